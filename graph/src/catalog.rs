@@ -1,0 +1,68 @@
+//! The signature of a node kind as the static checker sees it, and the catalog that holds them.
+//! The runtime's node registry implements [`Catalog`]; tests can build one from plain data.
+
+use crate::ports::TypeSet;
+use serde::Serialize;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DevicePreference {
+    Cpu,
+    Gpu,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct InputSpec {
+    pub name: String,
+    #[serde(rename = "type")]
+    pub ty: TypeSet,
+    pub required: bool,
+    pub doc: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct OutputSpec {
+    pub name: String,
+    #[serde(rename = "type")]
+    pub ty: String,
+    pub doc: String,
+}
+
+/// Everything the checker, the `nodes` listing and the JSON Schema export need about a kind.
+#[derive(Clone, Debug, Serialize)]
+pub struct KindSignature {
+    pub kind: String,
+    pub version: u32,
+    pub device: DevicePreference,
+    pub doc: String,
+    pub inputs: Vec<InputSpec>,
+    pub outputs: Vec<OutputSpec>,
+    /// JSON Schema of the parameter object, with defaults.
+    pub params: serde_json::Value,
+}
+
+impl KindSignature {
+    pub fn input(&self, name: &str) -> Option<&InputSpec> {
+        self.inputs.iter().find(|p| p.name == name)
+    }
+
+    pub fn output(&self, name: &str) -> Option<&OutputSpec> {
+        self.outputs.iter().find(|p| p.name == name)
+    }
+}
+
+/// A set of node kinds, looked up by name.
+pub trait Catalog {
+    fn signature(&self, kind: &str) -> Option<&KindSignature>;
+    fn kinds(&self) -> Vec<&str>;
+}
+
+impl Catalog for Vec<KindSignature> {
+    fn signature(&self, kind: &str) -> Option<&KindSignature> {
+        self.iter().find(|s| s.kind == kind)
+    }
+
+    fn kinds(&self) -> Vec<&str> {
+        self.iter().map(|s| s.kind.as_str()).collect()
+    }
+}

@@ -1,0 +1,370 @@
+//! The graph file, format version 1 (see the design brief): parsing, with every structural problem
+//! collected rather than the first one only, and migration of older versions.
+
+use crate::error::GraphError;
+use serde::de::{Deserializer, MapAccess, Visitor};
+use serde::Deserialize;
+use serde_json::{Map, Value};
+use std::collections::BTreeMap;
+use std::fmt;
+
+/// The newest format version this crate reads and writes.
+pub const FORMAT_VERSION: u64 = 1;
+
+/// One node declaration as written in the file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct NodeDecl {
+    pub kind: String,
+    pub params: Map<String, Value>,
+    /// Input port name → "node.port".
+    pub inputs: BTreeMap<String, String>,
+}
+
+/// A parsed graph file. Nodes keep the order of the file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GraphFile {
+    pub description: Option<String>,
+    pub nodes: Vec<(String, NodeDecl)>,
+}
+
+/// A reference to an output: `node.port`.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PortRef {
+    pub node: String,
+    pub port: String,
+}
+
+impl PortRef {
+    /// Parses "node.port"; `None` if the text has not that shape.
+    pub fn parse(text: &str) -> Option<PortRef> {
+        let (node, port) = text.split_once('.')?;
+        if node.is_empty() || port.is_empty() || port.contains('.') {
+            return None;
+        }
+        Some(PortRef { node: node.to_string(), port: port.to_string() })
+    }
+}
+
+impl fmt::Display for PortRef {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}.{}", self.node, self.port)
+    }
+}
+
+/// A JSON object that keeps duplicate keys, so that a duplicated node id can be reported instead
+/// of silently replaced (serde_json's maps keep the last one).
+struct Entries(Vec<(String, Value)>);
+
+impl<'de> Deserialize<'de> for Entries {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct V;
+        impl<'de> Visitor<'de> for V {
+            type Value = Entries;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("an object")
+            }
+            fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Entries, A::Error> {
+                let mut out = Vec::new();
+                while let Some((k, v)) = map.next_entry::<String, Value>()? {
+                    out.push((k, v));
+                }
+                Ok(Entries(out))
+            }
+        }
+        d.deserialize_map(V)
+    }
+}
+
+#[derive(Deserialize)]
+struct RawFile {
+    nodes: Option<Entries>,
+    #[serde(flatten)]
+    rest: Map<String, Value>,
+}
+
+fn structure(node: Option<&str>, field: Option<&str>, message: String) -> GraphError {
+    GraphError::Structure {
+        node: node.map(str::to_string),
+        field: field.map(str::to_string),
+        message,
+    }
+}
+
+/// Upgrades a file of an older format version to the current one, one step at a time. Version 1
+/// is the first; a later version adds `migrate_vN_to_vN+1(Map) -> Map` here and a line below.
+fn migrate(version: u64, rest: Map<String, Value>) -> Result<Map<String, Value>, GraphError> {
+    match version {
+        FORMAT_VERSION => Ok(rest),
+        found => Err(GraphError::Version { found, supported: FORMAT_VERSION }),
+    }
+}
+
+impl GraphFile {
+    /// Parses a graph file, collecting every structural error (node-level problems of several
+    /// nodes are reported together).
+    pub fn parse(text: &str) -> Result<GraphFile, Vec<GraphError>> {
+        let raw: RawFile = serde_json::from_str(text).map_err(|e| {
+            let err = if e.is_syntax() || e.is_eof() {
+                GraphError::Syntax {
+                    line: e.line(),
+                    column: e.column(),
+                    message: strip_position(&e.to_string()),
+                }
+            } else {
+                structure(None, None, format!("the file must be a JSON object: {e}"))
+            };
+            vec![err]
+        })?;
+        let mut errors = Vec::new();
+        let mut rest = raw.rest;
+        let version = match rest.remove("mesoflow") {
+            Some(Value::Number(n)) if n.as_u64().is_some() => n.as_u64().unwrap_or_default(),
+            Some(other) => {
+                errors.push(structure(
+                    None,
+                    Some("mesoflow"),
+                    format!("`mesoflow` must be the format version number, got {other}"),
+                ));
+                FORMAT_VERSION
+            }
+            None => {
+                errors.push(structure(
+                    None,
+                    Some("mesoflow"),
+                    "missing `\"mesoflow\": 1` (the format version)".into(),
+                ));
+                FORMAT_VERSION
+            }
+        };
+        let mut rest = match migrate(version, rest) {
+            Ok(r) => r,
+            Err(e) => return Err(vec![e]),
+        };
+        let description = match rest.remove("description") {
+            None => None,
+            Some(Value::String(s)) => Some(s),
+            Some(other) => {
+                errors.push(structure(
+                    None,
+                    Some("description"),
+                    format!("`description` must be a string, got {}", describe(&other)),
+                ));
+                None
+            }
+        };
+        for key in rest.keys() {
+            let hint = crate::nearest(key, ["mesoflow", "description", "nodes"])
+                .map(|s| format!(" (did you mean `{s}`?)"))
+                .unwrap_or_default();
+            errors.push(structure(None, Some(key), format!("unknown top-level field `{key}`{hint}")));
+        }
+        let Some(Entries(entries)) = raw.nodes else {
+            errors.push(structure(None, Some("nodes"), "missing `nodes` object".into()));
+            return Err(errors);
+        };
+        let mut nodes = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for (id, value) in entries {
+            if !seen.insert(id.clone()) {
+                errors.push(GraphError::DuplicateId { node: id });
+                continue;
+            }
+            if !valid_id(&id) {
+                errors.push(GraphError::BadNodeId { node: id.clone() });
+            }
+            match parse_node(&id, value) {
+                Ok(decl) => nodes.push((id, decl)),
+                Err(mut es) => errors.append(&mut es),
+            }
+        }
+        if errors.is_empty() {
+            Ok(GraphFile { description, nodes })
+        } else {
+            Err(errors)
+        }
+    }
+
+    pub fn node(&self, id: &str) -> Option<&NodeDecl> {
+        self.nodes.iter().find(|(n, _)| n == id).map(|(_, d)| d)
+    }
+
+    pub fn node_mut(&mut self, id: &str) -> Option<&mut NodeDecl> {
+        self.nodes.iter_mut().find(|(n, _)| n == id).map(|(_, d)| d)
+    }
+
+    /// Serializes back to the version-1 format (pretty-printed).
+    pub fn to_json(&self) -> String {
+        let mut nodes = Map::new();
+        for (id, d) in &self.nodes {
+            let mut obj = Map::new();
+            obj.insert("kind".into(), Value::String(d.kind.clone()));
+            if !d.inputs.is_empty() {
+                let inputs = d.inputs.iter().map(|(k, v)| (k.clone(), Value::String(v.clone())));
+                obj.insert("inputs".into(), Value::Object(inputs.collect()));
+            }
+            if !d.params.is_empty() {
+                obj.insert("params".into(), Value::Object(d.params.clone()));
+            }
+            nodes.insert(id.clone(), Value::Object(obj));
+        }
+        let mut top = Map::new();
+        top.insert("mesoflow".into(), Value::from(FORMAT_VERSION));
+        if let Some(d) = &self.description {
+            top.insert("description".into(), Value::String(d.clone()));
+        }
+        top.insert("nodes".into(), Value::Object(nodes));
+        serde_json::to_string_pretty(&Value::Object(top)).unwrap_or_default()
+    }
+}
+
+fn strip_position(message: &str) -> String {
+    match message.rfind(" at line ") {
+        Some(i) => message[..i].to_string(),
+        None => message.to_string(),
+    }
+}
+
+/// `[a-z][a-z0-9_]*`
+pub fn valid_id(id: &str) -> bool {
+    let mut chars = id.chars();
+    matches!(chars.next(), Some('a'..='z'))
+        && chars.all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+}
+
+/// A short description of a JSON value's type, for error messages.
+pub fn describe(v: &Value) -> String {
+    match v {
+        Value::Null => "null".into(),
+        Value::Bool(b) => format!("boolean {b}"),
+        Value::Number(n) => format!("number {n}"),
+        Value::String(s) => format!("string \"{s}\""),
+        Value::Array(_) => "an array".into(),
+        Value::Object(_) => "an object".into(),
+    }
+}
+
+fn parse_node(id: &str, value: Value) -> Result<NodeDecl, Vec<GraphError>> {
+    let Value::Object(mut obj) = value else {
+        return Err(vec![structure(
+            Some(id),
+            None,
+            format!("node `{id}` must be an object with `kind`, got {}", describe(&value)),
+        )]);
+    };
+    let mut errors = Vec::new();
+    let kind = match obj.remove("kind") {
+        Some(Value::String(k)) => k,
+        Some(other) => {
+            errors.push(structure(
+                Some(id),
+                Some("kind"),
+                format!("node `{id}`: `kind` must be a string, got {}", describe(&other)),
+            ));
+            String::new()
+        }
+        None => {
+            errors.push(structure(Some(id), Some("kind"), format!("node `{id}`: missing `kind`")));
+            String::new()
+        }
+    };
+    let params = match obj.remove("params") {
+        None => Map::new(),
+        Some(Value::Object(m)) => m,
+        Some(other) => {
+            errors.push(structure(
+                Some(id),
+                Some("params"),
+                format!("node `{id}`: `params` must be an object, got {}", describe(&other)),
+            ));
+            Map::new()
+        }
+    };
+    let mut inputs = BTreeMap::new();
+    match obj.remove("inputs") {
+        None => {}
+        Some(Value::Object(m)) => {
+            for (port, v) in m {
+                match v {
+                    Value::String(s) => {
+                        inputs.insert(port, s);
+                    }
+                    other => errors.push(structure(
+                        Some(id),
+                        Some(&port),
+                        format!(
+                            "node `{id}`: input `{port}` must be a string \"node.port\", got {}",
+                            describe(&other)
+                        ),
+                    )),
+                }
+            }
+        }
+        Some(other) => errors.push(structure(
+            Some(id),
+            Some("inputs"),
+            format!("node `{id}`: `inputs` must be an object, got {}", describe(&other)),
+        )),
+    }
+    for key in obj.keys() {
+        let hint = crate::nearest(key, ["kind", "params", "inputs"])
+            .map(|s| format!(" (did you mean `{s}`?)"))
+            .unwrap_or_default();
+        errors.push(structure(
+            Some(id),
+            Some(key),
+            format!("node `{id}`: unknown field `{key}`{hint}"),
+        ));
+    }
+    if errors.is_empty() {
+        Ok(NodeDecl { kind, params, inputs })
+    } else {
+        Err(errors)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn syntax_error_has_line_and_column() {
+        let errs = GraphFile::parse("{\n  \"mesoflow\": 1,\n  \"nodes\": { ,}\n}").unwrap_err();
+        match &errs[0] {
+            GraphError::Syntax { line, column, .. } => {
+                assert_eq!(*line, 3);
+                assert_eq!(*column, 14);
+            }
+            e => panic!("expected a syntax error, got {e:?}"),
+        }
+    }
+
+    #[test]
+    fn duplicate_ids_are_reported_not_replaced() {
+        let text = r#"{"mesoflow":1,"nodes":{"a":{"kind":"x"},"a":{"kind":"y"}}}"#;
+        let errs = GraphFile::parse(text).unwrap_err();
+        assert_eq!(errs, vec![GraphError::DuplicateId { node: "a".into() }]);
+    }
+
+    #[test]
+    fn ids_follow_the_pattern() {
+        assert!(valid_id("surface_2"));
+        for bad in ["", "2a", "Surface", "a-b", "a.b", "_a"] {
+            assert!(!valid_id(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn future_versions_are_refused() {
+        let errs = GraphFile::parse(r#"{"mesoflow":7,"nodes":{}}"#).unwrap_err();
+        assert_eq!(errs, vec![GraphError::Version { found: 7, supported: 1 }]);
+    }
+
+    #[test]
+    fn round_trips_through_json() {
+        let text = r#"{"mesoflow":1,"description":"d","nodes":{"b":{"kind":"k","params":{"x":1.5}},
+            "a":{"kind":"k2","inputs":{"i":"b.o"}}}}"#;
+        let g = GraphFile::parse(text).unwrap();
+        assert_eq!(g.nodes[0].0, "b", "file order is kept");
+        assert_eq!(GraphFile::parse(&g.to_json()).unwrap(), g);
+    }
+}

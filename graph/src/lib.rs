@@ -1,0 +1,22 @@
+//! mesoflow's pipeline language: the graph-file model, port types, the catalog of node kinds a
+//! graph is checked against, and the static checks that run before anything executes.
+//!
+//! This crate knows nothing about execution, GPUs or algorithms, so an editor or linter can load,
+//! edit and check a pipeline without building wgpu.
+
+pub mod catalog;
+pub mod check;
+pub mod edit;
+pub mod error;
+pub mod file;
+pub mod params;
+pub mod ports;
+mod suggest;
+
+pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec};
+pub use check::{check, CheckedGraph, CheckedNode, Edge};
+pub use edit::{parse_override, Override};
+pub use error::{GraphError, GraphErrors};
+pub use file::{GraphFile, NodeDecl, PortRef, FORMAT_VERSION};
+pub use ports::TypeSet;
+pub use suggest::nearest;
