@@ -1,1 +1,24 @@
-//! placeholder
+//! mesoflow's executor: the node contract, opaque values, Merkle cache keys, the memory and disk
+//! caches, the GPU device shared by a run, the demand-driven scheduler and the run report.
+//!
+//! The runtime knows no algorithm and no domain type: values reach it as [`Value`] trait objects
+//! that report their type name and size and encode themselves for the disk cache.
+
+pub mod cache;
+pub mod codec;
+pub mod engine;
+pub mod gpu;
+pub mod key;
+pub mod node;
+pub mod registry;
+pub mod report;
+mod scheduler;
+pub mod value;
+
+pub use engine::{DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, SilentObserver};
+pub use gpu::{Gpu, GpuProvider};
+pub use key::{Key, KEY_SCHEME};
+pub use node::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+pub use registry::Registry;
+pub use report::{NodeReport, NodeStatus, RunReport, Warning};
+pub use value::{ArrayView, Artifact, Scalar, Value, ValueRef};

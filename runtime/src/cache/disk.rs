@@ -1,0 +1,269 @@
+//! Content-addressed disk cache. One file per key, `<dir>/<first two hex>/<key>.mfc`:
+//!
+//! ```text
+//! "MESOFLOW-CACHE\x01\n" | u64 header length | header JSON | payload | blake3(header ‖ payload)
+//! ```
+//!
+//! The header names the kind, the compute time and each output's port, type and payload length.
+//! Entries are written to a temporary file in `<dir>/tmp` and renamed into place, so a reader (in
+//! this process or another) sees a whole entry or none; the trailing checksum catches truncation
+//! and corruption, which the engine reports as a warning and recomputes.
+
+use crate::codec::Encoder;
+use crate::key::Key;
+use crate::node::Outputs;
+use crate::registry::Registry;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use thiserror::Error;
+
+const MAGIC: &[u8; 16] = b"MESOFLOW-CACHE\x01\n";
+
+#[derive(Debug, Error)]
+pub enum DiskError {
+    #[error("cache entry {path}: {message}")]
+    Corrupt { path: String, message: String },
+    #[error("cache {path}: {source}")]
+    Io { path: String, source: std::io::Error },
+}
+
+#[derive(Serialize, Deserialize)]
+struct Header {
+    kind: String,
+    seconds: f64,
+    outputs: Vec<OutputHeader>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct OutputHeader {
+    port: String,
+    #[serde(rename = "type")]
+    ty: String,
+    len: u64,
+}
+
+#[derive(Clone, Debug)]
+pub struct DiskCache {
+    dir: PathBuf,
+}
+
+/// Per-kind totals for `mesoflow cache stats`.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct KindStats {
+    pub entries: u64,
+    pub bytes: u64,
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct CacheStats {
+    pub entries: u64,
+    pub bytes: u64,
+    pub unreadable: u64,
+    pub by_kind: BTreeMap<String, KindStats>,
+}
+
+static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+impl DiskCache {
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        DiskCache { dir: dir.into() }
+    }
+
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    pub fn entry_path(&self, key: &Key) -> PathBuf {
+        let hex = key.hex();
+        self.dir.join(&hex[..2]).join(format!("{hex}.mfc"))
+    }
+
+    pub fn contains(&self, key: &Key) -> bool {
+        self.entry_path(key).is_file()
+    }
+
+    /// `Ok(None)` on a miss; `Err(Corrupt)` for an entry that exists but cannot be trusted.
+    pub fn get(&self, key: &Key, registry: &Registry) -> Result<Option<(Outputs, f64)>, DiskError> {
+        let path = self.entry_path(key);
+        let bytes = match std::fs::read(&path) {
+            Ok(b) => b,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
+            Err(source) => return Err(DiskError::Io { path: path.display().to_string(), source }),
+        };
+        decode_entry(&bytes, registry)
+            .map(Some)
+            .map_err(|message| DiskError::Corrupt { path: path.display().to_string(), message })
+    }
+
+    /// Removes an entry (after it was found corrupt).
+    pub fn remove(&self, key: &Key) {
+        let _ = std::fs::remove_file(self.entry_path(key));
+    }
+
+    pub fn put(&self, key: &Key, kind: &str, outputs: &Outputs, seconds: f64) -> Result<(), DiskError> {
+        let io = |path: &Path| {
+            let path = path.display().to_string();
+            move |source| DiskError::Io { path, source }
+        };
+        let mut payload = Encoder::default();
+        let mut headers = Vec::new();
+        for (port, value) in &outputs.values {
+            let start = payload.bytes.len();
+            value.encode(&mut payload);
+            headers.push(OutputHeader {
+                port: port.clone(),
+                ty: value.type_name().to_string(),
+                len: (payload.bytes.len() - start) as u64,
+            });
+        }
+        let header = serde_json::to_vec(&Header { kind: kind.into(), seconds, outputs: headers })
+            .map_err(|e| DiskError::Corrupt { path: String::new(), message: e.to_string() })?;
+        let mut hasher = blake3::Hasher::new();
+        hasher.update(&header);
+        hasher.update(&payload.bytes);
+
+        let final_path = self.entry_path(key);
+        let tmp_dir = self.dir.join("tmp");
+        std::fs::create_dir_all(&tmp_dir).map_err(io(&tmp_dir))?;
+        if let Some(parent) = final_path.parent() {
+            std::fs::create_dir_all(parent).map_err(io(parent))?;
+        }
+        let tmp = tmp_dir.join(format!(
+            "{}.{}.{}.tmp",
+            key.hex(),
+            std::process::id(),
+            TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+        ));
+        let write = || -> std::io::Result<()> {
+            let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
+            f.write_all(MAGIC)?;
+            f.write_all(&(header.len() as u64).to_le_bytes())?;
+            f.write_all(&header)?;
+            f.write_all(&payload.bytes)?;
+            f.write_all(hasher.finalize().as_bytes())?;
+            f.into_inner().map_err(|e| e.into_error())?.sync_data()?;
+            std::fs::rename(&tmp, &final_path)
+        };
+        write().map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            DiskError::Io { path: final_path.display().to_string(), source: e }
+        })
+    }
+
+    /// Removes every entry and leftover temporary file.
+    pub fn clear(&self) -> Result<u64, DiskError> {
+        let stats = self.stats();
+        if self.dir.exists() {
+            std::fs::remove_dir_all(&self.dir)
+                .map_err(|source| DiskError::Io { path: self.dir.display().to_string(), source })?;
+        }
+        Ok(stats.entries)
+    }
+
+    pub fn stats(&self) -> CacheStats {
+        let mut stats = CacheStats::default();
+        let Ok(shards) = std::fs::read_dir(&self.dir) else { return stats };
+        for shard in shards.flatten() {
+            if shard.file_name() == "tmp" {
+                continue;
+            }
+            let Ok(files) = std::fs::read_dir(shard.path()) else { continue };
+            for f in files.flatten() {
+                let len = f.metadata().map(|m| m.len()).unwrap_or(0);
+                stats.entries += 1;
+                stats.bytes += len;
+                match read_kind(&f.path()) {
+                    Some(kind) => {
+                        let k = stats.by_kind.entry(kind).or_default();
+                        k.entries += 1;
+                        k.bytes += len;
+                    }
+                    None => stats.unreadable += 1,
+                }
+            }
+        }
+        stats
+    }
+}
+
+fn read_kind(path: &Path) -> Option<String> {
+    use std::io::Read;
+    let mut f = std::fs::File::open(path).ok()?;
+    let mut head = [0u8; 24];
+    f.read_exact(&mut head).ok()?;
+    if &head[..16] != MAGIC {
+        return None;
+    }
+    let len = u64::from_le_bytes(head[16..24].try_into().ok()?);
+    let mut header = vec![0u8; usize::try_from(len).ok().filter(|l| *l < 1 << 20)?];
+    f.read_exact(&mut header).ok()?;
+    serde_json::from_slice::<Header>(&header).ok().map(|h| h.kind)
+}
+
+fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), String> {
+    if bytes.len() < MAGIC.len() + 8 + 32 || &bytes[..16] != MAGIC {
+        return Err("not a mesoflow cache entry or truncated".into());
+    }
+    let (body, sum) = bytes.split_at(bytes.len() - 32);
+    let content = &body[24..];
+    if blake3::hash(content).as_bytes() != sum {
+        return Err("checksum mismatch (truncated or corrupted)".into());
+    }
+    let len = u64::from_le_bytes(body[16..24].try_into().map_err(|_| "bad header length")?);
+    let len = usize::try_from(len).ok().filter(|l| *l <= content.len()).ok_or("bad header length")?;
+    let header: Header = serde_json::from_slice(&content[..len]).map_err(|e| e.to_string())?;
+    let mut rest = &content[len..];
+    let mut outputs = Outputs::new();
+    for o in header.outputs {
+        let n = usize::try_from(o.len).ok().filter(|n| *n <= rest.len()).ok_or("output longer than entry")?;
+        let value = registry.decode(&o.ty, &rest[..n]).map_err(|e| e.to_string())?;
+        outputs.values.insert(o.port, value);
+        rest = &rest[n..];
+    }
+    if !rest.is_empty() {
+        return Err("trailing bytes".into());
+    }
+    Ok((outputs, header.seconds))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::value::{Artifact, Scalar};
+
+    fn sample() -> Outputs {
+        Outputs::new()
+            .with("x", Scalar(2.5))
+            .with("file", Artifact { path: "a.png".into(), bytes: (0..=255).collect() })
+    }
+
+    #[test]
+    fn round_trip_and_every_truncation_is_detected() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = DiskCache::new(dir.path());
+        let reg = Registry::new();
+        let key = Key([7; 32]);
+        assert!(cache.get(&key, &reg).unwrap().is_none());
+        cache.put(&key, "test.kind", &sample(), 1.25).unwrap();
+        let (out, secs) = cache.get(&key, &reg).unwrap().unwrap();
+        assert_eq!(secs, 1.25);
+        assert_eq!(out.get("x").unwrap().as_scalar(), Some(2.5));
+        let full = std::fs::read(cache.entry_path(&key)).unwrap();
+        for cut in [0, 10, 30, full.len() / 2, full.len() - 1] {
+            std::fs::write(cache.entry_path(&key), &full[..cut]).unwrap();
+            assert!(matches!(cache.get(&key, &reg), Err(DiskError::Corrupt { .. })), "cut {cut}");
+        }
+        let mut flipped = full.clone();
+        flipped[full.len() / 2] ^= 1;
+        std::fs::write(cache.entry_path(&key), &flipped).unwrap();
+        assert!(matches!(cache.get(&key, &reg), Err(DiskError::Corrupt { .. })));
+        let stats = cache.stats();
+        assert_eq!((stats.entries, stats.unreadable), (1, 0));
+        assert!(std::fs::read_dir(dir.path().join("tmp")).unwrap().next().is_none(), "no temp files left");
+        assert_eq!(cache.clear().unwrap(), 1);
+        assert_eq!(cache.stats().entries, 0);
+    }
+}

@@ -1,0 +1,63 @@
+//! The set of node kinds and value types an engine knows. `mesoflow-nodes` fills one.
+
+use crate::codec::{DecodeError, Decoder};
+use crate::node::{DynNode, Erased, Node};
+use crate::value::{Artifact, DecodeFn, Scalar, ValueRef};
+use mesoflow_graph::{Catalog, KindSignature};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+
+#[derive(Clone, Default)]
+pub struct Registry {
+    nodes: BTreeMap<String, Arc<dyn DynNode>>,
+    codecs: BTreeMap<&'static str, DecodeFn>,
+}
+
+impl Registry {
+    /// A registry with the runtime's own value types (Scalar, File) and no kinds.
+    pub fn new() -> Self {
+        let mut r = Registry::default();
+        r.register_type(Scalar::TYPE, Scalar::decode);
+        r.register_type(Artifact::TYPE, Artifact::decode);
+        r
+    }
+
+    pub fn register<N: Node>(&mut self, node: N) -> &mut Self {
+        let erased = Erased::new(node);
+        self.nodes.insert(erased.spec.kind.to_string(), Arc::new(erased));
+        self
+    }
+
+    pub fn register_type(&mut self, name: &'static str, decode: DecodeFn) -> &mut Self {
+        self.codecs.insert(name, decode);
+        self
+    }
+
+    pub fn node(&self, kind: &str) -> Option<&Arc<dyn DynNode>> {
+        self.nodes.get(kind)
+    }
+
+    pub fn signatures(&self) -> impl Iterator<Item = &KindSignature> {
+        self.nodes.values().map(|n| n.signature())
+    }
+
+    pub fn decode(&self, type_name: &str, bytes: &[u8]) -> Result<ValueRef, DecodeError> {
+        let f = self
+            .codecs
+            .get(type_name)
+            .ok_or_else(|| DecodeError::new(type_name, "no decoder registered for this type"))?;
+        let mut d = Decoder::new("cache entry", bytes);
+        let v = f(&mut d)?;
+        d.finish()?;
+        Ok(v)
+    }
+}
+
+impl Catalog for Registry {
+    fn signature(&self, kind: &str) -> Option<&KindSignature> {
+        self.nodes.get(kind).map(|n| n.signature())
+    }
+    fn kinds(&self) -> Vec<&str> {
+        self.nodes.keys().map(String::as_str).collect()
+    }
+}

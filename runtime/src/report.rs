@@ -1,0 +1,66 @@
+//! The run report, `<out-dir>/report.json`: the contract scripts and tests read (design brief).
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum NodeStatus {
+    Computed,
+    Memory,
+    Disk,
+    Failed,
+    Cancelled,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct NodeReport {
+    pub id: String,
+    pub kind: String,
+    pub device: String,
+    pub status: NodeStatus,
+    pub seconds: f64,
+    pub bytes: u64,
+    pub key: String,
+    pub metrics: BTreeMap<String, f64>,
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub error: Option<String>,
+    /// With `--verify-cache`: the cached value was recomputed and matched.
+    #[serde(skip_serializing_if = "std::ops::Not::not", default)]
+    pub verified: bool,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Warning {
+    pub node: String,
+    pub message: String,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct RunReport {
+    pub mesoflow: u32,
+    pub graph: String,
+    pub ok: bool,
+    pub seconds: f64,
+    /// Nodes that ran or were read from a cache, in topological order.
+    pub nodes: Vec<NodeReport>,
+    pub warnings: Vec<Warning>,
+    /// Ancestors of the requested outputs that were not needed because every value depending on
+    /// them came from a cache.
+    #[serde(default)]
+    pub skipped: Vec<String>,
+    /// Files written under the output folder.
+    #[serde(default)]
+    pub files: Vec<String>,
+    #[serde(default)]
+    pub cancelled: bool,
+    /// Absolute paths of the files that nodes declared they read (what `watch` watches).
+    #[serde(default)]
+    pub read: Vec<String>,
+}
+
+impl RunReport {
+    pub fn node(&self, id: &str) -> Option<&NodeReport> {
+        self.nodes.iter().find(|n| n.id == id)
+    }
+}
