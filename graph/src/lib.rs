@@ -11,6 +11,7 @@ pub mod error;
 pub mod file;
 pub mod params;
 pub mod ports;
+pub mod schema;
 mod suggest;
 
 pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec};

@@ -1,12 +1,11 @@
 //! Port types. A type is a name ("HeightField", "Image", "Scalar"); the graph language compares
 //! names only, so it needs to know nothing of what the values are.
 
-use serde::Serialize;
+use serde::{Serialize, Serializer};
 use std::fmt;
 
 /// The types an input port accepts.
-#[derive(Clone, Debug, PartialEq, Eq, Serialize)]
-#[serde(untagged)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum TypeSet {
     /// Exactly one type.
     One(String),
@@ -36,6 +35,17 @@ impl fmt::Display for TypeSet {
         match self {
             TypeSet::One(t) => f.write_str(t),
             TypeSet::AnyOf(ts) => write!(f, "one of {}", ts.join(", ")),
+        }
+    }
+}
+
+/// Serialized as one string, alternatives joined by `|` ("HeightField|Image"), so scripts read a
+/// port's type the same way whether it accepts one type or several.
+impl Serialize for TypeSet {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            TypeSet::One(t) => s.serialize_str(t),
+            TypeSet::AnyOf(ts) => s.serialize_str(&ts.join("|")),
         }
     }
 }

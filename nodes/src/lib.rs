@@ -1,1 +1,13 @@
-//! placeholder
+//! mesoflow's node kinds: the algorithms, one folder per stage, and [`registry`], the list of kinds
+//! a graph can use. Nodes know nothing about scheduling or caching; each is a pure function of its
+//! parameters, inputs and declared files.
+
+pub mod gpu;
+pub mod heightfield;
+pub mod io;
+mod registry;
+pub mod rng;
+pub mod types;
+pub mod util;
+
+pub use registry::registry;

@@ -1,0 +1,101 @@
+//! Small helpers for compute passes: upload f32 data, run one WGSL entry point over a 2-D grid,
+//! read the result back. GPU nodes share these so each node's file holds only its own logic.
+
+use mesoflow_runtime::{Gpu, NodeError};
+use wgpu::util::DeviceExt;
+
+/// Runs `entry` of `shader` with bindings 0 = uniform `params`, 1 = read-only storage `input`,
+/// 2 = read-write storage of `output_len` f32, dispatching enough 8×8 workgroups to cover
+/// `width`×`height`; returns the output buffer.
+pub fn compute_2d(
+    gpu: &Gpu,
+    label: &str,
+    shader: &str,
+    entry: &str,
+    params: &[u8],
+    input: &[f32],
+    output_len: usize,
+    (width, height): (u32, u32),
+) -> Result<Vec<f32>, NodeError> {
+    let limit = gpu.device.limits().max_storage_buffer_binding_size as u64;
+    let out_bytes = (output_len * 4) as u64;
+    let in_bytes = (input.len() * 4) as u64;
+    if out_bytes.max(in_bytes) > limit {
+        return Err(NodeError::Gpu(format!(
+            "{label}: a buffer of {} bytes exceeds this adapter's storage binding limit of {limit} bytes; use --device cpu",
+            out_bytes.max(in_bytes)
+        )));
+    }
+    let device = &gpu.device;
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some(label),
+        source: wgpu::ShaderSource::Wgsl(shader.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        module: &module,
+        entry_point: Some(entry),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("params"),
+        contents: params,
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let input_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("input"),
+        contents: bytemuck::cast_slice(input),
+        usage: wgpu::BufferUsages::STORAGE,
+    });
+    let output_buf = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("output"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+        mapped_at_creation: false,
+    });
+    let staging = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: out_bytes,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some(label),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: input_buf.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: output_buf.as_entire_binding() },
+        ],
+    });
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(label), timestamp_writes: None });
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(width.div_ceil(8), height.div_ceil(8), 1);
+    }
+    encoder.copy_buffer_to_buffer(&output_buf, 0, &staging, 0, out_bytes);
+    gpu.queue.submit([encoder.finish()]);
+    let slice = staging.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| NodeError::Gpu(format!("{label}: {e}")))?;
+    rx.recv()
+        .map_err(|e| NodeError::Gpu(format!("{label}: {e}")))?
+        .map_err(|e| NodeError::Gpu(format!("{label}: readback failed: {e}")))?;
+    let out = {
+        let view = slice
+            .get_mapped_range()
+            .map_err(|e| NodeError::Gpu(format!("{label}: cannot map the readback buffer: {e}")))?;
+        bytemuck::cast_slice::<u8, f32>(&view).to_vec()
+    };
+    staging.unmap();
+    Ok(out)
+}

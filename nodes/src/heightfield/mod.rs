@@ -1,0 +1,5 @@
+//! Mesostructure height fields: procedural tiles, reading from files, and normal maps.
+
+pub mod normals;
+pub mod procedural;
+pub mod read;

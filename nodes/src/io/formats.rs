@@ -1,0 +1,255 @@
+//! Encoders and decoders for the file formats mesoflow exchanges: PNG (8/16-bit, sRGB for
+//! display), EXR (linear f32), Radiance HDR and JPEG (read only), NPY (f32 arrays, numpy's layout).
+
+use crate::types::{linear_to_srgb, srgb_to_linear};
+use crate::types::Image;
+use mesoflow_runtime::NodeError;
+use std::io::Cursor;
+use std::path::Path;
+
+/// A single-channel grid of samples, as read from a file.
+pub struct Grid {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<f32>,
+}
+
+fn ext(path: &Path) -> String {
+    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
+}
+
+/// Reads an image as linear f32. 8-bit files are sRGB-decoded; 16-bit and float files are taken
+/// as linear (the design brief: sRGB only for 8-bit images).
+pub fn read_image(path: &Path) -> Result<Image, NodeError> {
+    if !path.is_file() {
+        return Err(NodeError::file(path, "no such file"));
+    }
+    if ext(path) == "exr" {
+        return read_exr(path);
+    }
+    let img = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| NodeError::file(path, e))?
+        .decode()
+        .map_err(|e| NodeError::file(path, format!("cannot decode: {e}")))?;
+    let eight_bit = matches!(
+        img.color(),
+        image::ColorType::L8 | image::ColorType::La8 | image::ColorType::Rgb8 | image::ColorType::Rgba8
+    );
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    let has_alpha = img.color().has_alpha();
+    let grey = img.color().channel_count() <= 2;
+    let (channels, raw): (usize, Vec<f32>) = match (grey, has_alpha) {
+        (true, false) => (1, img.to_luma32f().into_raw()),
+        (_, true) => (4, img.to_rgba32f().into_raw()),
+        (false, false) => (3, img.to_rgb32f().into_raw()),
+    };
+    let data = if eight_bit {
+        raw.iter()
+            .enumerate()
+            .map(|(i, &c)| if channels == 4 && i % 4 == 3 { c } else { srgb_to_linear(c) })
+            .collect()
+    } else {
+        raw
+    };
+    Ok(Image { width, height, channels, data })
+}
+
+fn read_exr(path: &Path) -> Result<Image, NodeError> {
+    use exr::prelude::*;
+    let img = read_first_flat_layer_from_file(path).map_err(|e| NodeError::file(path, format!("cannot decode EXR: {e}")))?;
+    let layer = &img.layer_data;
+    let (width, height) = (layer.size.width(), layer.size.height());
+    let find = |name: &str| layer.channel_data.list.iter().find(|c| c.name.eq_case_insensitive(name));
+    let wanted: Vec<_> = match (find("R"), find("G"), find("B"), find("A"), find("Y")) {
+        (Some(r), Some(g), Some(b), a, _) => [Some(r), Some(g), Some(b), a].into_iter().flatten().collect(),
+        (_, _, _, _, Some(y)) => vec![y],
+        _ => layer.channel_data.list.iter().take(1).collect(),
+    };
+    if wanted.is_empty() {
+        return Err(NodeError::file(path, "EXR layer has no channels"));
+    }
+    let planes: Vec<Vec<f32>> = wanted.iter().map(|c| c.sample_data.values_as_f32().collect()).collect();
+    let channels = planes.len();
+    let mut data = vec![0f32; width * height * channels];
+    for (c, plane) in planes.iter().enumerate() {
+        for (i, v) in plane.iter().enumerate() {
+            data[i * channels + c] = *v;
+        }
+    }
+    Ok(crate::types::Image { width, height, channels, data })
+}
+
+/// Reads a single-channel grid: a grey image (first channel of a colour one), EXR, or 2-D NPY.
+pub fn read_grey(path: &Path) -> Result<Grid, NodeError> {
+    if ext(path) == "npy" {
+        return read_npy_2d(path);
+    }
+    let img = read_image(path)?;
+    let grey_png = ext(path) == "png" && img.channels == 1;
+    // A grey PNG holds heights, not colours: undo the sRGB decode read_image applied to 8-bit.
+    let data = img
+        .data
+        .chunks_exact(img.channels)
+        .map(|px| if grey_png { linear_to_srgb(px[0]) } else { px[0] })
+        .collect();
+    Ok(Grid { width: img.width, height: img.height, data })
+}
+
+fn read_npy_2d(path: &Path) -> Result<Grid, NodeError> {
+    let bytes = std::fs::read(path).map_err(|e| NodeError::file(path, e))?;
+    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| NodeError::file(path, format!("not an NPY file: {e}")))?;
+    let shape = npy.shape().to_vec();
+    if shape.len() != 2 {
+        return Err(NodeError::file(path, format!("expected a 2-D array (H, W), got shape {shape:?}")));
+    }
+    if npy.order() != npyz::Order::C {
+        return Err(NodeError::file(path, "Fortran-ordered arrays are not supported; save with order='C'"));
+    }
+    let type_str = npy.dtype().descr();
+    let data: Vec<f32> = if type_str.ends_with("f4") {
+        npy.into_vec::<f32>().map_err(|e| NodeError::file(path, e))?
+    } else if type_str.ends_with("f8") {
+        npy.into_vec::<f64>().map_err(|e| NodeError::file(path, e))?.into_iter().map(|v| v as f32).collect()
+    } else {
+        return Err(NodeError::file(path, format!("expected float32 or float64 samples, got dtype {type_str}")));
+    };
+    Ok(Grid { width: shape[1] as usize, height: shape[0] as usize, data })
+}
+
+/// PNG bytes of a linear image, sRGB-encoded (alpha stays linear), 8 or 16 bits per sample.
+pub fn encode_png(img: &Image, bits: u8) -> Result<Vec<u8>, String> {
+    let encode = |i: usize, c: f32| {
+        if img.channels == 4 && i % 4 == 3 {
+            if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) }
+        } else {
+            linear_to_srgb(c)
+        }
+    };
+    let (w, h) = (img.width as u32, img.height as u32);
+    let dynamic = if bits == 16 {
+        let raw: Vec<u16> = img.data.iter().enumerate().map(|(i, &c)| (encode(i, c) * 65535.0).round() as u16).collect();
+        match img.channels {
+            1 => image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+            3 => image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+            _ => image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+        }
+    } else {
+        let raw: Vec<u8> = img.data.iter().enumerate().map(|(i, &c)| (encode(i, c) * 255.0).round() as u8).collect();
+        match img.channels {
+            1 => image::ImageBuffer::<image::Luma<u8>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+            3 => image::ImageBuffer::<image::Rgb<u8>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+            _ => image::ImageBuffer::<image::Rgba<u8>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+        }
+    }
+    .ok_or("image size does not match its data")?;
+    let mut out = Cursor::new(Vec::new());
+    dynamic.write_to(&mut out, image::ImageFormat::Png).map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+/// EXR bytes of a linear image: channels Y, RGB or RGBA as f32, lossless ZIP compression.
+pub fn encode_exr(img: &Image) -> Result<Vec<u8>, String> {
+    use exr::prelude::*;
+    let names: &[&str] = match img.channels {
+        1 => &["Y"],
+        3 => &["R", "G", "B"],
+        _ => &["R", "G", "B", "A"],
+    };
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = names
+        .iter()
+        .enumerate()
+        .map(|(c, name)| {
+            let plane = img.data.iter().skip(c).step_by(img.channels).copied().collect();
+            AnyChannel::new(*name, FlatSamples::F32(plane))
+        })
+        .collect();
+    let layer = Layer::new(
+        (img.width, img.height),
+        LayerAttributes::named("main"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    let mut out = Cursor::new(Vec::new());
+    exr::image::Image::from_layer(layer).write().to_buffered(&mut out).map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+/// NPY bytes (little-endian f32, C order) of an array of the given shape.
+pub fn encode_npy(shape: &[usize], data: &[f32]) -> Result<Vec<u8>, String> {
+    use npyz::WriterBuilder;
+    let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
+    let mut out = Cursor::new(Vec::new());
+    let mut w = npyz::WriteOptions::new()
+        .default_dtype()
+        .shape(&shape)
+        .writer(&mut out)
+        .begin_nd()
+        .map_err(|e| e.to_string())?;
+    w.extend(data.iter().copied()).map_err(|e| e.to_string())?;
+    w.finish().map_err(|e| e.to_string())?;
+    Ok(out.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ramp(channels: usize) -> Image {
+        let (w, h) = (5, 3);
+        let data = (0..w * h * channels).map(|i| i as f32 / (w * h * channels) as f32).collect();
+        Image { width: w, height: h, channels, data }
+    }
+
+    #[test]
+    fn exr_round_trip_is_bit_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        for c in [1, 3, 4] {
+            let img = ramp(c);
+            let path = dir.path().join(format!("t{c}.exr"));
+            std::fs::write(&path, encode_exr(&img).unwrap()).unwrap();
+            assert_eq!(read_image(&path).unwrap(), img);
+        }
+    }
+
+    #[test]
+    fn png16_round_trip_is_within_quantisation() {
+        // 16-bit sRGB quantisation: half a step is 0.5/65535 in encoded units; the sRGB slope is at
+        // most 12.92, so the linear error is below 12.92 · 0.5 / 65535 ≈ 1e-4.
+        let dir = tempfile::tempdir().unwrap();
+        let img = ramp(3);
+        let path = dir.path().join("t.png");
+        std::fs::write(&path, encode_png(&img, 16).unwrap()).unwrap();
+        let back = read_image(&path).unwrap();
+        assert_eq!((back.width, back.height, back.channels), (5, 3, 3));
+        // 16-bit PNGs read back as linear samples, so re-apply the decode to compare.
+        for (a, b) in img.data.iter().zip(&back.data) {
+            assert!((srgb_to_linear(*b) - a).abs() < 1e-4, "{a} {b}");
+        }
+    }
+
+    #[test]
+    fn npy_is_what_numpy_writes() {
+        // The NPY v1.0 header for a (2, 3) little-endian float32 C-order array, per numpy's spec.
+        let bytes = encode_npy(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        assert_eq!(&bytes[..6], b"\x93NUMPY");
+        let header = String::from_utf8_lossy(&bytes[10..]).to_string();
+        assert!(header.contains("'descr': '<f4'") && header.contains("'shape': (2, 3"), "{header}");
+        assert_eq!(&bytes[bytes.len() - 4..], &6f32.to_le_bytes());
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.npy");
+        std::fs::write(&path, &bytes).unwrap();
+        let g = read_grey(&path).unwrap();
+        assert_eq!((g.width, g.height, g.data[5]), (3, 2, 6.0));
+    }
+
+    #[test]
+    fn missing_and_garbage_files_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(read_image(&dir.path().join("none.png")).is_err());
+        let path = dir.path().join("bad.png");
+        std::fs::write(&path, b"not a png").unwrap();
+        let e = read_image(&path).unwrap_err().to_string();
+        assert!(e.contains("bad.png"), "{e}");
+    }
+}

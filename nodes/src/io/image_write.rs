@@ -1,0 +1,85 @@
+//! `image.write`: encodes an image as PNG (8/16-bit, sRGB) or EXR (linear f32). The node returns
+//! the file's bytes; the runtime writes them under the output folder.
+
+use crate::io::formats;
+use crate::types::Image;
+use mesoflow_graph::DevicePreference;
+use mesoflow_runtime::{Artifact, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Format {
+    /// From the path's extension (.png or .exr).
+    Auto,
+    Png,
+    Exr,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Output file, relative to the output folder.
+    pub path: String,
+    /// File format.
+    #[serde(default = "auto")]
+    pub format: Format,
+    /// Bits per PNG sample: 8 or 16.
+    #[serde(default = "eight")]
+    #[schemars(range(min = 8, max = 16))]
+    pub bits: u8,
+}
+
+fn auto() -> Format {
+    Format::Auto
+}
+fn eight() -> u8 {
+    8
+}
+
+pub struct ImageWrite;
+
+impl Node for ImageWrite {
+    type Params = Params;
+
+    fn spec(&self) -> NodeSpec {
+        NodeSpec {
+            kind: "image.write",
+            version: 1,
+            doc: "Writes an image: PNG (8 or 16 bit, sRGB-encoded for display) or EXR (linear f32).",
+            device: DevicePreference::Cpu,
+            inputs: vec![Port::input("image", Image::TYPE, "linear image")],
+            outputs: vec![Port::output("file", "File", "the encoded file, written under the output folder")],
+            disk_cache: false,
+        }
+    }
+
+    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let img = inputs.get::<Image>("image")?;
+        let extension = std::path::Path::new(&p.path)
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        let format = match (p.format, extension.as_deref()) {
+            (Format::Auto, Some("png")) => Format::Png,
+            (Format::Auto, Some("exr")) => Format::Exr,
+            (Format::Auto, other) => {
+                return Err(NodeError::param(
+                    "path",
+                    format!("cannot tell the format from extension {other:?}; use .png or .exr, or set `format`"),
+                ))
+            }
+            (f, _) => f,
+        };
+        if p.bits != 8 && p.bits != 16 {
+            return Err(NodeError::param("bits", format!("PNG samples are 8 or 16 bits, got {}", p.bits)));
+        }
+        let bytes = match format {
+            Format::Exr => formats::encode_exr(img),
+            _ => formats::encode_png(img, p.bits),
+        }
+        .map_err(|e| NodeError::Failed(format!("encoding {}: {e}", p.path)))?;
+        Ok(Outputs::new().with("file", Artifact { path: p.path.clone(), bytes }))
+    }
+}

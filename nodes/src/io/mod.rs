@@ -1,0 +1,6 @@
+//! Reading and writing files: images (PNG, JPEG, HDR, EXR) and NPY arrays.
+
+pub mod formats;
+pub mod image_read;
+pub mod image_write;
+pub mod npy_write;

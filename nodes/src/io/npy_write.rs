@@ -1,0 +1,43 @@
+//! `npy.write`: any array-like value as a NumPy `.npy` file (little-endian f32, C order). Layouts:
+//! `HeightField` (H, W) in texels; `Image` (H, W, C) linear; `NormalMap` (H, W, 3) unit vectors.
+//! Row 0 is the top of the image in every layout.
+
+use crate::types::ARRAY_TYPES;
+use mesoflow_graph::DevicePreference;
+use mesoflow_runtime::{Artifact, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Params {
+    /// Output file, relative to the output folder.
+    pub path: String,
+}
+
+pub struct NpyWrite;
+
+impl Node for NpyWrite {
+    type Params = Params;
+
+    fn spec(&self) -> NodeSpec {
+        NodeSpec {
+            kind: "npy.write",
+            version: 1,
+            doc: "Writes an array-like value as .npy (f32, C order): HeightField (H,W), Image (H,W,C), NormalMap (H,W,3).",
+            device: DevicePreference::Cpu,
+            inputs: vec![Port::any_of("value", ARRAY_TYPES, "any array-like value")],
+            outputs: vec![Port::output("file", "File", "the .npy file, written under the output folder")],
+            disk_cache: false,
+        }
+    }
+
+    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let value = inputs.value("value")?;
+        let array = value
+            .as_array()
+            .ok_or_else(|| NodeError::input("value", format!("{} has no array layout", value.type_name())))?;
+        let bytes = crate::io::formats::encode_npy(&array.shape, array.data).map_err(NodeError::Failed)?;
+        Ok(Outputs::new().with("file", Artifact { path: p.path.clone(), bytes }))
+    }
+}

@@ -1,0 +1,18 @@
+//! Every node kind and value type mesoflow ships. Adding a kind: write its file, add one line here.
+
+use mesoflow_runtime::Registry;
+
+pub fn registry() -> Registry {
+    let mut r = Registry::new();
+    crate::types::register(&mut r);
+    r.register(crate::heightfield::procedural::Procedural);
+    r.register(crate::heightfield::read::Read);
+    r.register(crate::heightfield::normals::Normals);
+    r.register(crate::io::image_read::ImageRead);
+    r.register(crate::io::image_write::ImageWrite);
+    r.register(crate::io::npy_write::NpyWrite);
+    r.register(crate::util::scalar::Constant);
+    r.register(crate::util::scalar::Affine);
+    r.register(crate::util::sleep::Sleep);
+    r
+}

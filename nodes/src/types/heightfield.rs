@@ -1,0 +1,58 @@
+//! `HeightField`: a periodic tile of heights, row-major with row 0 at the top, heights in texel
+//! units (a height of 1.0 is one texel spacing), so slopes need no further scale.
+
+use mesoflow_runtime::codec::{DecodeError, Decoder, Encoder};
+use mesoflow_runtime::{ArrayView, Value, ValueRef};
+use std::any::Any;
+use std::sync::Arc;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeightField {
+    pub width: usize,
+    pub height: usize,
+    pub data: Vec<f32>,
+}
+
+impl HeightField {
+    pub const TYPE: &'static str = "HeightField";
+
+    /// Height at (x, y), wrapping around the tile in both directions.
+    pub fn at_wrapped(&self, x: isize, y: isize) -> f32 {
+        let xi = x.rem_euclid(self.width as isize) as usize;
+        let yi = y.rem_euclid(self.height as isize) as usize;
+        self.data[yi * self.width + xi]
+    }
+
+    pub fn min_max(&self) -> (f32, f32) {
+        self.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+    }
+
+    pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
+        let width = d.u64()? as usize;
+        let height = d.u64()? as usize;
+        let data = d.f32s()?;
+        if data.len() != width * height {
+            return Err(DecodeError::new(Self::TYPE, "size does not match the data"));
+        }
+        Ok(Arc::new(HeightField { width, height, data }))
+    }
+}
+
+impl Value for HeightField {
+    fn type_name(&self) -> &'static str {
+        Self::TYPE
+    }
+    fn byte_size(&self) -> usize {
+        self.data.len() * 4
+    }
+    fn encode(&self, out: &mut Encoder) {
+        out.u64(self.width as u64).u64(self.height as u64).f32s(&self.data);
+    }
+    /// NPY layout: (H, W) f32, heights in texels.
+    fn as_array(&self) -> Option<ArrayView<'_>> {
+        Some(ArrayView { shape: vec![self.height, self.width], data: &self.data })
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}
