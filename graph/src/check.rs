@@ -46,12 +46,20 @@ impl CheckedGraph {
             .iter()
             .flat_map(|n| n.inputs.iter().map(|e| e.from.node.as_str()))
             .collect();
-        self.nodes.iter().map(|n| n.id.as_str()).filter(|id| !read.contains(id)).collect()
+        self.nodes
+            .iter()
+            .map(|n| n.id.as_str())
+            .filter(|id| !read.contains(id))
+            .collect()
     }
 }
 
 /// Checks a parsed file against a catalog of kinds.
-pub fn check(file_name: &str, file: &GraphFile, catalog: &dyn Catalog) -> Result<CheckedGraph, GraphErrors> {
+pub fn check(
+    file_name: &str,
+    file: &GraphFile,
+    catalog: &dyn Catalog,
+) -> Result<CheckedGraph, GraphErrors> {
     let mut errors = Vec::new();
     let ids: Vec<&str> = file.nodes.iter().map(|(id, _)| id.as_str()).collect();
     let mut edges: Vec<(String, String)> = Vec::new();
@@ -104,7 +112,9 @@ pub fn check(file_name: &str, file: &GraphFile, catalog: &dyn Catalog) -> Result
             };
             edges.push((from.node.clone(), id.clone()));
             // An unknown target kind was already reported on the target itself.
-            let Some(target_sig) = catalog.signature(&target.kind) else { continue };
+            let Some(target_sig) = catalog.signature(&target.kind) else {
+                continue;
+            };
             match target_sig.output(&from.port) {
                 None => errors.push(GraphError::NoSuchOutput {
                     node: id.clone(),
@@ -137,7 +147,10 @@ pub fn check(file_name: &str, file: &GraphFile, catalog: &dyn Catalog) -> Result
         }
     };
     if !errors.is_empty() {
-        return Err(GraphErrors { file: file_name.to_string(), errors });
+        return Err(GraphErrors {
+            file: file_name.to_string(),
+            errors,
+        });
     }
     let nodes = order
         .into_iter()
@@ -146,7 +159,12 @@ pub fn check(file_name: &str, file: &GraphFile, catalog: &dyn Catalog) -> Result
             let inputs = decl
                 .inputs
                 .iter()
-                .filter_map(|(port, r)| Some(Edge { port: port.clone(), from: PortRef::parse(r)? }))
+                .filter_map(|(port, r)| {
+                    Some(Edge {
+                        port: port.clone(),
+                        from: PortRef::parse(r)?,
+                    })
+                })
                 .collect();
             Some(CheckedNode {
                 id: id.to_string(),
@@ -156,12 +174,18 @@ pub fn check(file_name: &str, file: &GraphFile, catalog: &dyn Catalog) -> Result
             })
         })
         .collect();
-    Ok(CheckedGraph { description: file.description.clone(), nodes })
+    Ok(CheckedGraph {
+        description: file.description.clone(),
+        nodes,
+    })
 }
 
 /// Kahn's algorithm, taking the earliest ready node in file order so that the order is stable.
 /// On a cycle, returns each strongly connected component that is a cycle, listed in cycle order.
-fn topological_order<'a>(ids: &[&'a str], edges: &[(String, String)]) -> Result<Vec<&'a str>, Vec<Vec<String>>> {
+fn topological_order<'a>(
+    ids: &[&'a str],
+    edges: &[(String, String)],
+) -> Result<Vec<&'a str>, Vec<Vec<String>>> {
     let pos: BTreeMap<&str, usize> = ids.iter().enumerate().map(|(i, id)| (*id, i)).collect();
     let mut graph = DiGraphMap::<usize, ()>::new();
     for i in 0..ids.len() {
@@ -173,7 +197,11 @@ fn topological_order<'a>(ids: &[&'a str], edges: &[(String, String)]) -> Result<
         }
     }
     let mut indegree: Vec<usize> = (0..ids.len())
-        .map(|i| graph.neighbors_directed(i, petgraph::Direction::Incoming).count())
+        .map(|i| {
+            graph
+                .neighbors_directed(i, petgraph::Direction::Incoming)
+                .count()
+        })
         .collect();
     let mut ready: BTreeSet<usize> = (0..ids.len()).filter(|&i| indegree[i] == 0).collect();
     let mut order = Vec::with_capacity(ids.len());
@@ -192,7 +220,12 @@ fn topological_order<'a>(ids: &[&'a str], edges: &[(String, String)]) -> Result<
     let cycles = petgraph::algo::tarjan_scc(&graph)
         .into_iter()
         .filter(|scc| scc.len() > 1 || graph.contains_edge(scc[0], scc[0]))
-        .map(|scc| cycle_path(&graph, &scc).into_iter().map(|i| ids[i].to_string()).collect())
+        .map(|scc| {
+            cycle_path(&graph, &scc)
+                .into_iter()
+                .map(|i| ids[i].to_string())
+                .collect()
+        })
         .collect();
     Err(cycles)
 }
@@ -237,25 +270,44 @@ mod tests {
     use serde_json::json;
 
     fn catalog() -> Vec<KindSignature> {
-        let sig = |kind: &str, inputs: Vec<(&str, &str, bool)>, outputs: Vec<(&str, &str)>| KindSignature {
-            kind: kind.into(),
-            version: 1,
-            device: DevicePreference::Cpu,
-            doc: String::new(),
-            inputs: inputs
-                .into_iter()
-                .map(|(n, t, r)| InputSpec { name: n.into(), ty: TypeSet::one(t), required: r, doc: String::new() })
-                .collect(),
-            outputs: outputs
-                .into_iter()
-                .map(|(n, t)| OutputSpec { name: n.into(), ty: t.into(), doc: String::new() })
-                .collect(),
-            params: json!({"type": "object", "properties": {"size": {"type": "integer", "minimum": 1}}}),
+        let sig = |kind: &str, inputs: Vec<(&str, &str, bool)>, outputs: Vec<(&str, &str)>| {
+            KindSignature {
+                kind: kind.into(),
+                version: 1,
+                device: DevicePreference::Cpu,
+                doc: String::new(),
+                inputs: inputs
+                    .into_iter()
+                    .map(|(n, t, r)| InputSpec {
+                        name: n.into(),
+                        ty: TypeSet::one(t),
+                        required: r,
+                        doc: String::new(),
+                    })
+                    .collect(),
+                outputs: outputs
+                    .into_iter()
+                    .map(|(n, t)| OutputSpec {
+                        name: n.into(),
+                        ty: t.into(),
+                        doc: String::new(),
+                    })
+                    .collect(),
+                params: json!({"type": "object", "properties": {"size": {"type": "integer", "minimum": 1}}}),
+            }
         };
         vec![
             sig("surface", vec![], vec![("height", "HeightField")]),
-            sig("pca", vec![("btf", "Btf", true)], vec![("basis", "BtfBasis")]),
-            sig("render", vec![("btf", "BtfBasis", true), ("env", "Image", false)], vec![("image", "Image")]),
+            sig(
+                "pca",
+                vec![("btf", "Btf", true)],
+                vec![("basis", "BtfBasis")],
+            ),
+            sig(
+                "render",
+                vec![("btf", "BtfBasis", true), ("env", "Image", false)],
+                vec![("image", "Image")],
+            ),
             sig("pass", vec![("x", "Image", true)], vec![("y", "Image")]),
         ]
     }
@@ -277,22 +329,33 @@ mod tests {
 
     #[test]
     fn cycles_are_listed_in_order() {
-        let e = run(r#"{"mesoflow":1,"nodes":{"a":{"kind":"pass","inputs":{"x":"c.y"}},
-            "b":{"kind":"pass","inputs":{"x":"a.y"}},"c":{"kind":"pass","inputs":{"x":"b.y"}}}}"#)
+        let e = run(
+            r#"{"mesoflow":1,"nodes":{"a":{"kind":"pass","inputs":{"x":"c.y"}},
+            "b":{"kind":"pass","inputs":{"x":"a.y"}},"c":{"kind":"pass","inputs":{"x":"b.y"}}}}"#,
+        )
         .unwrap_err();
-        assert_eq!(e.errors, vec![GraphError::Cycle { nodes: vec!["a".into(), "b".into(), "c".into()] }]);
+        assert_eq!(
+            e.errors,
+            vec![GraphError::Cycle {
+                nodes: vec!["a".into(), "b".into(), "c".into()]
+            }]
+        );
         assert_eq!(e.errors[0].to_string(), "cycle: a -> b -> c -> a");
     }
 
     #[test]
     fn order_is_topological_and_sinks_are_found() {
-        let g = run(r#"{"mesoflow":1,"nodes":{"render":{"kind":"render","inputs":{"btf":"pca.basis"}},
-            "pca":{"kind":"pca","inputs":{"btf":"surface.height"}},"surface":{"kind":"surface"}}}"#);
+        let g = run(
+            r#"{"mesoflow":1,"nodes":{"render":{"kind":"render","inputs":{"btf":"pca.basis"}},
+            "pca":{"kind":"pca","inputs":{"btf":"surface.height"}},"surface":{"kind":"surface"}}}"#,
+        );
         // pca reads a HeightField where it wants a Btf: one error, and nothing else wrong.
         assert_eq!(g.unwrap_err().errors.len(), 1);
-        let g = run(r#"{"mesoflow":1,"nodes":{"p2":{"kind":"pass","inputs":{"x":"p1.y"}},
+        let g = run(
+            r#"{"mesoflow":1,"nodes":{"p2":{"kind":"pass","inputs":{"x":"p1.y"}},
             "p1":{"kind":"pass","inputs":{"x":"r.image"}},"r":{"kind":"render","inputs":{"btf":"q.basis"}},
-            "q":{"kind":"pca","inputs":{"btf":"s.height"}},"s":{"kind":"surface"}}}"#);
+            "q":{"kind":"pca","inputs":{"btf":"s.height"}},"s":{"kind":"surface"}}}"#,
+        );
         let err = g.unwrap_err();
         assert_eq!(err.errors.len(), 1, "{err}");
     }
@@ -304,10 +367,21 @@ mod tests {
             "r":{"kind":"render","inputs":{"btff":"s.height","env":"nowhere.image"}},
             "t":{"kind":"surface","params":{"size":0,"sise":2}}}}"#)
         .unwrap_err();
-        let nodes: Vec<_> = e.errors.iter().map(|e| (e.node().unwrap(), e.field().unwrap())).collect();
+        let nodes: Vec<_> = e
+            .errors
+            .iter()
+            .map(|e| (e.node().unwrap(), e.field().unwrap()))
+            .collect();
         assert_eq!(
             nodes,
-            vec![("s", "kind"), ("r", "btf"), ("r", "btff"), ("r", "env"), ("t", "size"), ("t", "sise")]
+            vec![
+                ("s", "kind"),
+                ("r", "btf"),
+                ("r", "btff"),
+                ("r", "env"),
+                ("t", "size"),
+                ("t", "sise")
+            ]
         );
     }
 }

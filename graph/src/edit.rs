@@ -20,7 +20,11 @@ pub fn parse_override(text: &str) -> Result<Override, String> {
         .split_once('.')
         .filter(|(n, p)| !n.is_empty() && !p.is_empty())
         .ok_or_else(|| format!("`{text}`: expected id.param=value"))?;
-    Ok(Override { node: node.into(), param: param.into(), value: parse_value(value) })
+    Ok(Override {
+        node: node.into(),
+        param: param.into(),
+        value: parse_value(value),
+    })
 }
 
 /// A command-line value: JSON if it parses as JSON, a string otherwise.
@@ -41,7 +45,10 @@ impl GraphFile {
                 let hint = crate::nearest(&o.node, ids.iter().map(String::as_str))
                     .map(|s| format!(" (did you mean `{s}`?)"))
                     .unwrap_or_default();
-                Err(format!("--set {}.{}: no node `{}` in the graph{hint}", o.node, o.param, o.node))
+                Err(format!(
+                    "--set {}.{}: no node `{}` in the graph{hint}",
+                    o.node, o.param, o.node
+                ))
             }
         }
     }
@@ -54,9 +61,18 @@ mod tests {
     #[test]
     fn values_are_json_or_strings() {
         let o = parse_override("surface.size=64").unwrap();
-        assert_eq!((o.node.as_str(), o.param.as_str(), o.value), ("surface", "size", Value::from(64)));
-        assert_eq!(parse_override("s.pattern=weave").unwrap().value, Value::from("weave"));
-        assert_eq!(parse_override("s.v=[1,2]").unwrap().value, serde_json::json!([1, 2]));
+        assert_eq!(
+            (o.node.as_str(), o.param.as_str(), o.value),
+            ("surface", "size", Value::from(64))
+        );
+        assert_eq!(
+            parse_override("s.pattern=weave").unwrap().value,
+            Value::from("weave")
+        );
+        assert_eq!(
+            parse_override("s.v=[1,2]").unwrap().value,
+            serde_json::json!([1, 2])
+        );
         assert!(parse_override("nodot=1").is_err());
         assert!(parse_override("a.b").is_err());
     }

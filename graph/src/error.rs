@@ -5,15 +5,25 @@ use std::fmt;
 use thiserror::Error;
 
 fn hint(s: &Option<String>) -> String {
-    s.as_ref().map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default()
+    s.as_ref()
+        .map(|s| format!(" (did you mean `{s}`?)"))
+        .unwrap_or_default()
 }
 
 #[derive(Clone, Debug, Error, PartialEq)]
 pub enum GraphError {
     #[error("JSON syntax error at line {line}, column {column}: {message}")]
-    Syntax { line: usize, column: usize, message: String },
+    Syntax {
+        line: usize,
+        column: usize,
+        message: String,
+    },
     #[error("{message}")]
-    Structure { node: Option<String>, field: Option<String>, message: String },
+    Structure {
+        node: Option<String>,
+        field: Option<String>,
+        message: String,
+    },
     #[error("unsupported format version {found}; this mesoflow reads versions 1 to {supported}")]
     Version { found: u64, supported: u64 },
     #[error("node id `{node}` is invalid: ids match [a-z][a-z0-9_]*")]
@@ -21,10 +31,25 @@ pub enum GraphError {
     #[error("node id `{node}` is defined more than once")]
     DuplicateId { node: String },
     #[error("node `{node}`: unknown kind `{kind}`{}", hint(suggestion))]
-    UnknownKind { node: String, kind: String, suggestion: Option<String> },
-    #[error("node `{node}` ({kind}): unknown parameter `{param}`{}", hint(suggestion))]
-    UnknownParam { node: String, kind: String, param: String, suggestion: Option<String> },
-    #[error("node `{node}`: parameter `{param}` expects {expected}, got {found}{}", hint(suggestion))]
+    UnknownKind {
+        node: String,
+        kind: String,
+        suggestion: Option<String>,
+    },
+    #[error(
+        "node `{node}` ({kind}): unknown parameter `{param}`{}",
+        hint(suggestion)
+    )]
+    UnknownParam {
+        node: String,
+        kind: String,
+        param: String,
+        suggestion: Option<String>,
+    },
+    #[error(
+        "node `{node}`: parameter `{param}` expects {expected}, got {found}{}",
+        hint(suggestion)
+    )]
     ParamType {
         node: String,
         param: String,
@@ -33,17 +58,42 @@ pub enum GraphError {
         suggestion: Option<String>,
     },
     #[error("node `{node}`: parameter `{param}` is out of range: {message}")]
-    ParamRange { node: String, param: String, message: String },
+    ParamRange {
+        node: String,
+        param: String,
+        message: String,
+    },
     #[error("node `{node}`: required parameter `{param}` is missing")]
     MissingParam { node: String, param: String },
     #[error("node `{node}`: required input `{port}` ({ty}) is not connected")]
-    MissingInput { node: String, port: String, ty: String },
+    MissingInput {
+        node: String,
+        port: String,
+        ty: String,
+    },
     #[error("node `{node}` ({kind}): unknown input `{port}`{}", hint(suggestion))]
-    UnknownInput { node: String, kind: String, port: String, suggestion: Option<String> },
+    UnknownInput {
+        node: String,
+        kind: String,
+        port: String,
+        suggestion: Option<String>,
+    },
     #[error("node `{node}`: input `{port}` is `{reference}`, expected the form \"node.port\"")]
-    BadReference { node: String, port: String, reference: String },
-    #[error("node `{node}`: input `{port}` names node `{target}`, which does not exist{}", hint(suggestion))]
-    NoSuchNode { node: String, port: String, target: String, suggestion: Option<String> },
+    BadReference {
+        node: String,
+        port: String,
+        reference: String,
+    },
+    #[error(
+        "node `{node}`: input `{port}` names node `{target}`, which does not exist{}",
+        hint(suggestion)
+    )]
+    NoSuchNode {
+        node: String,
+        port: String,
+        target: String,
+        suggestion: Option<String>,
+    },
     #[error(
         "node `{node}`: input `{port}` names `{target}.{target_port}`, but `{target}` ({kind}) has no output `{target_port}`{}",
         hint(suggestion)
@@ -57,7 +107,13 @@ pub enum GraphError {
         suggestion: Option<String>,
     },
     #[error("`{node}` input `{port}` expects {expected}, got {found} from `{from}`")]
-    TypeMismatch { node: String, port: String, expected: String, found: String, from: String },
+    TypeMismatch {
+        node: String,
+        port: String,
+        expected: String,
+        found: String,
+        from: String,
+    },
     #[error("cycle: {}", cycle_text(nodes))]
     Cycle { nodes: Vec<String> },
 }
@@ -125,7 +181,12 @@ pub struct GraphErrors {
 impl fmt::Display for GraphErrors {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let n = self.errors.len();
-        writeln!(f, "{}: {n} error{}", self.file, if n == 1 { "" } else { "s" })?;
+        writeln!(
+            f,
+            "{}: {n} error{}",
+            self.file,
+            if n == 1 { "" } else { "s" }
+        )?;
         for e in &self.errors {
             writeln!(f, "  {}: {e}", self.file)?;
         }

@@ -41,7 +41,10 @@ impl PortRef {
         if node.is_empty() || port.is_empty() || port.contains('.') {
             return None;
         }
-        Some(PortRef { node: node.to_string(), port: port.to_string() })
+        Some(PortRef {
+            node: node.to_string(),
+            port: port.to_string(),
+        })
     }
 }
 
@@ -95,7 +98,10 @@ fn structure(node: Option<&str>, field: Option<&str>, message: String) -> GraphE
 fn migrate(version: u64, rest: Map<String, Value>) -> Result<Map<String, Value>, GraphError> {
     match version {
         FORMAT_VERSION => Ok(rest),
-        found => Err(GraphError::Version { found, supported: FORMAT_VERSION }),
+        found => Err(GraphError::Version {
+            found,
+            supported: FORMAT_VERSION,
+        }),
     }
 }
 
@@ -156,10 +162,18 @@ impl GraphFile {
             let hint = crate::nearest(key, ["mesoflow", "description", "nodes"])
                 .map(|s| format!(" (did you mean `{s}`?)"))
                 .unwrap_or_default();
-            errors.push(structure(None, Some(key), format!("unknown top-level field `{key}`{hint}")));
+            errors.push(structure(
+                None,
+                Some(key),
+                format!("unknown top-level field `{key}`{hint}"),
+            ));
         }
         let Some(Entries(entries)) = raw.nodes else {
-            errors.push(structure(None, Some("nodes"), "missing `nodes` object".into()));
+            errors.push(structure(
+                None,
+                Some("nodes"),
+                "missing `nodes` object".into(),
+            ));
             return Err(errors);
         };
         let mut nodes = Vec::new();
@@ -199,7 +213,10 @@ impl GraphFile {
             let mut obj = Map::new();
             obj.insert("kind".into(), Value::String(d.kind.clone()));
             if !d.inputs.is_empty() {
-                let inputs = d.inputs.iter().map(|(k, v)| (k.clone(), Value::String(v.clone())));
+                let inputs = d
+                    .inputs
+                    .iter()
+                    .map(|(k, v)| (k.clone(), Value::String(v.clone())));
                 obj.insert("inputs".into(), Value::Object(inputs.collect()));
             }
             if !d.params.is_empty() {
@@ -248,7 +265,10 @@ fn parse_node(id: &str, value: Value) -> Result<NodeDecl, Vec<GraphError>> {
         return Err(vec![structure(
             Some(id),
             None,
-            format!("node `{id}` must be an object with `kind`, got {}", describe(&value)),
+            format!(
+                "node `{id}` must be an object with `kind`, got {}",
+                describe(&value)
+            ),
         )]);
     };
     let mut errors = Vec::new();
@@ -258,12 +278,19 @@ fn parse_node(id: &str, value: Value) -> Result<NodeDecl, Vec<GraphError>> {
             errors.push(structure(
                 Some(id),
                 Some("kind"),
-                format!("node `{id}`: `kind` must be a string, got {}", describe(&other)),
+                format!(
+                    "node `{id}`: `kind` must be a string, got {}",
+                    describe(&other)
+                ),
             ));
             String::new()
         }
         None => {
-            errors.push(structure(Some(id), Some("kind"), format!("node `{id}`: missing `kind`")));
+            errors.push(structure(
+                Some(id),
+                Some("kind"),
+                format!("node `{id}`: missing `kind`"),
+            ));
             String::new()
         }
     };
@@ -274,7 +301,10 @@ fn parse_node(id: &str, value: Value) -> Result<NodeDecl, Vec<GraphError>> {
             errors.push(structure(
                 Some(id),
                 Some("params"),
-                format!("node `{id}`: `params` must be an object, got {}", describe(&other)),
+                format!(
+                    "node `{id}`: `params` must be an object, got {}",
+                    describe(&other)
+                ),
             ));
             Map::new()
         }
@@ -302,7 +332,10 @@ fn parse_node(id: &str, value: Value) -> Result<NodeDecl, Vec<GraphError>> {
         Some(other) => errors.push(structure(
             Some(id),
             Some("inputs"),
-            format!("node `{id}`: `inputs` must be an object, got {}", describe(&other)),
+            format!(
+                "node `{id}`: `inputs` must be an object, got {}",
+                describe(&other)
+            ),
         )),
     }
     for key in obj.keys() {
@@ -316,7 +349,11 @@ fn parse_node(id: &str, value: Value) -> Result<NodeDecl, Vec<GraphError>> {
         ));
     }
     if errors.is_empty() {
-        Ok(NodeDecl { kind, params, inputs })
+        Ok(NodeDecl {
+            kind,
+            params,
+            inputs,
+        })
     } else {
         Err(errors)
     }
@@ -356,7 +393,13 @@ mod tests {
     #[test]
     fn future_versions_are_refused() {
         let errs = GraphFile::parse(r#"{"mesoflow":7,"nodes":{}}"#).unwrap_err();
-        assert_eq!(errs, vec![GraphError::Version { found: 7, supported: 1 }]);
+        assert_eq!(
+            errs,
+            vec![GraphError::Version {
+                found: 7,
+                supported: 1
+            }]
+        );
     }
 
     #[test]

@@ -8,7 +8,12 @@ use crate::file::describe;
 use serde_json::{Map, Value};
 
 /// Checks `params` of node `node` (kind `kind`) against `schema`; returns every problem found.
-pub fn check_params(node: &str, kind: &str, schema: &Value, params: &Map<String, Value>) -> Vec<GraphError> {
+pub fn check_params(
+    node: &str,
+    kind: &str,
+    schema: &Value,
+    params: &Map<String, Value>,
+) -> Vec<GraphError> {
     let mut errors = Vec::new();
     let root = schema;
     let props = schema.get("properties").and_then(Value::as_object);
@@ -18,7 +23,10 @@ pub fn check_params(node: &str, kind: &str, schema: &Value, params: &Map<String,
                 node: node.into(),
                 kind: kind.into(),
                 param: name.clone(),
-                suggestion: crate::nearest(name, props.into_iter().flat_map(|p| p.keys().map(String::as_str))),
+                suggestion: crate::nearest(
+                    name,
+                    props.into_iter().flat_map(|p| p.keys().map(String::as_str)),
+                ),
             }),
             Some(sub) => {
                 if let Err(problem) = check_value(root, sub, value) {
@@ -30,7 +38,10 @@ pub fn check_params(node: &str, kind: &str, schema: &Value, params: &Map<String,
     if let Some(required) = schema.get("required").and_then(Value::as_array) {
         for r in required.iter().filter_map(Value::as_str) {
             if !params.contains_key(r) {
-                errors.push(GraphError::MissingParam { node: node.into(), param: r.into() });
+                errors.push(GraphError::MissingParam {
+                    node: node.into(),
+                    param: r.into(),
+                });
             }
         }
     }
@@ -40,23 +51,31 @@ pub fn check_params(node: &str, kind: &str, schema: &Value, params: &Map<String,
 /// Why a value does not match a schema.
 #[derive(Debug)]
 pub enum Problem {
-    Type { expected: String, suggestion: Option<String> },
+    Type {
+        expected: String,
+        suggestion: Option<String>,
+    },
     Range(String),
 }
 
 impl Problem {
     fn into_error(self, node: &str, param: &str, value: &Value) -> GraphError {
         match self {
-            Problem::Type { expected, suggestion } => GraphError::ParamType {
+            Problem::Type {
+                expected,
+                suggestion,
+            } => GraphError::ParamType {
                 node: node.into(),
                 param: param.into(),
                 expected,
                 found: describe(value),
                 suggestion,
             },
-            Problem::Range(message) => {
-                GraphError::ParamRange { node: node.into(), param: param.into(), message }
-            }
+            Problem::Range(message) => GraphError::ParamRange {
+                node: node.into(),
+                param: param.into(),
+                message,
+            },
         }
     }
 }
@@ -159,18 +178,25 @@ fn type_matches(t: &str, v: &Value) -> bool {
 /// Checks one value against one schema.
 pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Problem> {
     let s = resolve(root, schema);
-    let type_error = |suggestion| Problem::Type { expected: expected_text(root, s), suggestion };
+    let type_error = |suggestion| Problem::Type {
+        expected: expected_text(root, s),
+        suggestion,
+    };
     if let Some(values) = enum_values(root, s) {
         if values.contains(v) {
             return Ok(());
         }
-        let suggestion = v.as_str().and_then(|word| {
-            crate::nearest(word, values.iter().filter_map(Value::as_str))
-        });
+        let suggestion = v
+            .as_str()
+            .and_then(|word| crate::nearest(word, values.iter().filter_map(Value::as_str)));
         return Err(type_error(suggestion));
     }
     if let Some(c) = s.get("const") {
-        return if c == v { Ok(()) } else { Err(type_error(None)) };
+        return if c == v {
+            Ok(())
+        } else {
+            Err(type_error(None))
+        };
     }
     for key in ["oneOf", "anyOf"] {
         if let Some(branches) = s.get(key).and_then(Value::as_array) {
@@ -187,7 +213,10 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
     }
     let type_ok = match s.get("type") {
         Some(Value::String(t)) => type_matches(t, v),
-        Some(Value::Array(ts)) => ts.iter().filter_map(Value::as_str).any(|t| type_matches(t, v)),
+        Some(Value::Array(ts)) => ts
+            .iter()
+            .filter_map(Value::as_str)
+            .any(|t| type_matches(t, v)),
         _ => true,
     };
     if !type_ok {
@@ -216,14 +245,29 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
             })?;
         }
         let len = arr.len() as u64;
-        if let Some(m) = s.get("minItems").and_then(Value::as_u64).filter(|m| len < *m) {
-            return Err(Problem::Range(format!("{len} elements, at least {m} expected")));
+        if let Some(m) = s
+            .get("minItems")
+            .and_then(Value::as_u64)
+            .filter(|m| len < *m)
+        {
+            return Err(Problem::Range(format!(
+                "{len} elements, at least {m} expected"
+            )));
         }
-        if let Some(m) = s.get("maxItems").and_then(Value::as_u64).filter(|m| len > *m) {
-            return Err(Problem::Range(format!("{len} elements, at most {m} expected")));
+        if let Some(m) = s
+            .get("maxItems")
+            .and_then(Value::as_u64)
+            .filter(|m| len > *m)
+        {
+            return Err(Problem::Range(format!(
+                "{len} elements, at most {m} expected"
+            )));
         }
     }
-    if let (Some(props), Some(obj)) = (s.get("properties").and_then(Value::as_object), v.as_object()) {
+    if let (Some(props), Some(obj)) = (
+        s.get("properties").and_then(Value::as_object),
+        v.as_object(),
+    ) {
         for (k, sub) in obj {
             match props.get(k) {
                 Some(ps) => check_value(root, ps, sub).map_err(|p| match p {
@@ -272,7 +316,10 @@ mod tests {
 
     #[test]
     fn accepts_valid_params() {
-        assert!(errs(json!({"size": 64, "depth": 2, "pattern": "cells", "path": null, "mode": "b"})).is_empty());
+        assert!(errs(
+            json!({"size": 64, "depth": 2, "pattern": "cells", "path": null, "mode": "b"})
+        )
+        .is_empty());
     }
 
     #[test]
@@ -280,7 +327,9 @@ mod tests {
         let e = errs(json!({"sise": 3, "size": 0, "pattern": "waeve", "mode": 3}));
         assert_eq!(e.len(), 5, "{e:#?}");
         // Parameters are visited in file order: sise, size, pattern, mode; then required ones.
-        assert!(matches!(&e[0], GraphError::UnknownParam { suggestion: Some(s), .. } if s == "size"));
+        assert!(
+            matches!(&e[0], GraphError::UnknownParam { suggestion: Some(s), .. } if s == "size")
+        );
         assert!(matches!(&e[1], GraphError::ParamRange { param, .. } if param == "size"));
         assert!(matches!(&e[2], GraphError::ParamType { suggestion: Some(s), .. } if s == "weave"));
         assert!(matches!(&e[3], GraphError::ParamType { param, .. } if param == "mode"));
@@ -290,6 +339,8 @@ mod tests {
     #[test]
     fn integer_rejects_fractions() {
         let e = errs(json!({"size": 2.5, "depth": 1}));
-        assert!(matches!(&e[0], GraphError::ParamType { expected, .. } if expected == "an integer"));
+        assert!(
+            matches!(&e[0], GraphError::ParamType { expected, .. } if expected == "an integer")
+        );
     }
 }

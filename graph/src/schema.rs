@@ -36,8 +36,15 @@ pub fn graph_schema(catalog: &dyn Catalog) -> Value {
     kinds.sort();
     let mut rules = Vec::new();
     for kind in &kinds {
-        let Some(sig) = catalog.signature(kind) else { continue };
-        let defs = sig.params.get("$defs").and_then(Value::as_object).cloned().unwrap_or_default();
+        let Some(sig) = catalog.signature(kind) else {
+            continue;
+        };
+        let defs = sig
+            .params
+            .get("$defs")
+            .and_then(Value::as_object)
+            .cloned()
+            .unwrap_or_default();
         let mut params = inline_refs(&sig.params, &defs, 0);
         if let Value::Object(p) = &mut params {
             p.remove("title");
@@ -50,7 +57,12 @@ pub fn graph_schema(catalog: &dyn Catalog) -> Value {
                 (i.name.clone(), json!({ "type": "string", "pattern": "^[a-z][a-z0-9_]*\\.[a-z0-9_]+$", "description": desc }))
             })
             .collect();
-        let required: Vec<&str> = sig.inputs.iter().filter(|i| i.required).map(|i| i.name.as_str()).collect();
+        let required: Vec<&str> = sig
+            .inputs
+            .iter()
+            .filter(|i| i.required)
+            .map(|i| i.name.as_str())
+            .collect();
         rules.push(json!({
             "if": { "properties": { "kind": { "const": kind } }, "required": ["kind"] },
             "then": {
@@ -110,7 +122,11 @@ mod tests {
         let s = graph_schema(&vec![sig]);
         let text = s.to_string();
         assert!(!text.contains("$ref"), "{text}");
-        let p = &s["properties"]["nodes"]["additionalProperties"]["allOf"][0]["then"]["properties"]["params"]["properties"]["p"];
-        assert_eq!(p, &json!({"type": "string", "enum": ["x", "y"], "default": "x"}));
+        let p = &s["properties"]["nodes"]["additionalProperties"]["allOf"][0]["then"]["properties"]
+            ["params"]["properties"]["p"];
+        assert_eq!(
+            p,
+            &json!({"type": "string", "enum": ["x", "y"], "default": "x"})
+        );
     }
 }

@@ -26,7 +26,10 @@ mod tests {
             nearest("heightfield.procedual", kinds).as_deref(),
             Some("heightfield.procedural")
         );
-        assert_eq!(nearest("image.wirte", kinds).as_deref(), Some("image.write"));
+        assert_eq!(
+            nearest("image.wirte", kinds).as_deref(),
+            Some("image.write")
+        );
         assert_eq!(nearest("sss.profile", kinds), None);
     }
 }

@@ -12,7 +12,10 @@ pub struct DecodeError {
 
 impl DecodeError {
     pub fn new(what: &str, message: impl Into<String>) -> Self {
-        DecodeError { what: what.into(), message: message.into() }
+        DecodeError {
+            what: what.into(),
+            message: message.into(),
+        }
     }
 }
 
@@ -66,7 +69,10 @@ impl<'a> Decoder<'a> {
 
     fn take(&mut self, n: usize) -> Result<&'a [u8], DecodeError> {
         if self.rest.len() < n {
-            return Err(DecodeError::new(self.what, format!("truncated: needed {n} more bytes, {} left", self.rest.len())));
+            return Err(DecodeError::new(
+                self.what,
+                format!("truncated: needed {n} more bytes, {} left", self.rest.len()),
+            ));
         }
         let (head, tail) = self.rest.split_at(n);
         self.rest = tail;
@@ -91,11 +97,17 @@ impl<'a> Decoder<'a> {
         usize::try_from(n)
             .ok()
             .filter(|n| n.checked_mul(elem).is_some_and(|b| b <= self.rest.len()))
-            .ok_or_else(|| DecodeError::new(self.what, format!("length {n} exceeds the {} bytes left", self.rest.len())))
+            .ok_or_else(|| {
+                DecodeError::new(
+                    self.what,
+                    format!("length {n} exceeds the {} bytes left", self.rest.len()),
+                )
+            })
     }
     pub fn str(&mut self) -> Result<String, DecodeError> {
         let n = self.len(1)?;
-        String::from_utf8(self.take(n)?.to_vec()).map_err(|e| DecodeError::new(self.what, e.to_string()))
+        String::from_utf8(self.take(n)?.to_vec())
+            .map_err(|e| DecodeError::new(self.what, e.to_string()))
     }
     pub fn raw(&mut self) -> Result<Vec<u8>, DecodeError> {
         let n = self.len(1)?;
@@ -104,14 +116,20 @@ impl<'a> Decoder<'a> {
     pub fn f32s(&mut self) -> Result<Vec<f32>, DecodeError> {
         let n = self.len(4)?;
         let bytes = self.take(n * 4)?;
-        Ok(bytes.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect())
+        Ok(bytes
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect())
     }
     /// Fails unless every byte was consumed.
     pub fn finish(self) -> Result<(), DecodeError> {
         if self.rest.is_empty() {
             Ok(())
         } else {
-            Err(DecodeError::new(self.what, format!("{} trailing bytes", self.rest.len())))
+            Err(DecodeError::new(
+                self.what,
+                format!("{} trailing bytes", self.rest.len()),
+            ))
         }
     }
 }
@@ -123,7 +141,11 @@ mod tests {
     #[test]
     fn round_trip_and_truncation() {
         let mut e = Encoder::default();
-        e.u32(7).f64(-1.5).str("héllo").f32s(&[1.0, f32::INFINITY]).raw(&[9, 8]);
+        e.u32(7)
+            .f64(-1.5)
+            .str("héllo")
+            .f32s(&[1.0, f32::INFINITY])
+            .raw(&[9, 8]);
         let mut d = Decoder::new("t", &e.bytes);
         assert_eq!(d.u32().unwrap(), 7);
         assert_eq!(d.f64().unwrap(), -1.5);

@@ -126,7 +126,12 @@ impl Engine {
                 .ok_or_else(|| EngineError::NoSuchNode(o.to_string()))?;
             let sig = self.registry.node(&node.kind).map(|n| n.signature());
             if sig.is_some_and(|s| s.output(&o.port).is_none()) {
-                return Err(EngineError::NoSuchOutput(o.to_string(), o.node.clone(), node.kind.clone(), o.port.clone()));
+                return Err(EngineError::NoSuchOutput(
+                    o.to_string(),
+                    o.node.clone(),
+                    node.kind.clone(),
+                    o.port.clone(),
+                ));
             }
         }
         Ok(crate::scheduler::execute(self, graph, opts, observer))

@@ -15,26 +15,50 @@ impl Gpu {
         format!("{} ({:?})", self.info.name, self.info.backend)
     }
 
+    /// An adapter from the native APIs (Vulkan, Metal, DX12) first; OpenGL only when none exists,
+    /// because probing GL drivers is slow and noisy where they are absent. `WGPU_BACKEND` overrides.
+    fn adapter() -> Result<wgpu::Adapter, String> {
+        let from_env = wgpu::Backends::from_env();
+        let tries = match from_env {
+            Some(b) => vec![b],
+            None => vec![wgpu::Backends::PRIMARY, wgpu::Backends::GL],
+        };
+        let mut last = String::from("no backend tried");
+        for backends in tries {
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+            desc.backends = backends;
+            let instance = wgpu::Instance::new(desc);
+            match pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                apply_limit_buckets: false,
+            })) {
+                Ok(a) => return Ok(a),
+                Err(e) => last = e.to_string(),
+            }
+        }
+        Err(format!("no GPU adapter: {last}"))
+    }
+
     fn create() -> Result<Gpu, String> {
-        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            apply_limit_buckets: false,
-        }))
-        .map_err(|e| format!("no GPU adapter: {e}"))?;
+        let adapter = Self::adapter()?;
         let info = adapter.get_info();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("mesoflow"),
             required_features: wgpu::Features::empty(),
-            required_limits: wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits()),
+            // The adapter's own limits: compute nodes want the largest storage buffers it allows.
+            required_limits: adapter.limits(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),
             memory_hints: wgpu::MemoryHints::Performance,
             trace: wgpu::Trace::Off,
         }))
         .map_err(|e| format!("adapter {} refused a device: {e}", info.name))?;
-        Ok(Gpu { device, queue, info })
+        Ok(Gpu {
+            device,
+            queue,
+            info,
+        })
     }
 }
 
@@ -46,6 +70,8 @@ pub struct GpuProvider {
 
 impl GpuProvider {
     pub fn get(&self) -> Result<Arc<Gpu>, String> {
-        self.cell.get_or_init(|| Gpu::create().map(Arc::new)).clone()
+        self.cell
+            .get_or_init(|| Gpu::create().map(Arc::new))
+            .clone()
     }
 }

@@ -57,7 +57,10 @@ fn write_canonical(v: &Value, out: &mut String) {
             } else if let Some(u) = n.as_u64() {
                 out.push_str(&format!("i{u}"));
             } else {
-                out.push_str(&format!("f{:016x}", n.as_f64().unwrap_or(f64::NAN).to_bits()));
+                out.push_str(&format!(
+                    "f{:016x}",
+                    n.as_f64().unwrap_or(f64::NAN).to_bits()
+                ));
             }
         }
         Value::String(s) => out.push_str(&serde_json::to_string(s).unwrap_or_default()),
@@ -137,13 +140,25 @@ mod tests {
     use serde_json::json;
 
     fn key(params: Value) -> Key {
-        compute(&KeyParts { kind: "k", version: 1, params: &params, inputs: vec![], files: vec![] })
+        compute(&KeyParts {
+            kind: "k",
+            version: 1,
+            params: &params,
+            inputs: vec![],
+            files: vec![],
+        })
     }
 
     #[test]
     fn canonical_sorts_keys_and_encodes_float_bits() {
-        assert_eq!(canonical(&json!({"b": 1, "a": [true, null, "x"]})), r#"{"a":[true,null,"x"],"b":i1}"#);
-        assert_eq!(canonical(&json!(0.5)), format!("f{:016x}", 0.5f64.to_bits()));
+        assert_eq!(
+            canonical(&json!({"b": 1, "a": [true, null, "x"]})),
+            r#"{"a":[true,null,"x"],"b":i1}"#
+        );
+        assert_eq!(
+            canonical(&json!(0.5)),
+            format!("f{:016x}", 0.5f64.to_bits())
+        );
     }
 
     #[test]
@@ -163,12 +178,27 @@ mod tests {
     #[test]
     fn inputs_and_version_enter_the_key() {
         let p = json!({});
-        let base = KeyParts { kind: "k", version: 1, params: &p, inputs: vec![], files: vec![] };
+        let base = KeyParts {
+            kind: "k",
+            version: 1,
+            params: &p,
+            inputs: vec![],
+            files: vec![],
+        };
         let k0 = compute(&base);
         let k1 = compute(&KeyParts { version: 2, ..base });
-        let base = KeyParts { kind: "k", version: 1, params: &p, inputs: vec![("x", k0, "out")], files: vec![] };
+        let base = KeyParts {
+            kind: "k",
+            version: 1,
+            params: &p,
+            inputs: vec![("x", k0, "out")],
+            files: vec![],
+        };
         let k2 = compute(&base);
-        let k3 = compute(&KeyParts { inputs: vec![("x", k0, "other")], ..base });
+        let k3 = compute(&KeyParts {
+            inputs: vec![("x", k0, "other")],
+            ..base
+        });
         let all = [k0, k1, k2, k3];
         for i in 0..4 {
             for j in 0..i {

@@ -32,13 +32,22 @@ pub enum NodeError {
 
 impl NodeError {
     pub fn param(param: &str, message: impl Into<String>) -> Self {
-        NodeError::Param { param: param.into(), message: message.into() }
+        NodeError::Param {
+            param: param.into(),
+            message: message.into(),
+        }
     }
     pub fn input(port: &str, message: impl Into<String>) -> Self {
-        NodeError::Input { port: port.into(), message: message.into() }
+        NodeError::Input {
+            port: port.into(),
+            message: message.into(),
+        }
     }
     pub fn file(path: &Path, message: impl ToString) -> Self {
-        NodeError::File { path: path.display().to_string(), message: message.to_string() }
+        NodeError::File {
+            path: path.display().to_string(),
+            message: message.to_string(),
+        }
     }
 }
 
@@ -53,16 +62,36 @@ pub struct Port {
 
 impl Port {
     pub fn input(name: &'static str, ty: &str, doc: &'static str) -> Port {
-        Port { name, ty: TypeSet::one(ty), required: true, doc }
+        Port {
+            name,
+            ty: TypeSet::one(ty),
+            required: true,
+            doc,
+        }
     }
     pub fn optional(name: &'static str, ty: &str, doc: &'static str) -> Port {
-        Port { name, ty: TypeSet::one(ty), required: false, doc }
+        Port {
+            name,
+            ty: TypeSet::one(ty),
+            required: false,
+            doc,
+        }
     }
     pub fn any_of(name: &'static str, types: &[&str], doc: &'static str) -> Port {
-        Port { name, ty: TypeSet::any_of(types.iter().copied()), required: true, doc }
+        Port {
+            name,
+            ty: TypeSet::any_of(types.iter().copied()),
+            required: true,
+            doc,
+        }
     }
     pub fn output(name: &'static str, ty: &str, doc: &'static str) -> Port {
-        Port { name, ty: TypeSet::one(ty), required: true, doc }
+        Port {
+            name,
+            ty: TypeSet::one(ty),
+            required: true,
+            doc,
+        }
     }
 }
 
@@ -93,7 +122,12 @@ pub trait Node: Send + Sync + 'static {
         Ok(Vec::new())
     }
 
-    fn run(&self, ctx: &NodeContext, params: &Self::Params, inputs: &Inputs) -> Result<Outputs, NodeError>;
+    fn run(
+        &self,
+        ctx: &NodeContext,
+        params: &Self::Params,
+        inputs: &Inputs,
+    ) -> Result<Outputs, NodeError>;
 }
 
 /// Receives what nodes report while running.
@@ -176,20 +210,29 @@ impl Inputs {
     }
     /// A connected input of type `T`.
     pub fn get<T: Value>(&self, port: &str) -> Result<&T, NodeError> {
-        self.opt(port)?.ok_or_else(|| NodeError::input(port, "not connected"))
+        self.opt(port)?
+            .ok_or_else(|| NodeError::input(port, "not connected"))
     }
     /// An optional input of type `T`.
     pub fn opt<T: Value>(&self, port: &str) -> Result<Option<&T>, NodeError> {
         match self.values.get(port) {
             None => Ok(None),
             Some(v) => v.as_any().downcast_ref::<T>().map(Some).ok_or_else(|| {
-                NodeError::input(port, format!("got a {} value of an unexpected representation", v.type_name()))
+                NodeError::input(
+                    port,
+                    format!(
+                        "got a {} value of an unexpected representation",
+                        v.type_name()
+                    ),
+                )
             }),
         }
     }
     /// The value as the runtime holds it, for nodes that accept several types.
     pub fn value(&self, port: &str) -> Result<&ValueRef, NodeError> {
-        self.values.get(port).ok_or_else(|| NodeError::input(port, "not connected"))
+        self.values
+            .get(port)
+            .ok_or_else(|| NodeError::input(port, "not connected"))
     }
 }
 
@@ -225,7 +268,10 @@ pub struct Prepared {
 pub trait DynNode: Send + Sync {
     fn spec(&self) -> &NodeSpec;
     fn signature(&self) -> &KindSignature;
-    fn prepare(&self, params: &serde_json::Map<String, serde_json::Value>) -> Result<Prepared, NodeError>;
+    fn prepare(
+        &self,
+        params: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<Prepared, NodeError>;
     fn files(&self, p: &Prepared, base: &Path) -> Result<Vec<PathBuf>, NodeError>;
     fn run(&self, ctx: &NodeContext, p: &Prepared, inputs: &Inputs) -> Result<Outputs, NodeError>;
 }
@@ -248,22 +294,35 @@ impl<N: Node> Erased<N> {
             inputs: spec
                 .inputs
                 .iter()
-                .map(|p| InputSpec { name: p.name.into(), ty: p.ty.clone(), required: p.required, doc: p.doc.into() })
+                .map(|p| InputSpec {
+                    name: p.name.into(),
+                    ty: p.ty.clone(),
+                    required: p.required,
+                    doc: p.doc.into(),
+                })
                 .collect(),
             outputs: spec
                 .outputs
                 .iter()
-                .map(|p| OutputSpec { name: p.name.into(), ty: p.ty.to_string(), doc: p.doc.into() })
+                .map(|p| OutputSpec {
+                    name: p.name.into(),
+                    ty: p.ty.to_string(),
+                    doc: p.doc.into(),
+                })
                 .collect(),
             params: schema.into(),
         };
-        Erased { node, spec, signature }
+        Erased {
+            node,
+            spec,
+            signature,
+        }
     }
 
     fn typed<'a>(&self, p: &'a Prepared) -> Result<&'a N::Params, NodeError> {
-        p.params
-            .downcast_ref::<N::Params>()
-            .ok_or_else(|| NodeError::Failed("internal: parameters prepared for another kind".into()))
+        p.params.downcast_ref::<N::Params>().ok_or_else(|| {
+            NodeError::Failed("internal: parameters prepared for another kind".into())
+        })
     }
 }
 
@@ -274,13 +333,20 @@ impl<N: Node> DynNode for Erased<N> {
     fn signature(&self) -> &KindSignature {
         &self.signature
     }
-    fn prepare(&self, params: &serde_json::Map<String, serde_json::Value>) -> Result<Prepared, NodeError> {
+    fn prepare(
+        &self,
+        params: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<Prepared, NodeError> {
         let typed: N::Params = serde_json::from_value(serde_json::Value::Object(params.clone()))
             .map_err(|e| NodeError::param("params", e.to_string()))?;
         // The canonical form includes every default, so omitting a parameter and writing its
         // default give the same cache key.
-        let canonical = serde_json::to_value(&typed).map_err(|e| NodeError::param("params", e.to_string()))?;
-        Ok(Prepared { params: Box::new(typed), canonical })
+        let canonical =
+            serde_json::to_value(&typed).map_err(|e| NodeError::param("params", e.to_string()))?;
+        Ok(Prepared {
+            params: Box::new(typed),
+            canonical,
+        })
     }
     fn files(&self, p: &Prepared, base: &Path) -> Result<Vec<PathBuf>, NodeError> {
         self.node.files(self.typed(p)?, base)

@@ -24,7 +24,8 @@ impl Registry {
 
     pub fn register<N: Node>(&mut self, node: N) -> &mut Self {
         let erased = Erased::new(node);
-        self.nodes.insert(erased.spec.kind.to_string(), Arc::new(erased));
+        self.nodes
+            .insert(erased.spec.kind.to_string(), Arc::new(erased));
         self
     }
 

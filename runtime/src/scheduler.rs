@@ -34,7 +34,10 @@ impl Sink {
         self.warnings
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .push(Warning { node: node.into(), message });
+            .push(Warning {
+                node: node.into(),
+                message,
+            });
     }
 }
 
@@ -88,23 +91,42 @@ pub(crate) fn execute(
     observer: Arc<dyn RunObserver>,
 ) -> RunReport {
     let t0 = Instant::now();
-    let sink = Arc::new(Sink { observer: observer.clone(), warnings: Mutex::new(Vec::new()) });
+    let sink = Arc::new(Sink {
+        observer: observer.clone(),
+        warnings: Mutex::new(Vec::new()),
+    });
     let n = graph.nodes.len();
-    let index: BTreeMap<&str, usize> = graph.nodes.iter().enumerate().map(|(i, n)| (n.id.as_str(), i)).collect();
+    let index: BTreeMap<&str, usize> = graph
+        .nodes
+        .iter()
+        .enumerate()
+        .map(|(i, n)| (n.id.as_str(), i))
+        .collect();
     let upstream: Vec<Vec<usize>> = graph
         .nodes
         .iter()
         .map(|node| {
-            let set: BTreeSet<usize> = node.inputs.iter().filter_map(|e| index.get(e.from.node.as_str()).copied()).collect();
+            let set: BTreeSet<usize> = node
+                .inputs
+                .iter()
+                .filter_map(|e| index.get(e.from.node.as_str()).copied())
+                .collect();
             set.into_iter().collect()
         })
         .collect();
 
     // 1. Plan.
     let requested: BTreeSet<usize> = if opts.outputs.is_empty() {
-        graph.sinks().iter().filter_map(|id| index.get(id).copied()).collect()
+        graph
+            .sinks()
+            .iter()
+            .filter_map(|id| index.get(id).copied())
+            .collect()
     } else {
-        opts.outputs.iter().filter_map(|o| index.get(o.node.as_str()).copied()).collect()
+        opts.outputs
+            .iter()
+            .filter_map(|o| index.get(o.node.as_str()).copied())
+            .collect()
     };
     let mut needed = vec![false; n];
     for &i in &requested {
@@ -130,19 +152,40 @@ pub(crate) fn execute(
             slots.push(None);
             continue;
         };
-        let mut slot = Slot { node, prepared: None, key: None, outputs: None, report: None, expected: None };
-        let failed_input = upstream[i].iter().find(|&&u| slots[u].as_ref().is_none_or(|s| s.key.is_none()));
+        let mut slot = Slot {
+            node,
+            prepared: None,
+            key: None,
+            outputs: None,
+            report: None,
+            expected: None,
+        };
+        let failed_input = upstream[i]
+            .iter()
+            .find(|&&u| slots[u].as_ref().is_none_or(|s| s.key.is_none()));
         let keyed = match failed_input {
-            Some(&u) => Err((NodeStatus::Cancelled, format!("not run: input node `{}` failed", graph.nodes[u].id))),
-            None => prepare_and_key(&slot.node, cn, &slots, &index, &opts.base_dir, &mut read_files)
-                .map_err(|e| (NodeStatus::Failed, e.to_string())),
+            Some(&u) => Err((
+                NodeStatus::Cancelled,
+                format!("not run: input node `{}` failed", graph.nodes[u].id),
+            )),
+            None => prepare_and_key(
+                &slot.node,
+                cn,
+                &slots,
+                &index,
+                &opts.base_dir,
+                &mut read_files,
+            )
+            .map_err(|e| (NodeStatus::Failed, e.to_string())),
         };
         match keyed {
             Ok((prepared, key)) => {
                 slot.prepared = Some(Arc::new(prepared));
                 slot.key = Some(key);
             }
-            Err((status, error)) => slot.report = Some(failure(cn, &slot.node, status, error, None)),
+            Err((status, error)) => {
+                slot.report = Some(failure(cn, &slot.node, status, error, None))
+            }
         }
         slots.push(Some(slot));
     }
@@ -157,16 +200,23 @@ pub(crate) fn execute(
         if !demanded[i] {
             continue;
         }
-        let Some(slot) = slots[i].as_mut() else { continue };
+        let Some(slot) = slots[i].as_mut() else {
+            continue;
+        };
         let Some(key) = slot.key else { continue };
         let cn = &graph.nodes[i];
-        let hit = if opts.use_cache { lookup(engine, &key, cn.id.as_str(), &sink) } else { None };
+        let hit = if opts.use_cache {
+            lookup(engine, &key, cn.id.as_str(), &sink)
+        } else {
+            None
+        };
         match hit {
             Some((outputs, status, seconds)) if !opts.verify_cache => {
                 let report = NodeReport {
                     id: cn.id.clone(),
                     kind: cn.kind.clone(),
-                    device: device_name(planned_device(slot.node.spec().device, opts.device)).into(),
+                    device: device_name(planned_device(slot.node.spec().device, opts.device))
+                        .into(),
                     status,
                     seconds,
                     bytes: outputs.byte_size() as u64,
@@ -201,7 +251,13 @@ pub(crate) fn execute(
 
     // 4. Execute.
     let mut waiting: Vec<usize> = (0..n)
-        .map(|i| if compute[i] { upstream[i].iter().filter(|&&u| compute[u]).count() } else { 0 })
+        .map(|i| {
+            if compute[i] {
+                upstream[i].iter().filter(|&&u| compute[u]).count()
+            } else {
+                0
+            }
+        })
         .collect();
     let mut ready: BTreeSet<usize> = (0..n).filter(|&i| compute[i] && waiting[i] == 0).collect();
     let (tx, rx) = mpsc::channel::<Done>();
@@ -226,7 +282,9 @@ pub(crate) fn execute(
                     inputs = inputs.with(&e.port, v);
                 }
             }
-            let Some(slot) = slots[i].as_mut() else { continue };
+            let Some(slot) = slots[i].as_mut() else {
+                continue;
+            };
             let gpu = match choose_device(engine, slot.node.spec().device, opts) {
                 Ok(gpu) => gpu,
                 Err(message) => {
@@ -237,7 +295,10 @@ pub(crate) fn execute(
                     continue;
                 }
             };
-            if slot.node.spec().device == DevicePreference::Gpu && gpu.is_none() && opts.device == DeviceMode::Auto {
+            if slot.node.spec().device == DevicePreference::Gpu
+                && gpu.is_none()
+                && opts.device == DeviceMode::Auto
+            {
                 sink.push(&cn.id, "no GPU adapter; ran the CPU path".into());
             }
             let device = if gpu.is_some() { "gpu" } else { "cpu" };
@@ -257,7 +318,11 @@ pub(crate) fn execute(
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
                 memory: opts.use_cache.then(|| engine.memory.clone()),
-                disk: if opts.use_cache && slot.node.spec().disk_cache { engine.disk.clone() } else { None },
+                disk: if opts.use_cache && slot.node.spec().disk_cache {
+                    engine.disk.clone()
+                } else {
+                    None
+                },
                 device,
                 tx: tx.clone(),
             };
@@ -281,7 +346,9 @@ pub(crate) fn execute(
         running -= 1;
         let i = done.idx;
         let cn = &graph.nodes[i];
-        let Some(slot) = slots[i].as_mut() else { continue };
+        let Some(slot) = slots[i].as_mut() else {
+            continue;
+        };
         let key = slot.key;
         let report = match done.result {
             Ok(outputs) => {
@@ -314,7 +381,11 @@ pub(crate) fn execute(
                 r
             }
             Err(e) => {
-                let status = if e == NodeError::Cancelled { NodeStatus::Cancelled } else { NodeStatus::Failed };
+                let status = if e == NodeError::Cancelled {
+                    NodeStatus::Cancelled
+                } else {
+                    NodeStatus::Failed
+                };
                 let mut r = failure(cn, &slot.node, status, e.to_string(), key);
                 r.seconds = done.seconds;
                 r.device = done.device.into();
@@ -332,14 +403,27 @@ pub(crate) fn execute(
     let mut nodes = Vec::new();
     let mut skipped = Vec::new();
     for (i, cn) in graph.nodes.iter().enumerate() {
-        let Some(slot) = slots[i].as_mut() else { continue };
+        let Some(slot) = slots[i].as_mut() else {
+            continue;
+        };
         match slot.report.take() {
             Some(r) => nodes.push(r),
-            None if compute[i] => nodes.push(failure(cn, &slot.node, NodeStatus::Cancelled, "cancelled".into(), slot.key)),
+            None if compute[i] => nodes.push(failure(
+                cn,
+                &slot.node,
+                NodeStatus::Cancelled,
+                "cancelled".into(),
+                slot.key,
+            )),
             None => skipped.push(cn.id.clone()),
         }
     }
-    let ok = nodes.iter().all(|r| matches!(r.status, NodeStatus::Computed | NodeStatus::Memory | NodeStatus::Disk));
+    let ok = nodes.iter().all(|r| {
+        matches!(
+            r.status,
+            NodeStatus::Computed | NodeStatus::Memory | NodeStatus::Disk
+        )
+    });
     let warnings = std::mem::take(&mut *sink.warnings.lock().unwrap_or_else(|e| e.into_inner()));
     RunReport {
         mesoflow: 1,
@@ -354,7 +438,6 @@ pub(crate) fn execute(
         read: read_files.into_iter().collect(),
     }
 }
-
 
 fn planned_device(pref: DevicePreference, mode: DeviceMode) -> DevicePreference {
     if mode == DeviceMode::Cpu {
@@ -377,7 +460,9 @@ fn choose_device(
     match engine.gpu.get() {
         Ok(gpu) => Ok(Some(gpu)),
         Err(e) if opts.device == DeviceMode::Gpu => Err(format!("{e} (--device gpu)")),
-        Err(e) if opts.require_gpu => Err(format!("{e} (MESOFLOW_REQUIRE_GPU=1 forbids the CPU fallback)")),
+        Err(e) if opts.require_gpu => Err(format!(
+            "{e} (MESOFLOW_REQUIRE_GPU=1 forbids the CPU fallback)"
+        )),
         Err(_) => Ok(None),
     }
 }
@@ -417,7 +502,12 @@ fn prepare_and_key(
     Ok((prepared, key))
 }
 
-fn lookup(engine: &Engine, key: &Key, node: &str, sink: &Sink) -> Option<(Outputs, NodeStatus, f64)> {
+fn lookup(
+    engine: &Engine,
+    key: &Key,
+    node: &str,
+    sink: &Sink,
+) -> Option<(Outputs, NodeStatus, f64)> {
     if let Some(out) = engine.memory.get(key) {
         return Some((out, NodeStatus::Memory, 0.0));
     }
@@ -473,8 +563,15 @@ fn cancel_dependants(
             dead.insert(j);
             if let Some(slot) = slots[j].as_mut() {
                 if slot.report.is_none() {
-                    let message = format!("not run: input node `{}` failed", graph.nodes[failed].id);
-                    let r = failure(&graph.nodes[j], &slot.node, NodeStatus::Cancelled, message, slot.key);
+                    let message =
+                        format!("not run: input node `{}` failed", graph.nodes[failed].id);
+                    let r = failure(
+                        &graph.nodes[j],
+                        &slot.node,
+                        NodeStatus::Cancelled,
+                        message,
+                        slot.key,
+                    );
                     observer.node_finished(&r);
                     slot.report = Some(r);
                 }
@@ -484,9 +581,17 @@ fn cancel_dependants(
 }
 
 /// Writes a node's `File` outputs under the output folder, atomically (temporary file + rename).
-fn write_artifacts(node: &str, outputs: &Outputs, out_dir: &Path, sink: &Sink, files: &mut Vec<String>) {
+fn write_artifacts(
+    node: &str,
+    outputs: &Outputs,
+    out_dir: &Path,
+    sink: &Sink,
+    files: &mut Vec<String>,
+) {
     for v in outputs.values.values() {
-        let Some(a) = v.as_any().downcast_ref::<Artifact>() else { continue };
+        let Some(a) = v.as_any().downcast_ref::<Artifact>() else {
+            continue;
+        };
         let path = out_dir.join(&a.path);
         let write = || -> std::io::Result<()> {
             if let Some(parent) = path.parent() {
@@ -521,15 +626,17 @@ impl Task {
     fn run(self) {
         let t = Instant::now();
         let result = match &self.prepared {
-            Some(p) => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| self.node.run(&self.ctx, p, &self.inputs)))
-                .unwrap_or_else(|panic| {
-                    let msg = panic
-                        .downcast_ref::<String>()
-                        .cloned()
-                        .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                        .unwrap_or_default();
-                    Err(NodeError::Failed(format!("internal error (panic): {msg}")))
-                }),
+            Some(p) => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                self.node.run(&self.ctx, p, &self.inputs)
+            }))
+            .unwrap_or_else(|panic| {
+                let msg = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                Err(NodeError::Failed(format!("internal error (panic): {msg}")))
+            }),
             None => Err(NodeError::Failed("internal: no prepared parameters".into())),
         };
         let seconds = t.elapsed().as_secs_f64();
@@ -563,7 +670,13 @@ impl Task {
                 }
             }
         }
-        let _ = self.tx.send(Done { idx: self.idx, result, seconds, device: self.device, verified });
+        let _ = self.tx.send(Done {
+            idx: self.idx,
+            result,
+            seconds,
+            device: self.device,
+            verified,
+        });
     }
 }
 
@@ -571,7 +684,12 @@ impl Task {
 fn check_outputs(node: &dyn DynNode, out: Outputs) -> Result<Outputs, NodeError> {
     for port in &node.spec().outputs {
         match out.get(port.name) {
-            None => return Err(NodeError::Failed(format!("internal: output `{}` was not produced", port.name))),
+            None => {
+                return Err(NodeError::Failed(format!(
+                    "internal: output `{}` was not produced",
+                    port.name
+                )))
+            }
             Some(v) if !port.ty.accepts(v.type_name()) => {
                 return Err(NodeError::Failed(format!(
                     "internal: output `{}` is a {}, declared {}",

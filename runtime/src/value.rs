@@ -77,7 +77,10 @@ pub struct Artifact {
 impl Artifact {
     pub const TYPE: &'static str = "File";
     pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
-        Ok(Arc::new(Artifact { path: d.str()?, bytes: d.raw()? }))
+        Ok(Arc::new(Artifact {
+            path: d.str()?,
+            bytes: d.raw()?,
+        }))
     }
 }
 

@@ -51,7 +51,11 @@ impl Node for Normals {
             None => normals_cpu(hf, p.scale as f32),
         };
         ctx.progress(1, 1);
-        let normals = NormalMap { width: hf.width, height: hf.height, data };
+        let normals = NormalMap {
+            width: hf.width,
+            height: hf.height,
+            data,
+        };
         let preview = Image {
             width: hf.width,
             height: hf.height,
@@ -59,7 +63,10 @@ impl Node for Normals {
             data: normals.data.iter().map(|c| 0.5 * c + 0.5).collect(),
         };
         let rms = rms_slope(&normals);
-        Ok(Outputs::new().with("normals", normals).with("preview", preview).with("rms_slope", Scalar(rms)))
+        Ok(Outputs::new()
+            .with("normals", normals)
+            .with("preview", preview)
+            .with("rms_slope", Scalar(rms)))
     }
 }
 
@@ -79,7 +86,11 @@ pub fn normals_cpu(hf: &HeightField, scale: f32) -> Vec<f32> {
     out
 }
 
-fn normals_gpu(gpu: &mesoflow_runtime::Gpu, hf: &HeightField, scale: f32) -> Result<Vec<f32>, NodeError> {
+fn normals_gpu(
+    gpu: &mesoflow_runtime::Gpu,
+    hf: &HeightField,
+    scale: f32,
+) -> Result<Vec<f32>, NodeError> {
     let mut params = Vec::with_capacity(16);
     params.extend_from_slice(&(hf.width as u32).to_le_bytes());
     params.extend_from_slice(&(hf.height as u32).to_le_bytes());
@@ -103,7 +114,11 @@ fn rms_slope(n: &NormalMap) -> f64 {
     let rows: Vec<f64> = n
         .data
         .par_chunks(n.width * 3)
-        .map(|row| row.chunks_exact(3).map(|c| ((c[0] * c[0] + c[1] * c[1]) / (c[2] * c[2])) as f64).sum())
+        .map(|row| {
+            row.chunks_exact(3)
+                .map(|c| ((c[0] * c[0] + c[1] * c[1]) / (c[2] * c[2])) as f64)
+                .sum()
+        })
         .collect();
     (rows.iter().sum::<f64>() / (n.width * n.height).max(1) as f64).sqrt()
 }
@@ -118,21 +133,37 @@ mod tests {
         // exact normal is (−a, 0, 1)/sqrt(1 + a²).
         let a = 0.5f32;
         let (w, hgt) = (16, 4);
-        let data = (0..hgt).flat_map(|_| (0..w).map(move |x| a * x as f32)).collect();
-        let hf = HeightField { width: w, height: hgt, data };
+        let data = (0..hgt)
+            .flat_map(|_| (0..w).map(move |x| a * x as f32))
+            .collect();
+        let hf = HeightField {
+            width: w,
+            height: hgt,
+            data,
+        };
         let n = normals_cpu(&hf, 1.0);
         let len = (1.0 + a * a).sqrt();
         for x in 1..w - 1 {
             let i = (2 * w + x) * 3;
-            assert!((n[i] + a / len).abs() < 1e-6 && n[i + 1].abs() < 1e-6 && (n[i + 2] - 1.0 / len).abs() < 1e-6);
+            assert!(
+                (n[i] + a / len).abs() < 1e-6
+                    && n[i + 1].abs() < 1e-6
+                    && (n[i + 2] - 1.0 / len).abs() < 1e-6
+            );
         }
     }
 
     #[test]
     fn slope_along_v_points_the_normal_down_the_image() {
         // Heights growing towards the top of the image (decreasing row) rise along +y.
-        let data = (0..8).flat_map(|y| (0..8).map(move |_| (8 - y) as f32)).collect();
-        let hf = HeightField { width: 8, height: 8, data };
+        let data = (0..8)
+            .flat_map(|y| (0..8).map(move |_| (8 - y) as f32))
+            .collect();
+        let hf = HeightField {
+            width: 8,
+            height: 8,
+            data,
+        };
         let n = normals_cpu(&hf, 1.0);
         let i = (4 * 8 + 4) * 3;
         assert!(n[i + 1] < 0.0 && n[i].abs() < 1e-6);
@@ -151,19 +182,37 @@ mod tests {
                 return;
             }
         };
-        let p = crate::heightfield::procedural::Params { pattern: crate::heightfield::procedural::Pattern::Cells, size: 96, ..Default::default() };
+        let p = crate::heightfield::procedural::Params {
+            pattern: crate::heightfield::procedural::Pattern::Cells,
+            size: 96,
+            ..Default::default()
+        };
         let hf = {
             let ctx = NodeContext::detached(None);
-            let out = crate::heightfield::procedural::Procedural.run(&ctx, &p, &Inputs::new()).unwrap();
-            out.get("height").unwrap().as_any().downcast_ref::<HeightField>().unwrap().clone()
+            let out = crate::heightfield::procedural::Procedural
+                .run(&ctx, &p, &Inputs::new())
+                .unwrap();
+            out.get("height")
+                .unwrap()
+                .as_any()
+                .downcast_ref::<HeightField>()
+                .unwrap()
+                .clone()
         };
         let cpu = normals_cpu(&hf, 2.0);
         let gpu_out = normals_gpu(&gpu, &hf, 2.0).unwrap();
         // Both paths evaluate the same f32 expression; they may differ only in how sqrt and the
         // division round (WGSL allows 2.5 ULP for sqrt and division), i.e. a few 1e-7 on unit
         // components. 1e-5 leaves a wide margin and still catches any indexing or sign error.
-        let max = cpu.iter().zip(&gpu_out).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-        eprintln!("GPU ({}) vs CPU normals: max |difference| = {max:e}", gpu.describe());
+        let max = cpu
+            .iter()
+            .zip(&gpu_out)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        eprintln!(
+            "GPU ({}) vs CPU normals: max |difference| = {max:e}",
+            gpu.describe()
+        );
         assert!(max < 1e-5, "max difference {max}");
     }
 }

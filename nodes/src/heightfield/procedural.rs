@@ -93,29 +93,46 @@ impl Node for Procedural {
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         if p.pattern == Pattern::Weave && p.count % 2 == 1 {
-            return Err(NodeError::param("count", format!("a plain weave tiles only with an even thread count, got {}", p.count)));
+            return Err(NodeError::param(
+                "count",
+                format!(
+                    "a plain weave tiles only with an even thread count, got {}",
+                    p.count
+                ),
+            ));
         }
         let n = p.size as usize;
         let mut data = vec![0f32; n * n];
         let rows_done = std::sync::atomic::AtomicU64::new(0);
-        data.par_chunks_mut(n).enumerate().try_for_each(|(y, row)| {
-            ctx.check_cancel()?;
-            for (x, h) in row.iter_mut().enumerate() {
-                // Texel centres; v grows up the image (row 0 is the top).
-                let u = (x as f64 + 0.5) / n as f64;
-                let v = 1.0 - (y as f64 + 0.5) / n as f64;
-                *h = (p.depth * unit_height(p, u, v)) as f32;
-            }
-            let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            if done % 64 == 0 || done == n as u64 {
-                ctx.progress(done, n as u64);
-            }
-            Ok::<(), NodeError>(())
-        })?;
-        let hf = HeightField { width: n, height: n, data };
+        data.par_chunks_mut(n)
+            .enumerate()
+            .try_for_each(|(y, row)| {
+                ctx.check_cancel()?;
+                for (x, h) in row.iter_mut().enumerate() {
+                    // Texel centres; v grows up the image (row 0 is the top).
+                    let u = (x as f64 + 0.5) / n as f64;
+                    let v = 1.0 - (y as f64 + 0.5) / n as f64;
+                    *h = (p.depth * unit_height(p, u, v)) as f32;
+                }
+                let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                if done % 64 == 0 || done == n as u64 {
+                    ctx.progress(done, n as u64);
+                }
+                Ok::<(), NodeError>(())
+            })?;
+        let hf = HeightField {
+            width: n,
+            height: n,
+            data,
+        };
         let (lo, hi) = hf.min_max();
         let span = if hi > lo { hi - lo } else { 1.0 };
-        let preview = Image { width: n, height: n, channels: 1, data: hf.data.iter().map(|h| (h - lo) / span).collect() };
+        let preview = Image {
+            width: n,
+            height: n,
+            channels: 1,
+            data: hf.data.iter().map(|h| (h - lo) / span).collect(),
+        };
         Ok(Outputs::new().with("height", hf).with("preview", preview))
     }
 }
@@ -201,7 +218,14 @@ fn value_noise(seed: u64, octave: u64, period: i64, x: f64, y: f64) -> f64 {
     let (ix, iy) = (x.floor() as i64, y.floor() as i64);
     let (fx, fy) = (x - ix as f64, y - iy as f64);
     let lattice = |i: i64, j: i64| {
-        rng::unit(rng::hash(seed, &[octave, i.rem_euclid(period) as u64, j.rem_euclid(period) as u64]))
+        rng::unit(rng::hash(
+            seed,
+            &[
+                octave,
+                i.rem_euclid(period) as u64,
+                j.rem_euclid(period) as u64,
+            ],
+        ))
     };
     let fade = |t: f64| t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
     let (sx, sy) = (fade(fx), fade(fy));
@@ -215,23 +239,37 @@ mod tests {
     use super::*;
 
     fn params(pattern: Pattern) -> Params {
-        Params { pattern, ..Params::default() }
+        Params {
+            pattern,
+            ..Params::default()
+        }
     }
 
     #[test]
     fn every_pattern_tiles_seamlessly() {
         // Periodicity means height(u, v) == height(u + 1, v): compare across the seam at fine
         // offsets. The formulas use floor/fract, so equality holds to rounding (1e-9).
-        for pattern in [Pattern::Bumps, Pattern::Weave, Pattern::Cells, Pattern::Noise] {
+        for pattern in [
+            Pattern::Bumps,
+            Pattern::Weave,
+            Pattern::Cells,
+            Pattern::Noise,
+        ] {
             let p = params(pattern);
             for k in 0..50 {
                 let t = k as f64 / 50.0 + 0.003;
                 let a = unit_height(&p, 0.0004, t);
                 let b = unit_height(&p, 1.0004, t);
-                assert!((a - b).abs() < 1e-9, "{pattern:?} u-seam at {t}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() < 1e-9,
+                    "{pattern:?} u-seam at {t}: {a} vs {b}"
+                );
                 let a = unit_height(&p, t, 0.0004);
                 let b = unit_height(&p, t, 1.0004);
-                assert!((a - b).abs() < 1e-9, "{pattern:?} v-seam at {t}: {a} vs {b}");
+                assert!(
+                    (a - b).abs() < 1e-9,
+                    "{pattern:?} v-seam at {t}: {a} vs {b}"
+                );
             }
         }
     }
@@ -239,7 +277,12 @@ mod tests {
     #[test]
     fn bump_profile_is_a_hemisphere() {
         // At the bump centre the height is 1; at distance d the closed form is sqrt(1 - (d/r)²).
-        let p = Params { pattern: Pattern::Bumps, count: 1, width: 0.8, ..Params::default() };
+        let p = Params {
+            pattern: Pattern::Bumps,
+            count: 1,
+            width: 0.8,
+            ..Params::default()
+        };
         assert!((unit_height(&p, 0.5, 0.5) - 1.0).abs() < 1e-12);
         let d: f64 = 0.2;
         let expected = (1.0 - (d / 0.4).powi(2)).sqrt();
@@ -250,7 +293,11 @@ mod tests {
     #[test]
     fn weave_alternates_over_and_under() {
         // At crossing (i, j) = (0, 0) the warp is on top; at (1, 0) the weft is.
-        let p = Params { pattern: Pattern::Weave, count: 2, ..Params::default() };
+        let p = Params {
+            pattern: Pattern::Weave,
+            count: 2,
+            ..Params::default()
+        };
         let warp_top = unit_height(&p, 0.25, 0.25);
         let weft_top = unit_height(&p, 0.75, 0.25);
         assert!((warp_top - 1.0).abs() < 1e-9 && (weft_top - 1.0).abs() < 1e-9);
@@ -262,8 +309,16 @@ mod tests {
     #[test]
     fn odd_weave_is_a_parameter_error() {
         let ctx = NodeContext::detached(None);
-        let p = Params { pattern: Pattern::Weave, count: 3, size: 16, ..Params::default() };
+        let p = Params {
+            pattern: Pattern::Weave,
+            count: 3,
+            size: 16,
+            ..Params::default()
+        };
         let err = Procedural.run(&ctx, &p, &Inputs::new()).unwrap_err();
-        assert!(matches!(err, NodeError::Param { ref param, .. } if param == "count"), "{err}");
+        assert!(
+            matches!(err, NodeError::Param { ref param, .. } if param == "count"),
+            "{err}"
+        );
     }
 }

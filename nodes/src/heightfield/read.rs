@@ -49,10 +49,24 @@ impl Node for Read {
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         let path = ctx.input_path(&p.path);
         let grid = formats::read_grey(&path)?;
-        let data: Vec<f32> = grid.data.iter().map(|v| (*v as f64 * p.depth) as f32).collect();
+        let data: Vec<f32> = grid
+            .data
+            .iter()
+            .map(|v| (*v as f64 * p.depth) as f32)
+            .collect();
         if let Some(bad) = data.iter().position(|v| !v.is_finite()) {
-            return Err(NodeError::file(&path, format!("sample {bad} is not finite")));
+            return Err(NodeError::file(
+                &path,
+                format!("sample {bad} is not finite"),
+            ));
         }
-        Ok(Outputs::new().with("height", HeightField { width: grid.width, height: grid.height, data }))
+        Ok(Outputs::new().with(
+            "height",
+            HeightField {
+                width: grid.width,
+                height: grid.height,
+                data,
+            },
+        ))
     }
 }

@@ -1,8 +1,8 @@
 //! Encoders and decoders for the file formats mesoflow exchanges: PNG (8/16-bit, sRGB for
 //! display), EXR (linear f32), Radiance HDR and JPEG (read only), NPY (f32 arrays, numpy's layout).
 
-use crate::types::{linear_to_srgb, srgb_to_linear};
 use crate::types::Image;
+use crate::types::{linear_to_srgb, srgb_to_linear};
 use mesoflow_runtime::NodeError;
 use std::io::Cursor;
 use std::path::Path;
@@ -15,7 +15,10 @@ pub struct Grid {
 }
 
 fn ext(path: &Path) -> String {
-    path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase()
+    path.extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase()
 }
 
 /// Reads an image as linear f32. 8-bit files are sRGB-decoded; 16-bit and float files are taken
@@ -34,7 +37,10 @@ pub fn read_image(path: &Path) -> Result<Image, NodeError> {
         .map_err(|e| NodeError::file(path, format!("cannot decode: {e}")))?;
     let eight_bit = matches!(
         img.color(),
-        image::ColorType::L8 | image::ColorType::La8 | image::ColorType::Rgb8 | image::ColorType::Rgba8
+        image::ColorType::L8
+            | image::ColorType::La8
+            | image::ColorType::Rgb8
+            | image::ColorType::Rgba8
     );
     let (width, height) = (img.width() as usize, img.height() as usize);
     let has_alpha = img.color().has_alpha();
@@ -47,29 +53,53 @@ pub fn read_image(path: &Path) -> Result<Image, NodeError> {
     let data = if eight_bit {
         raw.iter()
             .enumerate()
-            .map(|(i, &c)| if channels == 4 && i % 4 == 3 { c } else { srgb_to_linear(c) })
+            .map(|(i, &c)| {
+                if channels == 4 && i % 4 == 3 {
+                    c
+                } else {
+                    srgb_to_linear(c)
+                }
+            })
             .collect()
     } else {
         raw
     };
-    Ok(Image { width, height, channels, data })
+    Ok(Image {
+        width,
+        height,
+        channels,
+        data,
+    })
 }
 
 fn read_exr(path: &Path) -> Result<Image, NodeError> {
     use exr::prelude::*;
-    let img = read_first_flat_layer_from_file(path).map_err(|e| NodeError::file(path, format!("cannot decode EXR: {e}")))?;
+    let img = read_first_flat_layer_from_file(path)
+        .map_err(|e| NodeError::file(path, format!("cannot decode EXR: {e}")))?;
     let layer = &img.layer_data;
     let (width, height) = (layer.size.width(), layer.size.height());
-    let find = |name: &str| layer.channel_data.list.iter().find(|c| c.name.eq_case_insensitive(name));
+    let find = |name: &str| {
+        layer
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.eq_case_insensitive(name))
+    };
     let wanted: Vec<_> = match (find("R"), find("G"), find("B"), find("A"), find("Y")) {
-        (Some(r), Some(g), Some(b), a, _) => [Some(r), Some(g), Some(b), a].into_iter().flatten().collect(),
+        (Some(r), Some(g), Some(b), a, _) => [Some(r), Some(g), Some(b), a]
+            .into_iter()
+            .flatten()
+            .collect(),
         (_, _, _, _, Some(y)) => vec![y],
         _ => layer.channel_data.list.iter().take(1).collect(),
     };
     if wanted.is_empty() {
         return Err(NodeError::file(path, "EXR layer has no channels"));
     }
-    let planes: Vec<Vec<f32>> = wanted.iter().map(|c| c.sample_data.values_as_f32().collect()).collect();
+    let planes: Vec<Vec<f32>> = wanted
+        .iter()
+        .map(|c| c.sample_data.values_as_f32().collect())
+        .collect();
     let channels = planes.len();
     let mut data = vec![0f32; width * height * channels];
     for (c, plane) in planes.iter().enumerate() {
@@ -77,7 +107,12 @@ fn read_exr(path: &Path) -> Result<Image, NodeError> {
             data[i * channels + c] = *v;
         }
     }
-    Ok(crate::types::Image { width, height, channels, data })
+    Ok(crate::types::Image {
+        width,
+        height,
+        channels,
+        data,
+    })
 }
 
 /// Reads a single-channel grid: a grey image (first channel of a colour one), EXR, or 2-D NPY.
@@ -91,60 +126,111 @@ pub fn read_grey(path: &Path) -> Result<Grid, NodeError> {
     let data = img
         .data
         .chunks_exact(img.channels)
-        .map(|px| if grey_png { linear_to_srgb(px[0]) } else { px[0] })
+        .map(|px| {
+            if grey_png {
+                linear_to_srgb(px[0])
+            } else {
+                px[0]
+            }
+        })
         .collect();
-    Ok(Grid { width: img.width, height: img.height, data })
+    Ok(Grid {
+        width: img.width,
+        height: img.height,
+        data,
+    })
 }
 
 fn read_npy_2d(path: &Path) -> Result<Grid, NodeError> {
     let bytes = std::fs::read(path).map_err(|e| NodeError::file(path, e))?;
-    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| NodeError::file(path, format!("not an NPY file: {e}")))?;
+    let npy = npyz::NpyFile::new(&bytes[..])
+        .map_err(|e| NodeError::file(path, format!("not an NPY file: {e}")))?;
     let shape = npy.shape().to_vec();
     if shape.len() != 2 {
-        return Err(NodeError::file(path, format!("expected a 2-D array (H, W), got shape {shape:?}")));
+        return Err(NodeError::file(
+            path,
+            format!("expected a 2-D array (H, W), got shape {shape:?}"),
+        ));
     }
     if npy.order() != npyz::Order::C {
-        return Err(NodeError::file(path, "Fortran-ordered arrays are not supported; save with order='C'"));
+        return Err(NodeError::file(
+            path,
+            "Fortran-ordered arrays are not supported; save with order='C'",
+        ));
     }
     let type_str = npy.dtype().descr();
     let data: Vec<f32> = if type_str.ends_with("f4") {
-        npy.into_vec::<f32>().map_err(|e| NodeError::file(path, e))?
+        npy.into_vec::<f32>()
+            .map_err(|e| NodeError::file(path, e))?
     } else if type_str.ends_with("f8") {
-        npy.into_vec::<f64>().map_err(|e| NodeError::file(path, e))?.into_iter().map(|v| v as f32).collect()
+        npy.into_vec::<f64>()
+            .map_err(|e| NodeError::file(path, e))?
+            .into_iter()
+            .map(|v| v as f32)
+            .collect()
     } else {
-        return Err(NodeError::file(path, format!("expected float32 or float64 samples, got dtype {type_str}")));
+        return Err(NodeError::file(
+            path,
+            format!("expected float32 or float64 samples, got dtype {type_str}"),
+        ));
     };
-    Ok(Grid { width: shape[1] as usize, height: shape[0] as usize, data })
+    Ok(Grid {
+        width: shape[1] as usize,
+        height: shape[0] as usize,
+        data,
+    })
 }
 
 /// PNG bytes of a linear image, sRGB-encoded (alpha stays linear), 8 or 16 bits per sample.
 pub fn encode_png(img: &Image, bits: u8) -> Result<Vec<u8>, String> {
     let encode = |i: usize, c: f32| {
         if img.channels == 4 && i % 4 == 3 {
-            if c.is_nan() { 0.0 } else { c.clamp(0.0, 1.0) }
+            if c.is_nan() {
+                0.0
+            } else {
+                c.clamp(0.0, 1.0)
+            }
         } else {
             linear_to_srgb(c)
         }
     };
     let (w, h) = (img.width as u32, img.height as u32);
     let dynamic = if bits == 16 {
-        let raw: Vec<u16> = img.data.iter().enumerate().map(|(i, &c)| (encode(i, c) * 65535.0).round() as u16).collect();
+        let raw: Vec<u16> = img
+            .data
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (encode(i, c) * 65535.0).round() as u16)
+            .collect();
         match img.channels {
-            1 => image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
-            3 => image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
-            _ => image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+            1 => image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, raw)
+                .map(image::DynamicImage::from),
+            3 => image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, raw)
+                .map(image::DynamicImage::from),
+            _ => image::ImageBuffer::<image::Rgba<u16>, _>::from_raw(w, h, raw)
+                .map(image::DynamicImage::from),
         }
     } else {
-        let raw: Vec<u8> = img.data.iter().enumerate().map(|(i, &c)| (encode(i, c) * 255.0).round() as u8).collect();
+        let raw: Vec<u8> = img
+            .data
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| (encode(i, c) * 255.0).round() as u8)
+            .collect();
         match img.channels {
-            1 => image::ImageBuffer::<image::Luma<u8>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
-            3 => image::ImageBuffer::<image::Rgb<u8>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
-            _ => image::ImageBuffer::<image::Rgba<u8>, _>::from_raw(w, h, raw).map(image::DynamicImage::from),
+            1 => image::ImageBuffer::<image::Luma<u8>, _>::from_raw(w, h, raw)
+                .map(image::DynamicImage::from),
+            3 => image::ImageBuffer::<image::Rgb<u8>, _>::from_raw(w, h, raw)
+                .map(image::DynamicImage::from),
+            _ => image::ImageBuffer::<image::Rgba<u8>, _>::from_raw(w, h, raw)
+                .map(image::DynamicImage::from),
         }
     }
     .ok_or("image size does not match its data")?;
     let mut out = Cursor::new(Vec::new());
-    dynamic.write_to(&mut out, image::ImageFormat::Png).map_err(|e| e.to_string())?;
+    dynamic
+        .write_to(&mut out, image::ImageFormat::Png)
+        .map_err(|e| e.to_string())?;
     Ok(out.into_inner())
 }
 
@@ -160,7 +246,13 @@ pub fn encode_exr(img: &Image) -> Result<Vec<u8>, String> {
         .iter()
         .enumerate()
         .map(|(c, name)| {
-            let plane = img.data.iter().skip(c).step_by(img.channels).copied().collect();
+            let plane = img
+                .data
+                .iter()
+                .skip(c)
+                .step_by(img.channels)
+                .copied()
+                .collect();
             AnyChannel::new(*name, FlatSamples::F32(plane))
         })
         .collect();
@@ -171,7 +263,10 @@ pub fn encode_exr(img: &Image) -> Result<Vec<u8>, String> {
         AnyChannels::sort(list),
     );
     let mut out = Cursor::new(Vec::new());
-    exr::image::Image::from_layer(layer).write().to_buffered(&mut out).map_err(|e| e.to_string())?;
+    exr::image::Image::from_layer(layer)
+        .write()
+        .to_buffered(&mut out)
+        .map_err(|e| e.to_string())?;
     Ok(out.into_inner())
 }
 
@@ -197,8 +292,15 @@ mod tests {
 
     fn ramp(channels: usize) -> Image {
         let (w, h) = (5, 3);
-        let data = (0..w * h * channels).map(|i| i as f32 / (w * h * channels) as f32).collect();
-        Image { width: w, height: h, channels, data }
+        let data = (0..w * h * channels)
+            .map(|i| i as f32 / (w * h * channels) as f32)
+            .collect();
+        Image {
+            width: w,
+            height: h,
+            channels,
+            data,
+        }
     }
 
     #[test]
@@ -234,7 +336,10 @@ mod tests {
         let bytes = encode_npy(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
         assert_eq!(&bytes[..6], b"\x93NUMPY");
         let header = String::from_utf8_lossy(&bytes[10..]).to_string();
-        assert!(header.contains("'descr': '<f4'") && header.contains("'shape': (2, 3"), "{header}");
+        assert!(
+            header.contains("'descr': '<f4'") && header.contains("'shape': (2, 3"),
+            "{header}"
+        );
         assert_eq!(&bytes[bytes.len() - 4..], &6f32.to_le_bytes());
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("a.npy");

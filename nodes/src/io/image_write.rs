@@ -47,11 +47,16 @@ impl Node for ImageWrite {
         NodeSpec {
             kind: "image.write",
             version: 1,
-            doc: "Writes an image: PNG (8 or 16 bit, sRGB-encoded for display) or EXR (linear f32).",
+            doc:
+                "Writes an image: PNG (8 or 16 bit, sRGB-encoded for display) or EXR (linear f32).",
             device: DevicePreference::Cpu,
             inputs: vec![Port::input("image", Image::TYPE, "linear image")],
-            outputs: vec![Port::output("file", "File", "the encoded file, written under the output folder")],
-            disk_cache: false,
+            outputs: vec![Port::output(
+                "file",
+                "File",
+                "the encoded file, written under the output folder",
+            )],
+            disk_cache: true,
         }
     }
 
@@ -73,13 +78,22 @@ impl Node for ImageWrite {
             (f, _) => f,
         };
         if p.bits != 8 && p.bits != 16 {
-            return Err(NodeError::param("bits", format!("PNG samples are 8 or 16 bits, got {}", p.bits)));
+            return Err(NodeError::param(
+                "bits",
+                format!("PNG samples are 8 or 16 bits, got {}", p.bits),
+            ));
         }
         let bytes = match format {
             Format::Exr => formats::encode_exr(img),
             _ => formats::encode_png(img, p.bits),
         }
         .map_err(|e| NodeError::Failed(format!("encoding {}: {e}", p.path)))?;
-        Ok(Outputs::new().with("file", Artifact { path: p.path.clone(), bytes }))
+        Ok(Outputs::new().with(
+            "file",
+            Artifact {
+                path: p.path.clone(),
+                bytes,
+            },
+        ))
     }
 }

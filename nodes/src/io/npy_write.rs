@@ -28,16 +28,26 @@ impl Node for NpyWrite {
             device: DevicePreference::Cpu,
             inputs: vec![Port::any_of("value", ARRAY_TYPES, "any array-like value")],
             outputs: vec![Port::output("file", "File", "the .npy file, written under the output folder")],
-            disk_cache: false,
+            disk_cache: true,
         }
     }
 
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let value = inputs.value("value")?;
-        let array = value
-            .as_array()
-            .ok_or_else(|| NodeError::input("value", format!("{} has no array layout", value.type_name())))?;
-        let bytes = crate::io::formats::encode_npy(&array.shape, array.data).map_err(NodeError::Failed)?;
-        Ok(Outputs::new().with("file", Artifact { path: p.path.clone(), bytes }))
+        let array = value.as_array().ok_or_else(|| {
+            NodeError::input(
+                "value",
+                format!("{} has no array layout", value.type_name()),
+            )
+        })?;
+        let bytes =
+            crate::io::formats::encode_npy(&array.shape, array.data).map_err(NodeError::Failed)?;
+        Ok(Outputs::new().with(
+            "file",
+            Artifact {
+                path: p.path.clone(),
+                bytes,
+            },
+        ))
     }
 }

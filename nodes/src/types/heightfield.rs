@@ -24,7 +24,11 @@ impl HeightField {
     }
 
     pub fn min_max(&self) -> (f32, f32) {
-        self.data.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)))
+        self.data
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| {
+                (lo.min(v), hi.max(v))
+            })
     }
 
     pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
@@ -34,7 +38,11 @@ impl HeightField {
         if data.len() != width * height {
             return Err(DecodeError::new(Self::TYPE, "size does not match the data"));
         }
-        Ok(Arc::new(HeightField { width, height, data }))
+        Ok(Arc::new(HeightField {
+            width,
+            height,
+            data,
+        }))
     }
 }
 
@@ -46,11 +54,16 @@ impl Value for HeightField {
         self.data.len() * 4
     }
     fn encode(&self, out: &mut Encoder) {
-        out.u64(self.width as u64).u64(self.height as u64).f32s(&self.data);
+        out.u64(self.width as u64)
+            .u64(self.height as u64)
+            .f32s(&self.data);
     }
     /// NPY layout: (H, W) f32, heights in texels.
     fn as_array(&self) -> Option<ArrayView<'_>> {
-        Some(ArrayView { shape: vec![self.height, self.width], data: &self.data })
+        Some(ArrayView {
+            shape: vec![self.height, self.width],
+            data: &self.data,
+        })
     }
     fn as_any(&self) -> &dyn Any {
         self

@@ -25,7 +25,12 @@ impl Image {
         if data.len() != width * height * channels || !matches!(channels, 1 | 3 | 4) {
             return Err(DecodeError::new(Self::TYPE, "size does not match the data"));
         }
-        Ok(Arc::new(Image { width, height, channels, data }))
+        Ok(Arc::new(Image {
+            width,
+            height,
+            channels,
+            data,
+        }))
     }
 }
 
@@ -37,11 +42,17 @@ impl Value for Image {
         self.data.len() * 4
     }
     fn encode(&self, out: &mut Encoder) {
-        out.u64(self.width as u64).u64(self.height as u64).u64(self.channels as u64).f32s(&self.data);
+        out.u64(self.width as u64)
+            .u64(self.height as u64)
+            .u64(self.channels as u64)
+            .f32s(&self.data);
     }
     /// NPY layout: (H, W, C) f32, linear.
     fn as_array(&self) -> Option<ArrayView<'_>> {
-        Some(ArrayView { shape: vec![self.height, self.width, self.channels], data: &self.data })
+        Some(ArrayView {
+            shape: vec![self.height, self.width, self.channels],
+            data: &self.data,
+        })
     }
     fn as_any(&self) -> &dyn Any {
         self

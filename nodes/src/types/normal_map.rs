@@ -23,7 +23,11 @@ impl NormalMap {
         if data.len() != width * height * 3 {
             return Err(DecodeError::new(Self::TYPE, "size does not match the data"));
         }
-        Ok(Arc::new(NormalMap { width, height, data }))
+        Ok(Arc::new(NormalMap {
+            width,
+            height,
+            data,
+        }))
     }
 }
 
@@ -35,11 +39,16 @@ impl Value for NormalMap {
         self.data.len() * 4
     }
     fn encode(&self, out: &mut Encoder) {
-        out.u64(self.width as u64).u64(self.height as u64).f32s(&self.data);
+        out.u64(self.width as u64)
+            .u64(self.height as u64)
+            .f32s(&self.data);
     }
     /// NPY layout: (H, W, 3) f32, unit vectors.
     fn as_array(&self) -> Option<ArrayView<'_>> {
-        Some(ArrayView { shape: vec![self.height, self.width, 3], data: &self.data })
+        Some(ArrayView {
+            shape: vec![self.height, self.width, 3],
+            data: &self.data,
+        })
     }
     fn as_any(&self) -> &dyn Any {
         self

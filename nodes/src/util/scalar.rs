@@ -30,7 +30,12 @@ impl Node for Constant {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, p: &ConstantParams, _inputs: &Inputs) -> Result<Outputs, NodeError> {
+    fn run(
+        &self,
+        _ctx: &NodeContext,
+        p: &ConstantParams,
+        _inputs: &Inputs,
+    ) -> Result<Outputs, NodeError> {
         Ok(Outputs::new().with("value", Scalar(p.value)))
     }
 }
@@ -46,7 +51,10 @@ pub struct AffineParams {
 
 impl Default for AffineParams {
     fn default() -> Self {
-        AffineParams { scale: 1.0, offset: 0.0 }
+        AffineParams {
+            scale: 1.0,
+            offset: 0.0,
+        }
     }
 }
 
@@ -67,11 +75,19 @@ impl Node for Affine {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, p: &AffineParams, inputs: &Inputs) -> Result<Outputs, NodeError> {
+    fn run(
+        &self,
+        _ctx: &NodeContext,
+        p: &AffineParams,
+        inputs: &Inputs,
+    ) -> Result<Outputs, NodeError> {
         let x = inputs.opt::<Scalar>("x")?.map_or(0.0, |s| s.0);
         let y = p.scale * x + p.offset;
         if !y.is_finite() {
-            return Err(NodeError::Failed(format!("{} · {x} + {} is not finite", p.scale, p.offset)));
+            return Err(NodeError::Failed(format!(
+                "{} · {x} + {} is not finite",
+                p.scale, p.offset
+            )));
         }
         Ok(Outputs::new().with("y", Scalar(y)))
     }

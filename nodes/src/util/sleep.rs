@@ -19,7 +19,10 @@ pub struct Params {
 
 impl Default for Params {
     fn default() -> Self {
-        Params { ms: 100, fail: false }
+        Params {
+            ms: 100,
+            fail: false,
+        }
     }
 }
 
@@ -46,10 +49,14 @@ impl Node for Sleep {
         while start.elapsed() < total {
             ctx.check_cancel()?;
             ctx.progress(start.elapsed().as_millis() as u64, p.ms);
-            std::thread::sleep(Duration::from_millis(10).min(total.saturating_sub(start.elapsed())));
+            std::thread::sleep(
+                Duration::from_millis(10).min(total.saturating_sub(start.elapsed())),
+            );
         }
         if p.fail {
-            return Err(NodeError::Failed("failed on purpose (`fail` is true)".into()));
+            return Err(NodeError::Failed(
+                "failed on purpose (`fail` is true)".into(),
+            ));
         }
         let x = inputs.opt::<Scalar>("x")?.map_or(0.0, |s| s.0);
         Ok(Outputs::new().with("y", Scalar(x)))

@@ -27,7 +27,10 @@ pub enum DiskError {
     #[error("cache entry {path}: {message}")]
     Corrupt { path: String, message: String },
     #[error("cache {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
 }
 
 #[derive(Serialize, Deserialize)]
@@ -91,11 +94,19 @@ impl DiskCache {
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-            Err(source) => return Err(DiskError::Io { path: path.display().to_string(), source }),
+            Err(source) => {
+                return Err(DiskError::Io {
+                    path: path.display().to_string(),
+                    source,
+                })
+            }
         };
         decode_entry(&bytes, registry)
             .map(Some)
-            .map_err(|message| DiskError::Corrupt { path: path.display().to_string(), message })
+            .map_err(|message| DiskError::Corrupt {
+                path: path.display().to_string(),
+                message,
+            })
     }
 
     /// Removes an entry (after it was found corrupt).
@@ -103,7 +114,13 @@ impl DiskCache {
         let _ = std::fs::remove_file(self.entry_path(key));
     }
 
-    pub fn put(&self, key: &Key, kind: &str, outputs: &Outputs, seconds: f64) -> Result<(), DiskError> {
+    pub fn put(
+        &self,
+        key: &Key,
+        kind: &str,
+        outputs: &Outputs,
+        seconds: f64,
+    ) -> Result<(), DiskError> {
         let io = |path: &Path| {
             let path = path.display().to_string();
             move |source| DiskError::Io { path, source }
@@ -119,8 +136,15 @@ impl DiskCache {
                 len: (payload.bytes.len() - start) as u64,
             });
         }
-        let header = serde_json::to_vec(&Header { kind: kind.into(), seconds, outputs: headers })
-            .map_err(|e| DiskError::Corrupt { path: String::new(), message: e.to_string() })?;
+        let header = serde_json::to_vec(&Header {
+            kind: kind.into(),
+            seconds,
+            outputs: headers,
+        })
+        .map_err(|e| DiskError::Corrupt {
+            path: String::new(),
+            message: e.to_string(),
+        })?;
         let mut hasher = blake3::Hasher::new();
         hasher.update(&header);
         hasher.update(&payload.bytes);
@@ -149,7 +173,10 @@ impl DiskCache {
         };
         write().map_err(|e| {
             let _ = std::fs::remove_file(&tmp);
-            DiskError::Io { path: final_path.display().to_string(), source: e }
+            DiskError::Io {
+                path: final_path.display().to_string(),
+                source: e,
+            }
         })
     }
 
@@ -157,20 +184,26 @@ impl DiskCache {
     pub fn clear(&self) -> Result<u64, DiskError> {
         let stats = self.stats();
         if self.dir.exists() {
-            std::fs::remove_dir_all(&self.dir)
-                .map_err(|source| DiskError::Io { path: self.dir.display().to_string(), source })?;
+            std::fs::remove_dir_all(&self.dir).map_err(|source| DiskError::Io {
+                path: self.dir.display().to_string(),
+                source,
+            })?;
         }
         Ok(stats.entries)
     }
 
     pub fn stats(&self) -> CacheStats {
         let mut stats = CacheStats::default();
-        let Ok(shards) = std::fs::read_dir(&self.dir) else { return stats };
+        let Ok(shards) = std::fs::read_dir(&self.dir) else {
+            return stats;
+        };
         for shard in shards.flatten() {
             if shard.file_name() == "tmp" {
                 continue;
             }
-            let Ok(files) = std::fs::read_dir(shard.path()) else { continue };
+            let Ok(files) = std::fs::read_dir(shard.path()) else {
+                continue;
+            };
             for f in files.flatten() {
                 let len = f.metadata().map(|m| m.len()).unwrap_or(0);
                 stats.entries += 1;
@@ -200,7 +233,9 @@ fn read_kind(path: &Path) -> Option<String> {
     let len = u64::from_le_bytes(head[16..24].try_into().ok()?);
     let mut header = vec![0u8; usize::try_from(len).ok().filter(|l| *l < 1 << 20)?];
     f.read_exact(&mut header).ok()?;
-    serde_json::from_slice::<Header>(&header).ok().map(|h| h.kind)
+    serde_json::from_slice::<Header>(&header)
+        .ok()
+        .map(|h| h.kind)
 }
 
 fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), String> {
@@ -213,13 +248,21 @@ fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), Str
         return Err("checksum mismatch (truncated or corrupted)".into());
     }
     let len = u64::from_le_bytes(body[16..24].try_into().map_err(|_| "bad header length")?);
-    let len = usize::try_from(len).ok().filter(|l| *l <= content.len()).ok_or("bad header length")?;
+    let len = usize::try_from(len)
+        .ok()
+        .filter(|l| *l <= content.len())
+        .ok_or("bad header length")?;
     let header: Header = serde_json::from_slice(&content[..len]).map_err(|e| e.to_string())?;
     let mut rest = &content[len..];
     let mut outputs = Outputs::new();
     for o in header.outputs {
-        let n = usize::try_from(o.len).ok().filter(|n| *n <= rest.len()).ok_or("output longer than entry")?;
-        let value = registry.decode(&o.ty, &rest[..n]).map_err(|e| e.to_string())?;
+        let n = usize::try_from(o.len)
+            .ok()
+            .filter(|n| *n <= rest.len())
+            .ok_or("output longer than entry")?;
+        let value = registry
+            .decode(&o.ty, &rest[..n])
+            .map_err(|e| e.to_string())?;
         outputs.values.insert(o.port, value);
         rest = &rest[n..];
     }
@@ -235,9 +278,13 @@ mod tests {
     use crate::value::{Artifact, Scalar};
 
     fn sample() -> Outputs {
-        Outputs::new()
-            .with("x", Scalar(2.5))
-            .with("file", Artifact { path: "a.png".into(), bytes: (0..=255).collect() })
+        Outputs::new().with("x", Scalar(2.5)).with(
+            "file",
+            Artifact {
+                path: "a.png".into(),
+                bytes: (0..=255).collect(),
+            },
+        )
     }
 
     #[test]
@@ -254,15 +301,27 @@ mod tests {
         let full = std::fs::read(cache.entry_path(&key)).unwrap();
         for cut in [0, 10, 30, full.len() / 2, full.len() - 1] {
             std::fs::write(cache.entry_path(&key), &full[..cut]).unwrap();
-            assert!(matches!(cache.get(&key, &reg), Err(DiskError::Corrupt { .. })), "cut {cut}");
+            assert!(
+                matches!(cache.get(&key, &reg), Err(DiskError::Corrupt { .. })),
+                "cut {cut}"
+            );
         }
         let mut flipped = full.clone();
         flipped[full.len() / 2] ^= 1;
         std::fs::write(cache.entry_path(&key), &flipped).unwrap();
-        assert!(matches!(cache.get(&key, &reg), Err(DiskError::Corrupt { .. })));
+        assert!(matches!(
+            cache.get(&key, &reg),
+            Err(DiskError::Corrupt { .. })
+        ));
         let stats = cache.stats();
         assert_eq!((stats.entries, stats.unreadable), (1, 0));
-        assert!(std::fs::read_dir(dir.path().join("tmp")).unwrap().next().is_none(), "no temp files left");
+        assert!(
+            std::fs::read_dir(dir.path().join("tmp"))
+                .unwrap()
+                .next()
+                .is_none(),
+            "no temp files left"
+        );
         assert_eq!(cache.clear().unwrap(), 1);
         assert_eq!(cache.stats().entries, 0);
     }

@@ -25,7 +25,10 @@ struct Inner {
 
 impl MemoryCache {
     pub fn new(budget: usize) -> Self {
-        MemoryCache { budget, inner: Mutex::new(Inner::default()) }
+        MemoryCache {
+            budget,
+            inner: Mutex::new(Inner::default()),
+        }
     }
 
     pub fn budget(&self) -> usize {
@@ -80,7 +83,14 @@ impl MemoryCache {
             }
         }
         inner.used += bytes;
-        inner.entries.insert(key, Entry { outputs, bytes, seconds });
+        inner.entries.insert(
+            key,
+            Entry {
+                outputs,
+                bytes,
+                seconds,
+            },
+        );
     }
 }
 
@@ -90,7 +100,13 @@ mod tests {
     use crate::value::Artifact;
 
     fn out(n: usize) -> Outputs {
-        Outputs::new().with("f", Artifact { path: String::new(), bytes: vec![0; n] })
+        Outputs::new().with(
+            "f",
+            Artifact {
+                path: String::new(),
+                bytes: vec![0; n],
+            },
+        )
     }
 
     #[test]
@@ -106,6 +122,9 @@ mod tests {
         }
         assert!(c.used() <= 300);
         c.insert(Key([5; 32]), out(1000), 1.0);
-        assert!(c.get(&Key([5; 32])).is_none(), "larger than the budget: not kept");
+        assert!(
+            c.get(&Key([5; 32])).is_none(),
+            "larger than the budget: not kept"
+        );
     }
 }

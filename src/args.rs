@@ -1,0 +1,145 @@
+//! Command-line arguments (clap).
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+#[derive(Parser)]
+#[command(
+    name = "mesoflow",
+    version,
+    about = "Data-flow graphs for data-driven appearance modeling"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand)]
+pub enum Command {
+    /// Run a graph: compute the requested outputs, reusing cached results.
+    Run(RunArgs),
+    /// Check a graph without running it.
+    Validate {
+        graph: PathBuf,
+        #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
+        set: Vec<String>,
+    },
+    /// List node kinds, or describe one.
+    Nodes {
+        kind: Option<String>,
+        /// Machine-readable: a JSON array, one object per kind.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Print the JSON Schema of graph files (for editors).
+    Schema,
+    /// Print a graph in Graphviz dot.
+    Dot {
+        graph: PathBuf,
+        /// Colour nodes by their status in this run report.
+        #[arg(long, value_name = "REPORT_JSON")]
+        report: Option<PathBuf>,
+    },
+    /// Re-run a graph whenever it or a file it reads changes.
+    Watch {
+        #[command(flatten)]
+        run: RunArgs,
+        /// Poll interval in milliseconds.
+        #[arg(long, default_value_t = 500)]
+        interval_ms: u64,
+        /// Stop after this many runs (for scripts and tests).
+        #[arg(long)]
+        max_runs: Option<usize>,
+    },
+    /// Run a graph over a grid of parameter values; write sweep.csv and charts.
+    Sweep(SweepArgs),
+    /// Inspect or clear the disk cache.
+    Cache {
+        #[command(subcommand)]
+        action: CacheAction,
+    },
+}
+
+#[derive(Subcommand)]
+pub enum CacheAction {
+    /// Entries and bytes, by node kind.
+    Stats(CacheArgs),
+    /// Remove every entry.
+    Clear(CacheArgs),
+}
+
+#[derive(Args)]
+pub struct CacheArgs {
+    /// Use the cache beside this graph (default: ./.mesoflow/cache).
+    pub graph: Option<PathBuf>,
+    #[arg(long, env = "MESOFLOW_CACHE")]
+    pub cache_dir: Option<PathBuf>,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum DeviceArg {
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+#[derive(Args, Clone)]
+pub struct RunArgs {
+    pub graph: PathBuf,
+    /// Override a parameter (value read as JSON, else as a string).
+    #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
+    pub set: Vec<String>,
+    /// Produce only these outputs (default: every sink).
+    #[arg(long = "output", value_name = "ID.PORT")]
+    pub output: Vec<String>,
+    /// Output folder (default: out/<graph name>/).
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    pub device: DeviceArg,
+    /// No progress bars or summary table.
+    #[arg(long, short)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub cache: CacheOptions,
+}
+
+#[derive(Args, Clone)]
+pub struct CacheOptions {
+    /// Disk cache folder (default: .mesoflow/cache beside the graph).
+    #[arg(long, env = "MESOFLOW_CACHE")]
+    pub cache_dir: Option<PathBuf>,
+    /// Neither read nor write any cache.
+    #[arg(long)]
+    pub no_cache: bool,
+    /// Recompute cache hits and fail if they differ.
+    #[arg(long)]
+    pub verify_cache: bool,
+    /// Memory cache budget: bytes, or with K, M, G (default: a quarter of RAM).
+    #[arg(long, value_name = "SIZE")]
+    pub mem_budget: Option<String>,
+}
+
+#[derive(Args)]
+pub struct SweepArgs {
+    pub graph: PathBuf,
+    /// A parameter and its values: id.param=v1,v2,… (repeat for a grid).
+    #[arg(long = "vary", value_name = "ID.PARAM=V1,V2,…", required = true)]
+    pub vary: Vec<String>,
+    /// A scalar output to record: id.metric (repeat for several).
+    #[arg(long = "measure", value_name = "ID.METRIC", required = true)]
+    pub measure: Vec<String>,
+    #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
+    pub set: Vec<String>,
+    /// Output folder (default: out/<graph name>-sweep/).
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    pub device: DeviceArg,
+    #[arg(long, short)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub cache: CacheOptions,
+}

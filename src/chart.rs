@@ -1,0 +1,138 @@
+//! Charts for sweeps (plotters): one measure against one variable, a series per combination of
+//! the other varied parameters, written as both PNG and SVG.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+use std::sync::OnceLock;
+
+pub struct Series {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+}
+
+pub struct Chart<'a> {
+    pub title: String,
+    pub x_label: &'a str,
+    pub y_label: &'a str,
+    pub series: Vec<Series>,
+    /// Names for integer x positions when the variable is not numeric.
+    pub x_names: Option<Vec<String>>,
+}
+
+/// plotters draws text with a font we must supply (no system font lookup in this build):
+/// `MESOFLOW_FONT`, else DejaVu Sans where distributions install it.
+fn ensure_font() -> Result<(), String> {
+    static FONT: OnceLock<Result<(), String>> = OnceLock::new();
+    FONT.get_or_init(|| {
+        let mut candidates: Vec<String> = std::env::var("MESOFLOW_FONT").into_iter().collect();
+        candidates.extend(
+            [
+                "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
+                "/usr/share/fonts/TTF/DejaVuSans.ttf",
+                "/usr/share/fonts/dejavu/DejaVuSans.ttf",
+                "/usr/share/fonts/dejavu-sans-fonts/DejaVuSans.ttf",
+                "/Library/Fonts/Arial.ttf",
+                "C:\\Windows\\Fonts\\arial.ttf",
+            ]
+            .map(String::from),
+        );
+        let bytes = candidates
+            .iter()
+            .find_map(|p| std::fs::read(p).ok())
+            .ok_or(
+            "no TrueType font found for chart text; install fonts-dejavu-core or set MESOFLOW_FONT",
+        )?;
+        let leaked: &'static [u8] = Box::leak(bytes.into_boxed_slice());
+        plotters::style::register_font("sans-serif", FontStyle::Normal, leaked)
+            .map_err(|_| "the chart font could not be parsed".to_string())
+    })
+    .clone()
+}
+
+fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    let pad = if hi > lo {
+        0.05 * (hi - lo)
+    } else {
+        lo.abs().max(1.0) * 0.05
+    };
+    (lo - pad, hi + pad)
+}
+
+fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(), String> {
+    let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(e)?;
+    let (x0, x1) = range(c.series.iter().flat_map(|s| s.points.iter().map(|p| p.0)));
+    let (y0, y1) = range(c.series.iter().flat_map(|s| s.points.iter().map(|p| p.1)));
+    let mut chart = ChartBuilder::on(&root)
+        .caption(&c.title, ("sans-serif", 22))
+        .margin(20)
+        .x_label_area_size(45)
+        .y_label_area_size(75)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(e)?;
+    let names = c.x_names.clone();
+    let x_fmt = move |x: &f64| match &names {
+        Some(n) if (x.round() - x).abs() < 1e-9 && *x >= 0.0 => {
+            n.get(x.round() as usize).cloned().unwrap_or_default()
+        }
+        Some(_) => String::new(),
+        None => format!("{x:.3}"),
+    };
+    chart
+        .configure_mesh()
+        .x_desc(c.x_label)
+        .y_desc(c.y_label)
+        .x_label_formatter(&x_fmt)
+        .y_label_formatter(&|y| format!("{y:.4}"))
+        .draw()
+        .map_err(e)?;
+    for (i, s) in c.series.iter().enumerate() {
+        let colour = Palette99::pick(i).to_rgba();
+        let mut pts = s.points.clone();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart
+            .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+            .map_err(e)?
+            .label(s.name.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+            });
+        chart
+            .draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))
+            .map_err(e)?;
+    }
+    if c.series.len() > 1 || !c.series.first().is_some_and(|s| s.name.is_empty()) {
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(e)?;
+    }
+    root.present().map_err(e)
+}
+
+/// Writes `<base>.svg` and `<base>.png`.
+pub fn write(base: &Path, c: &Chart) -> Result<(), String> {
+    ensure_font()?;
+    let size = (900u32, 560u32);
+    let svg = base.with_extension("svg");
+    draw(SVGBackend::new(&svg, size).into_drawing_area(), c)?;
+    let mut rgb = vec![0u8; (size.0 * size.1 * 3) as usize];
+    draw(
+        BitMapBackend::with_buffer(&mut rgb, size).into_drawing_area(),
+        c,
+    )?;
+    let img = image::RgbImage::from_raw(size.0, size.1, rgb).ok_or("chart buffer size")?;
+    img.save(base.with_extension("png"))
+        .map_err(|e| e.to_string())
+}

@@ -1,0 +1,171 @@
+//! `validate`, `nodes`, `schema` and `dot`: commands that read graphs and kinds without running.
+
+use crate::exit::invalid;
+use crate::load;
+use mesoflow_graph::KindSignature;
+use mesoflow_runtime::{NodeStatus, RunReport};
+use serde_json::{json, Value};
+use std::path::Path;
+
+pub fn validate(path: &Path, set: &[String]) -> anyhow::Result<i32> {
+    let registry = mesoflow_nodes::registry();
+    let graph = load::load(path, set, &registry)?;
+    println!(
+        "{}: ok, {} nodes; default outputs: {}",
+        path.display(),
+        graph.nodes.len(),
+        graph.sinks().join(", ")
+    );
+    Ok(0)
+}
+
+/// The `nodes --json` object of one kind (a stable interface: add fields, never rename).
+fn kind_json(s: &KindSignature) -> Value {
+    json!({
+        "kind": s.kind,
+        "version": s.version,
+        "device": s.device,
+        "doc": s.doc,
+        "inputs": s.inputs.iter().map(|i| json!({"name": i.name, "type": i.ty, "required": i.required, "doc": i.doc})).collect::<Vec<_>>(),
+        "outputs": s.outputs.iter().map(|o| json!({"name": o.name, "type": o.ty, "doc": o.doc})).collect::<Vec<_>>(),
+        "params": s.params,
+    })
+}
+
+fn describe(s: &KindSignature) -> String {
+    let mut out = format!(
+        "{} (version {}, {:?})\n  {}\n",
+        s.kind, s.version, s.device, s.doc
+    );
+    out.push_str("inputs:\n");
+    if s.inputs.is_empty() {
+        out.push_str("  (none)\n");
+    }
+    for i in &s.inputs {
+        let opt = if i.required { "" } else { ", optional" };
+        out.push_str(&format!("  {:<14} {}{opt}  {}\n", i.name, i.ty, i.doc));
+    }
+    out.push_str("outputs:\n");
+    for o in &s.outputs {
+        out.push_str(&format!("  {:<14} {}  {}\n", o.name, o.ty, o.doc));
+    }
+    out.push_str("params:\n");
+    let props = s.params.get("properties").and_then(Value::as_object);
+    let required: Vec<&str> = s
+        .params
+        .get("required")
+        .and_then(Value::as_array)
+        .map(|r| r.iter().filter_map(Value::as_str).collect())
+        .unwrap_or_default();
+    for (name, schema) in props.into_iter().flatten() {
+        let ty = mesoflow_graph::params::expected_text(&s.params, schema);
+        let default = match schema.get("default") {
+            Some(d) => format!("default {d}"),
+            None if required.contains(&name.as_str()) => "required".into(),
+            None => "optional".into(),
+        };
+        let doc = schema
+            .get("description")
+            .and_then(Value::as_str)
+            .unwrap_or("");
+        out.push_str(&format!("  {name:<14} {ty}; {default}\n      {doc}\n"));
+    }
+    out
+}
+
+pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
+    let registry = mesoflow_nodes::registry();
+    let sigs: Vec<&KindSignature> = registry.signatures().collect();
+    let chosen: Vec<&KindSignature> = match kind {
+        None => sigs,
+        Some(k) => match sigs.iter().find(|s| s.kind == k) {
+            Some(s) => vec![*s],
+            None => {
+                let hint = mesoflow_graph::nearest(k, sigs.iter().map(|s| s.kind.as_str()))
+                    .map(|s| format!(" (did you mean `{s}`?)"))
+                    .unwrap_or_default();
+                return Err(invalid(format!("unknown node kind `{k}`{hint}")));
+            }
+        },
+    };
+    if as_json {
+        let arr: Vec<Value> = chosen.iter().map(|s| kind_json(s)).collect();
+        println!("{}", serde_json::to_string_pretty(&arr)?);
+    } else if kind.is_some() {
+        print!("{}", describe(chosen[0]));
+    } else {
+        for s in chosen {
+            println!(
+                "{:<24} v{:<3} {:<4} {}",
+                s.kind,
+                s.version,
+                format!("{:?}", s.device).to_lowercase(),
+                s.doc
+            );
+        }
+    }
+    Ok(0)
+}
+
+pub fn schema() -> anyhow::Result<i32> {
+    let registry = mesoflow_nodes::registry();
+    println!(
+        "{}",
+        serde_json::to_string_pretty(&mesoflow_graph::schema::graph_schema(&registry))?
+    );
+    Ok(0)
+}
+
+fn colour(s: NodeStatus) -> &'static str {
+    match s {
+        NodeStatus::Computed => "palegreen",
+        NodeStatus::Memory | NodeStatus::Disk => "lightblue",
+        NodeStatus::Failed => "salmon",
+        NodeStatus::Cancelled => "orange",
+    }
+}
+
+pub fn dot(graph: &Path, report: Option<&Path>) -> anyhow::Result<i32> {
+    let registry = mesoflow_nodes::registry();
+    let graph = load::load(graph, &[], &registry)?;
+    let report: Option<RunReport> = match report {
+        Some(p) => {
+            let text =
+                std::fs::read_to_string(p).map_err(|e| invalid(format!("{}: {e}", p.display())))?;
+            Some(
+                serde_json::from_str(&text)
+                    .map_err(|e| invalid(format!("{}: not a run report: {e}", p.display())))?,
+            )
+        }
+        None => None,
+    };
+    let mut out = String::from("digraph mesoflow {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=white, fontname=\"Helvetica\"];\n");
+    for n in &graph.nodes {
+        let (fill, extra) = match report.as_ref() {
+            Some(r) => match r.node(&n.id) {
+                Some(nr) => (
+                    colour(nr.status),
+                    format!("\\n{:?} {:.3}s", nr.status, nr.seconds).to_lowercase(),
+                ),
+                None if r.skipped.contains(&n.id) => ("grey90", "\\nnot needed".into()),
+                None => ("white", String::new()),
+            },
+            None => ("white", String::new()),
+        };
+        out.push_str(&format!(
+            "  {} [label=\"{}\\n{}{}\", fillcolor={}];\n",
+            n.id, n.id, n.kind, extra, fill
+        ));
+    }
+    for n in &graph.nodes {
+        for e in &n.inputs {
+            out.push_str(&format!(
+                "  {} -> {} [label=\"{}→{}\"];\n",
+                e.from.node, n.id, e.from.port, e.port
+            ));
+        }
+    }
+    out.push_str("}\n");
+    print!("{out}");
+    Ok(0)
+}

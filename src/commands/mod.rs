@@ -1,0 +1,31 @@
+//! One module per subcommand; `dispatch` routes to them and returns the exit code.
+
+mod cache;
+mod info;
+mod run;
+mod sweep;
+mod watch;
+
+use crate::args::{CacheAction, Cli, Command};
+
+pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
+    match cli.command {
+        Command::Run(args) => run::run(&args),
+        Command::Validate { graph, set } => info::validate(&graph, &set),
+        Command::Nodes { kind, json } => info::nodes(kind.as_deref(), json),
+        Command::Schema => info::schema(),
+        Command::Dot { graph, report } => info::dot(&graph, report.as_deref()),
+        Command::Watch {
+            run,
+            interval_ms,
+            max_runs,
+        } => watch::watch(&run, interval_ms, max_runs),
+        Command::Sweep(args) => sweep::sweep(&args),
+        Command::Cache {
+            action: CacheAction::Stats(a),
+        } => cache::stats(&a),
+        Command::Cache {
+            action: CacheAction::Clear(a),
+        } => cache::clear(&a),
+    }
+}

@@ -1,0 +1,207 @@
+//! `mesoflow run`, and the set-up that `watch` and `sweep` share with it: the engine, the cache
+//! folder, the output folder, Ctrl-C.
+
+use crate::args::{CacheOptions, DeviceArg, RunArgs};
+use crate::exit::{self, invalid};
+use crate::load;
+use crate::progress::{summary, Bars};
+use anyhow::Context;
+use mesoflow_graph::{CheckedGraph, PortRef};
+use mesoflow_runtime::cache::{default_memory_budget, DiskCache};
+use mesoflow_runtime::{
+    DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, RunReport, SilentObserver,
+};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+
+/// The folder a graph's relative input paths resolve against.
+pub fn graph_dir(graph: &Path) -> PathBuf {
+    match graph.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+pub fn graph_name(graph: &Path) -> String {
+    graph
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "graph".into())
+}
+
+/// `--cache-dir`, else `MESOFLOW_CACHE` (clap reads it into the same field), else
+/// `.mesoflow/cache` beside the graph.
+pub fn cache_dir(opts: &CacheOptions, graph: &Path) -> PathBuf {
+    opts.cache_dir
+        .clone()
+        .unwrap_or_else(|| graph_dir(graph).join(".mesoflow").join("cache"))
+}
+
+pub fn parse_size(text: &str) -> anyhow::Result<usize> {
+    let t = text.trim();
+    let (digits, mult) = match t.chars().last().map(|c| c.to_ascii_uppercase()) {
+        Some('K') => (&t[..t.len() - 1], 1usize << 10),
+        Some('M') => (&t[..t.len() - 1], 1 << 20),
+        Some('G') => (&t[..t.len() - 1], 1 << 30),
+        _ => (t, 1),
+    };
+    let n: f64 = digits.trim().parse().map_err(|_| {
+        invalid(format!(
+            "--mem-budget {text}: expected bytes or a size like 512M, 2G"
+        ))
+    })?;
+    if !(n >= 0.0) {
+        return Err(invalid(format!(
+            "--mem-budget {text}: must not be negative"
+        )));
+    }
+    Ok((n * mult as f64) as usize)
+}
+
+pub fn engine(opts: &CacheOptions, graph: &Path) -> anyhow::Result<Engine> {
+    let memory_budget = match &opts.mem_budget {
+        Some(s) => parse_size(s)?,
+        None => default_memory_budget(),
+    };
+    let disk = (!opts.no_cache).then(|| DiskCache::new(cache_dir(opts, graph)));
+    Ok(Engine::new(
+        mesoflow_nodes::registry(),
+        EngineConfig {
+            memory_budget,
+            disk,
+        },
+    ))
+}
+
+/// The run's cancellation flag, set by Ctrl-C. A second Ctrl-C exits at once.
+pub fn cancel_flag() -> Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let f = flag.clone();
+        let _ = ctrlc::set_handler(move || {
+            if f.swap(true, Ordering::SeqCst) {
+                std::process::exit(exit::CANCELLED);
+            }
+            eprintln!("\ncancelling: waiting for running nodes to stop (Ctrl-C again to quit now)");
+        });
+        flag
+    })
+    .clone()
+}
+
+pub fn device_mode(d: DeviceArg) -> DeviceMode {
+    match d {
+        DeviceArg::Auto => DeviceMode::Auto,
+        DeviceArg::Cpu => DeviceMode::Cpu,
+        DeviceArg::Gpu => DeviceMode::Gpu,
+    }
+}
+
+pub fn require_gpu() -> bool {
+    std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
+pub fn parse_outputs(outputs: &[String]) -> anyhow::Result<Vec<PortRef>> {
+    outputs
+        .iter()
+        .map(|o| {
+            PortRef::parse(o).ok_or_else(|| invalid(format!("--output {o}: expected id.port")))
+        })
+        .collect()
+}
+
+pub struct Runner {
+    pub engine: Engine,
+    pub base: RunOptions,
+    pub quiet: bool,
+}
+
+impl Runner {
+    pub fn new(args: &RunArgs) -> anyhow::Result<Runner> {
+        let engine = engine(&args.cache, &args.graph)?;
+        let out_dir = args
+            .out_dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("out").join(graph_name(&args.graph)));
+        let mut base = RunOptions::new(
+            &args.graph.display().to_string(),
+            graph_dir(&args.graph),
+            out_dir,
+        );
+        base.outputs = parse_outputs(&args.output)?;
+        base.device = device_mode(args.device);
+        base.require_gpu = require_gpu();
+        base.use_cache = !args.cache.no_cache;
+        base.verify_cache = args.cache.verify_cache;
+        base.cancel = cancel_flag();
+        Ok(Runner {
+            engine,
+            base,
+            quiet: args.quiet,
+        })
+    }
+
+    /// Runs once, writes report.json and prints the summary.
+    pub fn run_once(&self, graph: &CheckedGraph, out_dir: &Path) -> anyhow::Result<RunReport> {
+        let opts = RunOptions {
+            graph_name: self.base.graph_name.clone(),
+            base_dir: self.base.base_dir.clone(),
+            out_dir: out_dir.to_path_buf(),
+            outputs: self.base.outputs.clone(),
+            device: self.base.device,
+            require_gpu: self.base.require_gpu,
+            use_cache: self.base.use_cache,
+            verify_cache: self.base.verify_cache,
+            cancel: self.base.cancel.clone(),
+        };
+        let observer: Arc<dyn RunObserver> = if self.quiet {
+            Arc::new(SilentObserver)
+        } else {
+            Arc::new(Bars::new())
+        };
+        let report = self
+            .engine
+            .run(graph, &opts, observer)
+            .map_err(|e| invalid(e.to_string()))?;
+        write_report(&report, out_dir)?;
+        if !self.quiet {
+            print!("{}", summary(&report));
+        } else {
+            for n in report.nodes.iter().filter_map(|n| {
+                n.error
+                    .as_ref()
+                    .filter(|_| n.status == mesoflow_runtime::NodeStatus::Failed)
+            }) {
+                eprintln!("error: {n}");
+            }
+        }
+        Ok(report)
+    }
+}
+
+pub fn write_report(report: &RunReport, out_dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    let path = out_dir.join("report.json");
+    let text = serde_json::to_string_pretty(report)?;
+    std::fs::write(&path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+pub fn exit_code(report: &RunReport) -> i32 {
+    if report.cancelled {
+        exit::CANCELLED
+    } else if report.ok {
+        exit::OK
+    } else {
+        exit::FAILED
+    }
+}
+
+pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
+    let runner = Runner::new(args)?;
+    let graph = load::load(&args.graph, &args.set, runner.engine.registry())?;
+    let report = runner.run_once(&graph, &runner.base.out_dir)?;
+    Ok(exit_code(&report))
+}

@@ -1,0 +1,74 @@
+//! `mesoflow watch`: re-run when the graph file or any file a node read changes. The engine (and
+//! its memory cache) lives across runs, so only the nodes a change touches recompute.
+
+use super::run::{exit_code, Runner};
+use crate::args::RunArgs;
+use crate::load;
+use mesoflow_runtime::NodeStatus;
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+/// What identifies a file's state: its length and content hash (mtimes can be too coarse).
+fn fingerprint(paths: &[PathBuf]) -> Vec<Option<(u64, [u8; 32])>> {
+    paths
+        .iter()
+        .map(|p| {
+            let bytes = std::fs::read(p).ok()?;
+            Some((bytes.len() as u64, *blake3::hash(&bytes).as_bytes()))
+        })
+        .collect()
+}
+
+pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyhow::Result<i32> {
+    let runner = Runner::new(args)?;
+    let mut runs = 0usize;
+    loop {
+        let last_code;
+        let mut watched = vec![args.graph.clone()];
+        match load::load(&args.graph, &args.set, runner.engine.registry()) {
+            Ok(graph) => {
+                let report = runner.run_once(&graph, &runner.base.out_dir)?;
+                last_code = exit_code(&report);
+                let reran: Vec<&str> = report
+                    .nodes
+                    .iter()
+                    .filter(|n| n.status == NodeStatus::Computed)
+                    .map(|n| n.id.as_str())
+                    .collect();
+                println!(
+                    "[watch] run {}: re-ran {}",
+                    runs + 1,
+                    if reran.is_empty() {
+                        "nothing".into()
+                    } else {
+                        reran.join(", ")
+                    }
+                );
+                watched.extend(report.read.iter().map(PathBuf::from));
+            }
+            Err(e) => {
+                last_code = crate::exit::code_of(&e);
+                eprintln!("error: {e:#}");
+            }
+        }
+        runs += 1;
+        if max_runs.is_some_and(|m| runs >= m) || runner.base.cancel.load(Ordering::Relaxed) {
+            return Ok(last_code);
+        }
+        println!(
+            "[watch] waiting for changes to {} files (Ctrl-C to stop)",
+            watched.len()
+        );
+        let before = fingerprint(&watched);
+        loop {
+            std::thread::sleep(Duration::from_millis(interval_ms));
+            if runner.base.cancel.load(Ordering::Relaxed) {
+                return Ok(crate::exit::CANCELLED);
+            }
+            if fingerprint(&watched) != before {
+                break;
+            }
+        }
+    }
+}
