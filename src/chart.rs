@@ -3,7 +3,7 @@
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 pub struct Series {
@@ -121,11 +121,12 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(
     root.present().map_err(e)
 }
 
-/// Writes `<base>.svg` and `<base>.png`.
+/// Writes `<base>.svg` and `<base>.png` (the extension is appended: chart names contain dots).
 pub fn write(base: &Path, c: &Chart) -> Result<(), String> {
     ensure_font()?;
     let size = (900u32, 560u32);
-    let svg = base.with_extension("svg");
+    let with = |ext: &str| PathBuf::from(format!("{}.{ext}", base.display()));
+    let svg = with("svg");
     draw(SVGBackend::new(&svg, size).into_drawing_area(), c)?;
     let mut rgb = vec![0u8; (size.0 * size.1 * 3) as usize];
     draw(
@@ -133,6 +134,6 @@ pub fn write(base: &Path, c: &Chart) -> Result<(), String> {
         c,
     )?;
     let img = image::RgbImage::from_raw(size.0, size.1, rgb).ok_or("chart buffer size")?;
-    img.save(base.with_extension("png"))
+    img.save(with("png"))
         .map_err(|e| e.to_string())
 }

@@ -158,7 +158,8 @@ fn read_npy_2d(path: &Path) -> Result<Grid, NodeError> {
             "Fortran-ordered arrays are not supported; save with order='C'",
         ));
     }
-    let type_str = npy.dtype().descr();
+    let descr = npy.dtype().descr();
+    let type_str = descr.trim_matches(|c| c == '\'' || c == '"');
     let data: Vec<f32> = if type_str.ends_with("f4") {
         npy.into_vec::<f32>()
             .map_err(|e| NodeError::file(path, e))?
