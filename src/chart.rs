@@ -134,6 +134,5 @@ pub fn write(base: &Path, c: &Chart) -> Result<(), String> {
         c,
     )?;
     let img = image::RgbImage::from_raw(size.0, size.1, rgb).ok_or("chart buffer size")?;
-    img.save(with("png"))
-        .map_err(|e| e.to_string())
+    img.save(with("png")).map_err(|e| e.to_string())
 }

@@ -9,7 +9,9 @@ use std::time::{Duration, Instant};
 /// A reader, two derived nodes and writers: enough to see exactly what a change touches.
 fn pipeline(s: &Scratch) -> std::path::PathBuf {
     // A 2-D float32 NPY file written by hand (numpy's v1.0 format) so the test needs no numpy.
-    write_npy(&s.path("data/tile.npy"), 8, 8, |x, y| ((x * 3 + y * 5) % 7) as f32);
+    write_npy(&s.path("data/tile.npy"), 8, 8, |x, y| {
+        ((x * 3 + y * 5) % 7) as f32
+    });
     s.write(
         "data/g.json",
         r#"{
@@ -46,7 +48,13 @@ fn write_npy(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> f32) {
 
 fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> (Run, serde_json::Value) {
     let out_dir = s.path(out);
-    let mut args = vec!["run", graph.to_str().unwrap(), "--quiet", "--out-dir", out_dir.to_str().unwrap()];
+    let mut args = vec![
+        "run",
+        graph.to_str().unwrap(),
+        "--quiet",
+        "--out-dir",
+        out_dir.to_str().unwrap(),
+    ];
     args.extend_from_slice(extra);
     let r = mesoflow(&args, s.dir.path());
     let rep = report(&out_dir);
@@ -54,7 +62,10 @@ fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> (Run, serde_json
 }
 
 fn ids<'a>(st: &'a std::collections::BTreeMap<String, String>, status: &str) -> Vec<&'a str> {
-    st.iter().filter(|(_, v)| *v == status).map(|(k, _)| k.as_str()).collect()
+    st.iter()
+        .filter(|(_, v)| *v == status)
+        .map(|(k, _)| k.as_str())
+        .collect()
 }
 
 #[test]
@@ -64,7 +75,10 @@ fn incremental_reexecution_recomputes_exactly_what_changed() {
     let (r, rep) = run(&s, &g, "o1", &[]);
     assert_eq!(r.code, 0, "{}", r.stderr);
     assert_eq!(ids(&statuses(&rep), "computed").len(), 6);
-    assert!(s.path("data/.mesoflow/cache").is_dir(), "default cache beside the graph");
+    assert!(
+        s.path("data/.mesoflow/cache").is_dir(),
+        "default cache beside the graph"
+    );
 
     // Again: every node reported is a cache hit and nothing is computed; the writers' files
     // are written again from the cache.
@@ -89,7 +103,11 @@ fn incremental_reexecution_recomputes_exactly_what_changed() {
     let st = statuses(&rep);
     assert_eq!(ids(&st, "computed"), vec!["n_tile", "tile", "w_tile"]);
     assert_eq!(ids(&st, "disk"), vec!["w_surface"]);
-    assert!(rep["read"].as_array().unwrap().iter().any(|p| p.as_str().unwrap().ends_with("tile.npy")));
+    assert!(rep["read"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .any(|p| p.as_str().unwrap().ends_with("tile.npy")));
 }
 
 #[test]
@@ -98,7 +116,10 @@ fn requested_outputs_limit_what_runs() {
     let g = pipeline(&s);
     let (r, rep) = run(&s, &g, "o", &["--output", "n_surface.rms_slope"]);
     assert_eq!(r.code, 0, "{}", r.stderr);
-    assert_eq!(statuses(&rep).keys().cloned().collect::<Vec<_>>(), vec!["n_surface", "surface"]);
+    assert_eq!(
+        statuses(&rep).keys().cloned().collect::<Vec<_>>(),
+        vec!["n_surface", "surface"]
+    );
     assert!(rep["nodes"][1]["metrics"]["rms_slope"].as_f64().unwrap() > 0.0);
     let (r, _) = run(&s, &g, "o", &["--output", "n_surface.nope"]);
     assert_eq!(r.code, 2);
@@ -111,7 +132,9 @@ fn keys_do_not_depend_on_folder_process_or_parameter_order() {
     let b = Scratch::new();
     let ga = pipeline(&a);
     // The same graph, parameters written in another order, in another folder.
-    write_npy(&b.path("elsewhere/tile.npy"), 8, 8, |x, y| ((x * 3 + y * 5) % 7) as f32);
+    write_npy(&b.path("elsewhere/tile.npy"), 8, 8, |x, y| {
+        ((x * 3 + y * 5) % 7) as f32
+    });
     let text = std::fs::read_to_string(&ga).unwrap().replace(
         r#""params": {"size": 16, "pattern": "bumps", "count": 2}"#,
         r#""params": {"pattern": "bumps", "count": 2, "size": 16}"#,
@@ -124,7 +147,12 @@ fn keys_do_not_depend_on_folder_process_or_parameter_order() {
 
     // The last bit of a float parameter changes the key (6.0 and the next double up).
     let (_, r1) = run(&a, &ga, "p", &["--set", "surface.depth=6.0", "--no-cache"]);
-    let (_, r2) = run(&a, &ga, "q", &["--set", "surface.depth=6.000000000000001", "--no-cache"]);
+    let (_, r2) = run(
+        &a,
+        &ga,
+        "q",
+        &["--set", "surface.depth=6.000000000000001", "--no-cache"],
+    );
     assert_ne!(keys(&r1)["surface"], keys(&r2)["surface"]);
     assert_eq!(keys(&r1)["tile"], keys(&r2)["tile"]);
     // Writing a default explicitly is the same as omitting it (defaults enter the canonical form).
@@ -139,7 +167,12 @@ fn corrupted_cache_entries_are_warned_about_and_recomputed() {
     let (_, rep) = run(&s, &g, "o1", &[]);
     let cache = s.path("data/.mesoflow/cache");
     let entry = |id: &str| {
-        let node = rep["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap();
+        let node = rep["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["id"] == id)
+            .unwrap();
         let key = node["key"].as_str().unwrap().to_string();
         cache.join(&key[..2]).join(format!("{key}.mfc"))
     };
@@ -158,7 +191,9 @@ fn corrupted_cache_entries_are_warned_about_and_recomputed() {
     assert_eq!(st["w_surface"], "computed");
     let warnings = rep["warnings"].as_array().unwrap();
     assert_eq!(warnings.len(), 2, "{warnings:?}");
-    assert!(warnings.iter().all(|w| w["message"].as_str().unwrap().contains("recomputing")));
+    assert!(warnings
+        .iter()
+        .all(|w| w["message"].as_str().unwrap().contains("recomputing")));
     // The recomputed entries replaced the bad ones.
     let (_, rep) = run(&s, &g, "o3", &[]);
     assert!(ids(&statuses(&rep), "computed").is_empty());
@@ -172,7 +207,13 @@ fn two_processes_share_one_cache() {
     let cache = s.path("shared-cache");
     let spawn = |out: &str| {
         bin()
-            .args(["run", g.to_str().unwrap(), "--quiet", "--out-dir", s.path(out).to_str().unwrap()])
+            .args([
+                "run",
+                g.to_str().unwrap(),
+                "--quiet",
+                "--out-dir",
+                s.path(out).to_str().unwrap(),
+            ])
             .arg("--cache-dir")
             .arg(&cache)
             .current_dir(s.dir.path())
@@ -185,11 +226,17 @@ fn two_processes_share_one_cache() {
         assert!(pa.wait().unwrap().success());
         assert!(pb.wait().unwrap().success());
         for f in ["tile.png", "surface.npy"] {
-            assert_eq!(std::fs::read(s.path(&a).join(f)).unwrap(), std::fs::read(s.path(&b).join(f)).unwrap());
+            assert_eq!(
+                std::fs::read(s.path(&a).join(f)).unwrap(),
+                std::fs::read(s.path(&b).join(f)).unwrap()
+            );
         }
     }
     let tmp = cache.join("tmp");
-    assert!(!tmp.exists() || std::fs::read_dir(&tmp).unwrap().next().is_none(), "no temporary files left");
+    assert!(
+        !tmp.exists() || std::fs::read_dir(&tmp).unwrap().next().is_none(),
+        "no temporary files left"
+    );
 }
 
 #[test]
@@ -205,29 +252,73 @@ fn ctrl_c_cancels_with_130_and_leaves_no_partial_entry() {
     );
     let out = s.path("o");
     let mut child = bin()
-        .args(["run", g.to_str().unwrap(), "--quiet", "--out-dir", out.to_str().unwrap()])
+        .args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ])
         .current_dir(s.dir.path())
         .spawn()
         .unwrap();
     // Wait until `quick` is cached, i.e. `slow` is running.
     let cache = s.path(".mesoflow/cache");
     let start = Instant::now();
-    while mesoflow(&["cache", "stats", "--json", "--cache-dir", cache.to_str().unwrap()], s.dir.path()).stdout.contains("\"entries\": 0") {
-        assert!(start.elapsed() < Duration::from_secs(30), "quick never finished");
+    while mesoflow(
+        &[
+            "cache",
+            "stats",
+            "--json",
+            "--cache-dir",
+            cache.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    )
+    .stdout
+    .contains("\"entries\": 0")
+    {
+        assert!(
+            start.elapsed() < Duration::from_secs(30),
+            "quick never finished"
+        );
         std::thread::sleep(Duration::from_millis(50));
     }
     std::thread::sleep(Duration::from_millis(300));
-    let kill = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
     assert!(kill.success());
     let t = Instant::now();
     let status = child.wait().unwrap();
-    assert!(t.elapsed() < Duration::from_secs(10), "cancellation took {:?}", t.elapsed());
+    assert!(
+        t.elapsed() < Duration::from_secs(10),
+        "cancellation took {:?}",
+        t.elapsed()
+    );
     assert_eq!(status.code(), Some(130));
     let rep = report(&out);
     assert_eq!(rep["cancelled"], true);
     let st = statuses(&rep);
-    assert_eq!((st["quick"].as_str(), st["slow"].as_str(), st["after"].as_str()), ("computed", "cancelled", "cancelled"));
-    let stats = mesoflow(&["cache", "stats", "--json", "--cache-dir", cache.to_str().unwrap()], s.dir.path());
+    assert_eq!(
+        (
+            st["quick"].as_str(),
+            st["slow"].as_str(),
+            st["after"].as_str()
+        ),
+        ("computed", "cancelled", "cancelled")
+    );
+    let stats = mesoflow(
+        &[
+            "cache",
+            "stats",
+            "--json",
+            "--cache-dir",
+            cache.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
     let stats: serde_json::Value = serde_json::from_str(&stats.stdout).unwrap();
     assert_eq!(stats["entries"], 1, "only `quick` is cached: {stats}");
     let tmp = cache.join("tmp");
@@ -256,9 +347,27 @@ fn a_failure_stops_its_dependants_and_lets_independent_nodes_finish() {
     assert_eq!(st["boom"], "failed");
     assert_eq!(st["uses_bad"], "cancelled");
     assert_eq!(st["after_boom"], "cancelled");
-    let err = |id: &str| rep["nodes"].as_array().unwrap().iter().find(|n| n["id"] == id).unwrap()["error"].as_str().unwrap().to_string();
-    assert!(err("bad").contains("node `bad`") && err("bad").contains("missing.npy"), "{}", err("bad"));
-    assert!(err("after_boom").contains("`boom` failed"), "{}", err("after_boom"));
+    let err = |id: &str| {
+        rep["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["id"] == id)
+            .unwrap()["error"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    assert!(
+        err("bad").contains("node `bad`") && err("bad").contains("missing.npy"),
+        "{}",
+        err("bad")
+    );
+    assert!(
+        err("after_boom").contains("`boom` failed"),
+        "{}",
+        err("after_boom")
+    );
     assert!(r.stderr.contains("node `boom`"), "{}", r.stderr);
 }
 
@@ -271,7 +380,16 @@ fn outputs_are_bit_identical_whatever_the_thread_count() {
     for threads in ["1", "2"] {
         let out = s.path(&format!("t{threads}"));
         let r = bin()
-            .args(["run", g.to_str().unwrap(), "--quiet", "--no-cache", "--device", "cpu", "--out-dir", out.to_str().unwrap()])
+            .args([
+                "run",
+                g.to_str().unwrap(),
+                "--quiet",
+                "--no-cache",
+                "--device",
+                "cpu",
+                "--out-dir",
+                out.to_str().unwrap(),
+            ])
             .env("RAYON_NUM_THREADS", threads)
             .output()
             .unwrap();
@@ -280,9 +398,21 @@ fn outputs_are_bit_identical_whatever_the_thread_count() {
     }
     let files = ["normals.png", "height.exr", "height.png", "height.npy"];
     for f in files {
-        assert_eq!(std::fs::read(outs[0].join(f)).unwrap(), std::fs::read(outs[1].join(f)).unwrap(), "{f}");
+        assert_eq!(
+            std::fs::read(outs[0].join(f)).unwrap(),
+            std::fs::read(outs[1].join(f)).unwrap(),
+            "{f}"
+        );
     }
-    let m = |o: &Path| report(o)["nodes"].as_array().unwrap().iter().find(|n| n["id"] == "normals").unwrap()["metrics"]["rms_slope"].clone();
+    let m = |o: &Path| {
+        report(o)["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["id"] == "normals")
+            .unwrap()["metrics"]["rms_slope"]
+            .clone()
+    };
     assert_eq!(m(&outs[0]), m(&outs[1]));
 }
 
@@ -295,7 +425,12 @@ fn verify_cache_recomputes_hits_and_accepts_matching_ones() {
     assert_eq!(r.code, 0, "{}", r.stderr);
     let nodes = rep["nodes"].as_array().unwrap();
     assert_eq!(nodes.len(), 6, "verification pulls every ancestor");
-    assert!(nodes.iter().all(|n| n["verified"] == true && n["status"] == "disk"), "{nodes:?}");
+    assert!(
+        nodes
+            .iter()
+            .all(|n| n["verified"] == true && n["status"] == "disk"),
+        "{nodes:?}"
+    );
 }
 
 #[test]
@@ -311,25 +446,52 @@ fn sweep_writes_csv_and_charts_and_computes_upstream_once() {
     );
     let out = s.path("sweep");
     let r = mesoflow(
-        &["sweep", g.to_str().unwrap(), "--vary", "normals.scale=0.5,1,2", "--measure", "normals.rms_slope", "--quiet", "--out-dir", out.to_str().unwrap()],
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=0.5,1,2",
+            "--measure",
+            "normals.rms_slope",
+            "--quiet",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
         s.dir.path(),
     );
     assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
     let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
     let lines: Vec<&str> = csv.lines().collect();
-    assert_eq!(lines[0], "normals.scale,normals.rms_slope,normals.seconds,run_seconds,ok");
+    assert_eq!(
+        lines[0],
+        "normals.scale,normals.rms_slope,normals.seconds,run_seconds,ok"
+    );
     assert_eq!(lines.len(), 4);
     // rms slope is linear in the scale (∇(s·h) = s·∇h): compare with the first row exactly.
     let slope = |l: &str| l.split(',').nth(1).unwrap().parse::<f64>().unwrap();
     let base = slope(lines[2]);
-    assert!((slope(lines[1]) - 0.5 * base).abs() < 1e-6 * base && (slope(lines[3]) - 2.0 * base).abs() < 1e-6 * base, "{csv}");
-    for f in ["normals.rms_slope_vs_normals.scale", "normals.rms_slope_vs_seconds"] {
+    assert!(
+        (slope(lines[1]) - 0.5 * base).abs() < 1e-6 * base
+            && (slope(lines[3]) - 2.0 * base).abs() < 1e-6 * base,
+        "{csv}"
+    );
+    for f in [
+        "normals.rms_slope_vs_normals.scale",
+        "normals.rms_slope_vs_seconds",
+    ] {
         for ext in ["png", "svg"] {
             let p = out.join(format!("{f}.{ext}"));
-            assert!(std::fs::metadata(&p).map(|m| m.len() > 1000).unwrap_or(false), "{} missing or empty", p.display());
+            assert!(
+                std::fs::metadata(&p)
+                    .map(|m| m.len() > 1000)
+                    .unwrap_or(false),
+                "{} missing or empty",
+                p.display()
+            );
         }
     }
-    let computed = |i: usize| statuses(&report(&out.join(format!("runs/{i:03}"))))["surface"].clone();
+    let computed =
+        |i: usize| statuses(&report(&out.join(format!("runs/{i:03}"))))["surface"].clone();
     assert_eq!(computed(0), "computed");
     assert_eq!(computed(1), "memory");
     assert_eq!(computed(2), "memory");
@@ -341,7 +503,17 @@ fn watch_reruns_only_what_a_change_touches() {
     let g = pipeline(&s);
     let out = s.path("w");
     let child = bin()
-        .args(["watch", g.to_str().unwrap(), "--quiet", "--max-runs", "2", "--interval-ms", "50", "--out-dir", out.to_str().unwrap()])
+        .args([
+            "watch",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--max-runs",
+            "2",
+            "--interval-ms",
+            "50",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ])
         .current_dir(s.dir.path())
         .stdout(std::process::Stdio::piped())
         .spawn()
@@ -356,7 +528,10 @@ fn watch_reruns_only_what_a_change_touches() {
     let o = child.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{stdout}");
-    assert!(stdout.contains("run 2: re-ran tile, n_tile, w_tile"), "{stdout}");
+    assert!(
+        stdout.contains("run 2: re-ran tile, n_tile, w_tile"),
+        "{stdout}"
+    );
 }
 
 #[test]
@@ -364,9 +539,22 @@ fn quickstart_writes_png_and_exr() {
     let s = Scratch::new();
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = s.path("q");
-    let r = mesoflow(&["run", root.join("graphs/quickstart.json").to_str().unwrap(), "--out-dir", out.to_str().unwrap(), "--no-cache"], root);
+    let r = mesoflow(
+        &[
+            "run",
+            root.join("graphs/quickstart.json").to_str().unwrap(),
+            "--out-dir",
+            out.to_str().unwrap(),
+            "--no-cache",
+        ],
+        root,
+    );
     assert_eq!(r.code, 0, "{}", r.stderr);
-    assert!(r.stdout.contains("normals") && r.stdout.contains("ok in"), "summary table: {}", r.stdout);
+    assert!(
+        r.stdout.contains("normals") && r.stdout.contains("ok in"),
+        "summary table: {}",
+        r.stdout
+    );
     for f in ["normals.png", "height.exr", "height.npy", "report.json"] {
         assert!(out.join(f).is_file(), "{f}");
     }

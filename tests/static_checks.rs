@@ -8,8 +8,16 @@ fn validate(text: &str) -> Run {
     let s = Scratch::new();
     let g = s.write("g.json", text);
     let r = mesoflow(&["validate", g.to_str().unwrap()], s.dir.path());
-    assert_eq!(r.code, 2, "expected exit code 2, got {}: {}{}", r.code, r.stdout, r.stderr);
-    assert!(r.stderr.contains("g.json"), "the message names the file: {}", r.stderr);
+    assert_eq!(
+        r.code, 2,
+        "expected exit code 2, got {}: {}{}",
+        r.code, r.stdout, r.stderr
+    );
+    assert!(
+        r.stderr.contains("g.json"),
+        "the message names the file: {}",
+        r.stderr
+    );
     r
 }
 
@@ -21,87 +29,167 @@ const SURFACE: &str = r#""surface": {"kind": "heightfield.procedural", "params":
 
 #[test]
 fn json_syntax_error_gives_line_and_column() {
-    let r = validate("{\n  \"mesoflow\": 1,\n  \"nodes\": {\n    \"a\": {\"kind\": \"x\",}\n  }\n}\n");
+    let r =
+        validate("{\n  \"mesoflow\": 1,\n  \"nodes\": {\n    \"a\": {\"kind\": \"x\",}\n  }\n}\n");
     assert!(r.stderr.contains("line 4, column 23"), "{}", r.stderr);
 }
 
 #[test]
 fn unknown_kind_suggests_the_nearest() {
     let r = validate(&graph(r#""surface": {"kind": "heightfield.procedual"}"#));
-    assert!(r.stderr.contains("node `surface`: unknown kind `heightfield.procedual`"), "{}", r.stderr);
-    assert!(r.stderr.contains("did you mean `heightfield.procedural`"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("node `surface`: unknown kind `heightfield.procedual`"),
+        "{}",
+        r.stderr
+    );
+    assert!(
+        r.stderr.contains("did you mean `heightfield.procedural`"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn bad_node_id() {
     let r = validate(&graph(r#""Surface-1": {"kind": "heightfield.procedural"}"#));
-    assert!(r.stderr.contains("node id `Surface-1` is invalid"), "{}", r.stderr);
+    assert!(
+        r.stderr.contains("node id `Surface-1` is invalid"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn duplicate_id() {
     let r = validate(&graph(&format!("{SURFACE}, {SURFACE}")));
-    assert!(r.stderr.contains("node id `surface` is defined more than once"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("node id `surface` is defined more than once"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn unknown_parameter_suggests_the_nearest() {
-    let r = validate(&graph(r#""surface": {"kind": "heightfield.procedural", "params": {"sise": 16}}"#));
-    assert!(r.stderr.contains("node `surface` (heightfield.procedural): unknown parameter `sise`"), "{}", r.stderr);
+    let r = validate(&graph(
+        r#""surface": {"kind": "heightfield.procedural", "params": {"sise": 16}}"#,
+    ));
+    assert!(
+        r.stderr
+            .contains("node `surface` (heightfield.procedural): unknown parameter `sise`"),
+        "{}",
+        r.stderr
+    );
     assert!(r.stderr.contains("did you mean `size`"), "{}", r.stderr);
 }
 
 #[test]
 fn parameter_of_the_wrong_type() {
-    let r = validate(&graph(r#""surface": {"kind": "heightfield.procedural", "params": {"size": "big"}}"#));
-    assert!(r.stderr.contains("node `surface`: parameter `size` expects an integer, got string \"big\""), "{}", r.stderr);
-    let r = validate(&graph(r#""surface": {"kind": "heightfield.procedural", "params": {"pattern": "waeve"}}"#));
-    assert!(r.stderr.contains("parameter `pattern` expects one of"), "{}", r.stderr);
+    let r = validate(&graph(
+        r#""surface": {"kind": "heightfield.procedural", "params": {"size": "big"}}"#,
+    ));
+    assert!(
+        r.stderr
+            .contains("node `surface`: parameter `size` expects an integer, got string \"big\""),
+        "{}",
+        r.stderr
+    );
+    let r = validate(&graph(
+        r#""surface": {"kind": "heightfield.procedural", "params": {"pattern": "waeve"}}"#,
+    ));
+    assert!(
+        r.stderr.contains("parameter `pattern` expects one of"),
+        "{}",
+        r.stderr
+    );
     assert!(r.stderr.contains("did you mean `weave`"), "{}", r.stderr);
 }
 
 #[test]
 fn parameter_out_of_range() {
-    let r = validate(&graph(r#""surface": {"kind": "heightfield.procedural", "params": {"size": 2}}"#));
-    assert!(r.stderr.contains("node `surface`: parameter `size` is out of range: 2 is below the minimum 4"), "{}", r.stderr);
+    let r = validate(&graph(
+        r#""surface": {"kind": "heightfield.procedural", "params": {"size": 2}}"#,
+    ));
+    assert!(
+        r.stderr
+            .contains("node `surface`: parameter `size` is out of range: 2 is below the minimum 4"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn missing_required_input() {
     let r = validate(&graph(r#""normals": {"kind": "heightfield.normals"}"#));
-    assert!(r.stderr.contains("node `normals`: required input `height` (HeightField) is not connected"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("node `normals`: required input `height` (HeightField) is not connected"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn missing_required_parameter() {
     let r = validate(&graph(r#""read": {"kind": "heightfield.read"}"#));
-    assert!(r.stderr.contains("node `read`: required parameter `path` is missing"), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("node `read`: required parameter `path` is missing"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn input_naming_a_missing_node() {
-    let r = validate(&graph(&format!(r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surfac.height"}}}}"#)));
-    assert!(r.stderr.contains("node `normals`: input `height` names node `surfac`, which does not exist"), "{}", r.stderr);
+    let r = validate(&graph(&format!(
+        r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surfac.height"}}}}"#
+    )));
+    assert!(
+        r.stderr
+            .contains("node `normals`: input `height` names node `surfac`, which does not exist"),
+        "{}",
+        r.stderr
+    );
     assert!(r.stderr.contains("did you mean `surface`"), "{}", r.stderr);
 }
 
 #[test]
 fn input_naming_a_missing_port() {
-    let r = validate(&graph(&format!(r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surface.heights"}}}}"#)));
+    let r = validate(&graph(&format!(
+        r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surface.heights"}}}}"#
+    )));
     assert!(r.stderr.contains("node `normals`: input `height` names `surface.heights`, but `surface` (heightfield.procedural) has no output `heights`"), "{}", r.stderr);
     assert!(r.stderr.contains("did you mean `height`"), "{}", r.stderr);
 }
 
 #[test]
 fn unknown_input_port() {
-    let r = validate(&graph(&format!(r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surface.height", "heigth2": "surface.height"}}}}"#)));
-    assert!(r.stderr.contains("node `normals` (heightfield.normals): unknown input `heigth2`"), "{}", r.stderr);
+    let r = validate(&graph(&format!(
+        r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surface.height", "heigth2": "surface.height"}}}}"#
+    )));
+    assert!(
+        r.stderr
+            .contains("node `normals` (heightfield.normals): unknown input `heigth2`"),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
 fn port_type_mismatch() {
-    let r = validate(&graph(&format!(r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surface.preview"}}}}"#)));
-    assert!(r.stderr.contains("`normals` input `height` expects HeightField, got Image from `surface.preview`"), "{}", r.stderr);
+    let r = validate(&graph(&format!(
+        r#"{SURFACE}, "normals": {{"kind": "heightfield.normals", "inputs": {{"height": "surface.preview"}}}}"#
+    )));
+    assert!(
+        r.stderr.contains(
+            "`normals` input `height` expects HeightField, got Image from `surface.preview`"
+        ),
+        "{}",
+        r.stderr
+    );
 }
 
 #[test]
@@ -122,7 +210,12 @@ fn every_error_of_a_file_is_reported_at_once() {
            "out": {"kind": "image.wirte"}"#,
     ));
     assert!(r.stderr.contains("4 errors"), "{}", r.stderr);
-    for needle in ["parameter `size`", "`sise`", "`normals` input `height`", "`image.wirte`"] {
+    for needle in [
+        "parameter `size`",
+        "`sise`",
+        "`normals` input `height`",
+        "`image.wirte`",
+    ] {
         assert!(r.stderr.contains(needle), "missing {needle}: {}", r.stderr);
     }
 }
@@ -131,10 +224,20 @@ fn every_error_of_a_file_is_reported_at_once() {
 fn set_is_checked_like_the_file() {
     let s = Scratch::new();
     let g = s.write("g.json", &graph(SURFACE));
-    let r = mesoflow(&["run", g.to_str().unwrap(), "--set", "surface.size=1"], s.dir.path());
+    let r = mesoflow(
+        &["run", g.to_str().unwrap(), "--set", "surface.size=1"],
+        s.dir.path(),
+    );
     assert_eq!(r.code, 2, "{}", r.stderr);
-    assert!(r.stderr.contains("parameter `size` is out of range"), "{}", r.stderr);
-    let r = mesoflow(&["run", g.to_str().unwrap(), "--set", "surfce.size=8"], s.dir.path());
+    assert!(
+        r.stderr.contains("parameter `size` is out of range"),
+        "{}",
+        r.stderr
+    );
+    let r = mesoflow(
+        &["run", g.to_str().unwrap(), "--set", "surfce.size=8"],
+        s.dir.path(),
+    );
     assert_eq!(r.code, 2);
     assert!(r.stderr.contains("did you mean `surface`"), "{}", r.stderr);
 }

@@ -4,20 +4,31 @@
 use mesoflow_runtime::{Gpu, NodeError};
 use wgpu::util::DeviceExt;
 
-/// Runs `entry` of `shader` with bindings 0 = uniform `params`, 1 = read-only storage `input`,
-/// 2 = read-write storage of `output_len` f32, dispatching enough 8×8 workgroups to cover
-/// `width`×`height`; returns the output buffer.
-pub fn compute_2d(
-    gpu: &Gpu,
-    label: &str,
-    shader: &str,
-    entry: &str,
-    params: &[u8],
-    input: &[f32],
-    output_len: usize,
-    (width, height): (u32, u32),
-) -> Result<Vec<f32>, NodeError> {
-    let limit = gpu.device.limits().max_storage_buffer_binding_size as u64;
+/// One compute dispatch over a 2-D grid: `entry` of the WGSL `shader` with bindings
+/// 0 = uniform `params`, 1 = read-only storage `input`, 2 = read-write storage of `output_len` f32.
+pub struct Pass2d<'a> {
+    pub label: &'a str,
+    pub shader: &'a str,
+    pub entry: &'a str,
+    pub params: &'a [u8],
+    pub input: &'a [f32],
+    pub output_len: usize,
+    /// Grid size; enough 8×8 workgroups are dispatched to cover it.
+    pub grid: (u32, u32),
+}
+
+/// Runs the pass and returns the output buffer.
+pub fn compute_2d(gpu: &Gpu, pass: &Pass2d) -> Result<Vec<f32>, NodeError> {
+    let Pass2d {
+        label,
+        shader,
+        entry,
+        params,
+        input,
+        output_len,
+        grid: (width, height),
+    } = *pass;
+    let limit = gpu.device.limits().max_storage_buffer_binding_size;
     let out_bytes = (output_len * 4) as u64;
     let in_bytes = (input.len() * 4) as u64;
     if out_bytes.max(in_bytes) > limit {

@@ -240,11 +240,12 @@ pub(crate) fn execute(
 
     let out_dir = opts.out_dir.clone();
     let mut files = Vec::new();
-    for i in 0..n {
-        if let Some(out) = slots[i].as_ref().and_then(|s| s.outputs.as_ref()) {
-            write_artifacts(&graph.nodes[i].id, out, &out_dir, &sink, &mut files);
+    for (slot, cn) in slots.iter().zip(&graph.nodes) {
+        let Some(slot) = slot else { continue };
+        if let Some(out) = &slot.outputs {
+            write_artifacts(&cn.id, out, &out_dir, &sink, &mut files);
         }
-        if let Some(r) = slots[i].as_ref().and_then(|s| s.report.as_ref()) {
+        if let Some(r) = &slot.report {
             observer.node_finished(r);
         }
     }

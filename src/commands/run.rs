@@ -51,9 +51,9 @@ pub fn parse_size(text: &str) -> anyhow::Result<usize> {
             "--mem-budget {text}: expected bytes or a size like 512M, 2G"
         ))
     })?;
-    if !(n >= 0.0) {
+    if !n.is_finite() || n < 0.0 {
         return Err(invalid(format!(
-            "--mem-budget {text}: must not be negative"
+            "--mem-budget {text}: must be a finite, non-negative size"
         )));
     }
     Ok((n * mult as f64) as usize)

@@ -11,7 +11,9 @@ pub struct Scratch {
 
 impl Scratch {
     pub fn new() -> Self {
-        Scratch { dir: tempfile::tempdir().expect("temp dir") }
+        Scratch {
+            dir: tempfile::tempdir().expect("temp dir"),
+        }
     }
     pub fn path(&self, rel: &str) -> PathBuf {
         self.dir.path().join(rel)
@@ -49,7 +51,13 @@ impl Run {
 }
 
 pub fn mesoflow(args: &[&str], cwd: &Path) -> Run {
-    Run::from(bin().args(args).current_dir(cwd).output().expect("run mesoflow"))
+    Run::from(
+        bin()
+            .args(args)
+            .current_dir(cwd)
+            .output()
+            .expect("run mesoflow"),
+    )
 }
 
 pub fn report(out_dir: &Path) -> Value {
@@ -63,7 +71,12 @@ pub fn statuses(report: &Value) -> std::collections::BTreeMap<String, String> {
         .as_array()
         .unwrap()
         .iter()
-        .map(|n| (n["id"].as_str().unwrap().to_string(), n["status"].as_str().unwrap().to_string()))
+        .map(|n| {
+            (
+                n["id"].as_str().unwrap().to_string(),
+                n["status"].as_str().unwrap().to_string(),
+            )
+        })
         .collect()
 }
 
@@ -72,6 +85,11 @@ pub fn keys(report: &Value) -> std::collections::BTreeMap<String, String> {
         .as_array()
         .unwrap()
         .iter()
-        .map(|n| (n["id"].as_str().unwrap().to_string(), n["key"].as_str().unwrap().to_string()))
+        .map(|n| {
+            (
+                n["id"].as_str().unwrap().to_string(),
+                n["key"].as_str().unwrap().to_string(),
+            )
+        })
         .collect()
 }

@@ -96,16 +96,16 @@ fn normals_gpu(
     params.extend_from_slice(&(hf.height as u32).to_le_bytes());
     params.extend_from_slice(&scale.to_le_bytes());
     params.extend_from_slice(&0f32.to_le_bytes());
-    crate::gpu::compute_2d(
-        gpu,
-        "heightfield.normals",
-        include_str!("normals.wgsl"),
-        "main",
-        &params,
-        &hf.data,
-        hf.width * hf.height * 3,
-        (hf.width as u32, hf.height as u32),
-    )
+    let pass = crate::gpu::Pass2d {
+        label: "heightfield.normals",
+        shader: include_str!("normals.wgsl"),
+        entry: "main",
+        params: &params,
+        input: &hf.data,
+        output_len: hf.width * hf.height * 3,
+        grid: (hf.width as u32, hf.height as u32),
+    };
+    crate::gpu::compute_2d(gpu, &pass)
 }
 
 /// sqrt(mean |∇h|²) recovered from the normals (|∇h|² = (nx² + ny²)/nz²), summed row by row in a

@@ -92,7 +92,7 @@ impl Node for Procedural {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        if p.pattern == Pattern::Weave && p.count % 2 == 1 {
+        if p.pattern == Pattern::Weave && !p.count.is_multiple_of(2) {
             return Err(NodeError::param(
                 "count",
                 format!(
@@ -115,7 +115,7 @@ impl Node for Procedural {
                     *h = (p.depth * unit_height(p, u, v)) as f32;
                 }
                 let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                if done % 64 == 0 || done == n as u64 {
+                if done.is_multiple_of(64) || done == n as u64 {
                     ctx.progress(done, n as u64);
                 }
                 Ok::<(), NodeError>(())
