@@ -49,9 +49,13 @@ impl Encoder {
     }
     pub fn f32s(&mut self, v: &[f32]) -> &mut Self {
         self.u64(v.len() as u64);
-        self.bytes.reserve(v.len() * 4);
-        for x in v {
-            self.bytes.extend_from_slice(&x.to_le_bytes());
+        if cfg!(target_endian = "little") {
+            self.bytes.extend_from_slice(bytemuck::cast_slice(v));
+        } else {
+            self.bytes.reserve(v.len() * 4);
+            for x in v {
+                self.bytes.extend_from_slice(&x.to_le_bytes());
+            }
         }
         self
     }
@@ -116,10 +120,16 @@ impl<'a> Decoder<'a> {
     pub fn f32s(&mut self) -> Result<Vec<f32>, DecodeError> {
         let n = self.len(4)?;
         let bytes = self.take(n * 4)?;
-        Ok(bytes
-            .chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect())
+        let mut out = vec![0f32; n];
+        if cfg!(target_endian = "little") {
+            // The encoding is little-endian f32, i.e. the in-memory layout: one copy.
+            bytemuck::cast_slice_mut::<f32, u8>(&mut out).copy_from_slice(bytes);
+        } else {
+            for (o, c) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+                *o = f32::from_le_bytes([c[0], c[1], c[2], c[3]]);
+            }
+        }
+        Ok(out)
     }
     /// Fails unless every byte was consumed.
     pub fn finish(self) -> Result<(), DecodeError> {

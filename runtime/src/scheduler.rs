@@ -115,6 +115,13 @@ pub(crate) fn execute(
         })
         .collect();
 
+    let mut downstream: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for (j, ups) in upstream.iter().enumerate() {
+        for &u in ups {
+            downstream[u].push(j);
+        }
+    }
+
     // 1. Plan.
     let requested: BTreeSet<usize> = if opts.outputs.is_empty() {
         graph
@@ -328,7 +335,12 @@ pub(crate) fn execute(
                 tx: tx.clone(),
             };
             running += 1;
-            if device == "gpu" {
+            if running == 1 && ready.is_empty() && device == "cpu" {
+                // Nothing else is runnable: a hand-off to the pool would only add a thread
+                // wake-up per node (it dominates long chains of small nodes). The node's own
+                // parallel loops still use the pool.
+                task.run();
+            } else if device == "gpu" {
                 // The GPU lane: GPU nodes submit to the one device one at a time, off the rayon
                 // pool so CPU nodes keep running beside them.
                 let lane = gpu_lane.clone();
@@ -371,10 +383,10 @@ pub(crate) fn execute(
                 };
                 write_artifacts(&cn.id, &outputs, &out_dir, &sink, &mut files);
                 slot.outputs = Some(outputs);
-                for (j, w) in waiting.iter_mut().enumerate() {
-                    if compute[j] && upstream[j].contains(&i) {
-                        *w -= 1;
-                        if *w == 0 {
+                for &j in &downstream[i] {
+                    if compute[j] {
+                        waiting[j] -= 1;
+                        if waiting[j] == 0 {
                             ready.insert(j);
                         }
                     }
@@ -594,6 +606,14 @@ fn write_artifacts(
             continue;
         };
         let path = out_dir.join(&a.path);
+        // Re-running into the same folder is the common case while tuning; a file that already
+        // holds these bytes is left alone (a read is cheaper than a write and a rename).
+        let unchanged = std::fs::metadata(&path).is_ok_and(|m| m.len() == a.bytes.len() as u64)
+            && std::fs::read(&path).is_ok_and(|b| b == a.bytes);
+        if unchanged {
+            files.push(path.display().to_string());
+            continue;
+        }
         let write = || -> std::io::Result<()> {
             if let Some(parent) = path.parent() {
                 std::fs::create_dir_all(parent)?;

@@ -145,9 +145,7 @@ impl DiskCache {
             path: String::new(),
             message: e.to_string(),
         })?;
-        let mut hasher = blake3::Hasher::new();
-        hasher.update(&header);
-        hasher.update(&payload.bytes);
+        let sum = checksum(&[&header, &payload.bytes]);
 
         let final_path = self.entry_path(key);
         let tmp_dir = self.dir.join("tmp");
@@ -167,7 +165,7 @@ impl DiskCache {
             f.write_all(&(header.len() as u64).to_le_bytes())?;
             f.write_all(&header)?;
             f.write_all(&payload.bytes)?;
-            f.write_all(hasher.finalize().as_bytes())?;
+            f.write_all(sum.as_bytes())?;
             f.into_inner().map_err(|e| e.into_error())?.sync_data()?;
             std::fs::rename(&tmp, &final_path)
         };
@@ -222,6 +220,20 @@ impl DiskCache {
     }
 }
 
+/// blake3 of the concatenated parts; large inputs are hashed on the rayon pool (blake3's tree
+/// hash gives the same digest whatever the thread count).
+fn checksum(parts: &[&[u8]]) -> blake3::Hash {
+    let mut h = blake3::Hasher::new();
+    for p in parts {
+        if p.len() > 1 << 20 {
+            h.update_rayon(p);
+        } else {
+            h.update(p);
+        }
+    }
+    h.finalize()
+}
+
 fn read_kind(path: &Path) -> Option<String> {
     use std::io::Read;
     let mut f = std::fs::File::open(path).ok()?;
@@ -244,7 +256,7 @@ fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), Str
     }
     let (body, sum) = bytes.split_at(bytes.len() - 32);
     let content = &body[24..];
-    if blake3::hash(content).as_bytes() != sum {
+    if checksum(&[content]).as_bytes() != sum {
         return Err("checksum mismatch (truncated or corrupted)".into());
     }
     let len = u64::from_le_bytes(body[16..24].try_into().map_err(|_| "bad header length")?);
