@@ -559,3 +559,86 @@ fn quickstart_writes_png_and_exr() {
         assert!(out.join(f).is_file(), "{f}");
     }
 }
+
+#[test]
+fn gpu_nodes_fall_back_to_the_cpu_unless_a_gpu_is_required() {
+    // WGPU_BACKEND=dx12 on Linux leaves wgpu without any adapter: the no-GPU machine, simulated.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let go = |out: &str, require: &str| {
+        let out = s.path(out);
+        let r = Run::from(
+            bin()
+                .args([
+                    "run",
+                    g.to_str().unwrap(),
+                    "--quiet",
+                    "--no-cache",
+                    "--output",
+                    "normals.rms_slope",
+                    "--out-dir",
+                    out.to_str().unwrap(),
+                ])
+                .env("WGPU_BACKEND", "dx12")
+                .env("MESOFLOW_REQUIRE_GPU", require)
+                .output()
+                .unwrap(),
+        );
+        (r, report(&out))
+    };
+    let (r, rep) = go("fallback", "0");
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let normals = rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "normals")
+        .unwrap()
+        .clone();
+    assert_eq!(normals["device"], "cpu");
+    let w = rep["warnings"].as_array().unwrap();
+    assert!(
+        w.iter().any(|w| w["node"] == "normals"
+            && w["message"].as_str().unwrap().contains("ran the CPU path")),
+        "{w:?}"
+    );
+
+    let (r, rep) = go("required", "1");
+    assert_eq!(r.code, 1);
+    let normals = rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "normals")
+        .unwrap()
+        .clone();
+    assert_eq!(normals["status"], "failed");
+    assert!(
+        normals["error"]
+            .as_str()
+            .unwrap()
+            .contains("MESOFLOW_REQUIRE_GPU=1"),
+        "{normals}"
+    );
+
+    // --device cpu is an explicit choice: no adapter needed, no warning.
+    let out = s.path("cpu");
+    let r = bin()
+        .args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--device",
+            "cpu",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ])
+        .env("WGPU_BACKEND", "dx12")
+        .env("MESOFLOW_REQUIRE_GPU", "1")
+        .output()
+        .unwrap();
+    assert!(r.status.success());
+    assert!(report(&out)["warnings"].as_array().unwrap().is_empty());
+}

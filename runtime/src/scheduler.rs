@@ -743,3 +743,191 @@ fn compare(a: &Outputs, b: &Outputs) -> Result<(), String> {
         None => Ok(()),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::engine::{Engine, EngineConfig, RunOptions, SilentObserver};
+    use crate::node::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+    use crate::registry::Registry;
+    use crate::report::NodeStatus;
+    use crate::value::Scalar;
+    use mesoflow_graph::{check, DevicePreference, GraphFile};
+    use schemars::JsonSchema;
+    use serde::{Deserialize, Serialize};
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::Arc;
+    use std::time::{Duration, Instant};
+
+    #[derive(Default, Serialize, Deserialize, JsonSchema)]
+    #[serde(default)]
+    struct NoParams {}
+
+    /// Outputs how many times it has run: a kind whose results change without a version bump.
+    struct Drifting(Arc<AtomicUsize>);
+    impl Node for Drifting {
+        type Params = NoParams;
+        fn spec(&self) -> NodeSpec {
+            NodeSpec {
+                kind: "test.drifting",
+                version: 1,
+                doc: "",
+                device: DevicePreference::Cpu,
+                inputs: vec![],
+                outputs: vec![Port::output("y", "Scalar", "")],
+                disk_cache: true,
+            }
+        }
+        fn run(&self, _: &NodeContext, _: &NoParams, _: &Inputs) -> Result<Outputs, NodeError> {
+            Ok(Outputs::new().with("y", Scalar(self.0.fetch_add(1, Ordering::SeqCst) as f64)))
+        }
+    }
+
+    /// Waits (up to 10 s) until `expected` instances are inside `run` at once; reports whether
+    /// they met. Run one at a time, they never meet.
+    struct Rendezvous(Arc<AtomicUsize>, usize);
+    impl Node for Rendezvous {
+        type Params = NoParams;
+        fn spec(&self) -> NodeSpec {
+            NodeSpec {
+                kind: "test.rendezvous",
+                version: 1,
+                doc: "",
+                device: DevicePreference::Cpu,
+                inputs: vec![],
+                outputs: vec![Port::output("met", "Scalar", "")],
+                disk_cache: false,
+            }
+        }
+        fn run(&self, _: &NodeContext, _: &NoParams, _: &Inputs) -> Result<Outputs, NodeError> {
+            self.0.fetch_add(1, Ordering::SeqCst);
+            let start = Instant::now();
+            while self.0.load(Ordering::SeqCst) < self.1
+                && start.elapsed() < Duration::from_secs(10)
+            {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            let met = self.0.load(Ordering::SeqCst) >= self.1;
+            Ok(Outputs::new().with("met", Scalar(if met { 1.0 } else { 0.0 })))
+        }
+    }
+
+    struct Panics;
+    impl Node for Panics {
+        type Params = NoParams;
+        fn spec(&self) -> NodeSpec {
+            NodeSpec {
+                kind: "test.panics",
+                version: 1,
+                doc: "",
+                device: DevicePreference::Cpu,
+                inputs: vec![Port::optional("x", "Scalar", "")],
+                outputs: vec![Port::output("y", "Scalar", "")],
+                disk_cache: false,
+            }
+        }
+        fn run(&self, _: &NodeContext, _: &NoParams, _: &Inputs) -> Result<Outputs, NodeError> {
+            panic!("index out of bounds")
+        }
+    }
+
+    fn run(
+        engine: &Engine,
+        text: &str,
+        verify: bool,
+        dir: &std::path::Path,
+    ) -> crate::report::RunReport {
+        let file = GraphFile::parse(text).unwrap();
+        let graph = check("t.json", &file, engine.registry()).unwrap();
+        let mut opts = RunOptions::new("t.json", dir.into(), dir.join("out"));
+        opts.verify_cache = verify;
+        engine.run(&graph, &opts, Arc::new(SilentObserver)).unwrap()
+    }
+
+    #[test]
+    fn verify_cache_catches_a_kind_changed_without_a_version_bump() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = Registry::new();
+        r.register(Drifting(Arc::new(AtomicUsize::new(0))));
+        let config = || EngineConfig {
+            memory_budget: 1 << 20,
+            disk: Some(crate::cache::DiskCache::new(dir.path().join("c"))),
+        };
+        let g = r#"{"mesoflow": 1, "nodes": {"d": {"kind": "test.drifting"}}}"#;
+        let first = run(&Engine::new(r.clone(), config()), g, false, dir.path());
+        assert_eq!(first.nodes[0].status, NodeStatus::Computed);
+        let plain = run(&Engine::new(r.clone(), config()), g, false, dir.path());
+        assert_eq!(
+            plain.nodes[0].status,
+            NodeStatus::Disk,
+            "without verification the stale hit is used"
+        );
+        let verified = run(&Engine::new(r, config()), g, true, dir.path());
+        assert!(!verified.ok);
+        assert_eq!(verified.nodes[0].status, NodeStatus::Failed);
+        let err = verified.nodes[0].error.as_deref().unwrap();
+        assert!(
+            err.contains("node `d`") && err.contains("without a version bump"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn independent_nodes_run_at_the_same_time() {
+        if rayon::current_num_threads() < 2 {
+            return; // one worker cannot overlap anything; the CLI tests cover RAYON_NUM_THREADS=1
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = Registry::new();
+        r.register(Rendezvous(Arc::new(AtomicUsize::new(0)), 2));
+        let engine = Engine::new(
+            r,
+            EngineConfig {
+                memory_budget: 1 << 20,
+                disk: None,
+            },
+        );
+        let rep = run(
+            &engine,
+            r#"{"mesoflow": 1, "nodes": {"a": {"kind": "test.rendezvous"}, "b": {"kind": "test.rendezvous"}}}"#,
+            false,
+            dir.path(),
+        );
+        assert!(rep.ok);
+        assert!(
+            rep.nodes.iter().all(|n| n.metrics["met"] == 1.0),
+            "{:?}",
+            rep.nodes
+        );
+    }
+
+    #[test]
+    fn memory_cache_serves_a_second_run_and_a_panic_is_a_node_failure() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut r = Registry::new();
+        r.register(Drifting(Arc::new(AtomicUsize::new(0))));
+        r.register(Panics);
+        let engine = Engine::new(
+            r,
+            EngineConfig {
+                memory_budget: 1 << 20,
+                disk: None,
+            },
+        );
+        let g = r#"{"mesoflow": 1, "nodes": {"d": {"kind": "test.drifting"}, "p": {"kind": "test.panics", "inputs": {"x": "d.y"}}}}"#;
+        let first = run(&engine, g, false, dir.path());
+        assert!(!first.ok);
+        assert_eq!(first.nodes[0].status, NodeStatus::Computed);
+        assert_eq!(first.nodes[1].status, NodeStatus::Failed);
+        assert!(
+            first.nodes[1].error.as_deref().unwrap().contains("panic"),
+            "{:?}",
+            first.nodes[1].error
+        );
+        let second = run(&engine, g, false, dir.path());
+        assert_eq!(second.nodes[0].status, NodeStatus::Memory);
+        assert_eq!(
+            second.nodes[0].metrics["y"], 0.0,
+            "the cached value, not a recomputation"
+        );
+    }
+}
