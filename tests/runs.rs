@@ -232,11 +232,7 @@ fn two_processes_share_one_cache() {
             );
         }
     }
-    let tmp = cache.join("tmp");
-    assert!(
-        !tmp.exists() || std::fs::read_dir(&tmp).unwrap().next().is_none(),
-        "no temporary files left"
-    );
+    assert_no_temp_files(&cache);
 }
 
 #[test]
@@ -321,8 +317,7 @@ fn ctrl_c_cancels_with_130_and_leaves_no_partial_entry() {
     );
     let stats: serde_json::Value = serde_json::from_str(&stats.stdout).unwrap();
     assert_eq!(stats["entries"], 1, "only `quick` is cached: {stats}");
-    let tmp = cache.join("tmp");
-    assert!(!tmp.exists() || std::fs::read_dir(&tmp).unwrap().next().is_none());
+    assert_no_temp_files(&cache);
 }
 
 #[test]

@@ -65,8 +65,8 @@ pub fn report(out_dir: &Path) -> Value {
     serde_json::from_str(&text).expect("report is JSON")
 }
 
-/// node id → status, for the nodes in a report.
-pub fn statuses(report: &Value) -> std::collections::BTreeMap<String, String> {
+/// node id → the string `field` of that node, for the nodes in a report.
+pub fn per_node(report: &Value, field: &str) -> std::collections::BTreeMap<String, String> {
     report["nodes"]
         .as_array()
         .unwrap()
@@ -74,22 +74,26 @@ pub fn statuses(report: &Value) -> std::collections::BTreeMap<String, String> {
         .map(|n| {
             (
                 n["id"].as_str().unwrap().to_string(),
-                n["status"].as_str().unwrap().to_string(),
+                n[field].as_str().unwrap().to_string(),
             )
         })
         .collect()
 }
 
+pub fn statuses(report: &Value) -> std::collections::BTreeMap<String, String> {
+    per_node(report, "status")
+}
+
 pub fn keys(report: &Value) -> std::collections::BTreeMap<String, String> {
-    report["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|n| {
-            (
-                n["id"].as_str().unwrap().to_string(),
-                n["key"].as_str().unwrap().to_string(),
-            )
-        })
-        .collect()
+    per_node(report, "key")
+}
+
+/// A cache folder holds no temporary (half-written) entry.
+pub fn assert_no_temp_files(cache: &Path) {
+    let tmp = cache.join("tmp");
+    assert!(
+        !tmp.exists() || std::fs::read_dir(&tmp).unwrap().next().is_none(),
+        "temporary files left in {}",
+        tmp.display()
+    );
 }
