@@ -24,11 +24,34 @@ fn ext(path: &Path) -> String {
 /// Reads an image as linear f32. 8-bit files are sRGB-decoded; 16-bit and float files are taken
 /// as linear (the design brief: sRGB only for 8-bit images).
 pub fn read_image(path: &Path) -> Result<Image, NodeError> {
+    let (img, eight_bit) = read_samples(path)?;
+    if !eight_bit {
+        return Ok(img);
+    }
+    let alpha = img.channels == 4;
+    let data = img
+        .data
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| {
+            if alpha && i % 4 == 3 {
+                c
+            } else {
+                srgb_to_linear(c)
+            }
+        })
+        .collect();
+    Ok(Image { data, ..img })
+}
+
+/// The samples as stored, normalised to [0, 1] for integer formats, with no transfer function;
+/// and whether the file had 8-bit samples.
+fn read_samples(path: &Path) -> Result<(Image, bool), NodeError> {
     if !path.is_file() {
         return Err(NodeError::file(path, "no such file"));
     }
     if ext(path) == "exr" {
-        return read_exr(path);
+        return Ok((read_exr(path)?, false));
     }
     let img = image::ImageReader::open(path)
         .and_then(|r| r.with_guessed_format())
@@ -43,33 +66,21 @@ pub fn read_image(path: &Path) -> Result<Image, NodeError> {
             | image::ColorType::Rgba8
     );
     let (width, height) = (img.width() as usize, img.height() as usize);
-    let has_alpha = img.color().has_alpha();
     let grey = img.color().channel_count() <= 2;
-    let (channels, raw): (usize, Vec<f32>) = match (grey, has_alpha) {
+    let (channels, data): (usize, Vec<f32>) = match (grey, img.color().has_alpha()) {
         (true, false) => (1, img.to_luma32f().into_raw()),
         (_, true) => (4, img.to_rgba32f().into_raw()),
         (false, false) => (3, img.to_rgb32f().into_raw()),
     };
-    let data = if eight_bit {
-        raw.iter()
-            .enumerate()
-            .map(|(i, &c)| {
-                if channels == 4 && i % 4 == 3 {
-                    c
-                } else {
-                    srgb_to_linear(c)
-                }
-            })
-            .collect()
-    } else {
-        raw
-    };
-    Ok(Image {
-        width,
-        height,
-        channels,
-        data,
-    })
+    Ok((
+        Image {
+            width,
+            height,
+            channels,
+            data,
+        },
+        eight_bit,
+    ))
 }
 
 fn read_exr(path: &Path) -> Result<Image, NodeError> {
@@ -120,19 +131,12 @@ pub fn read_grey(path: &Path) -> Result<Grid, NodeError> {
     if ext(path) == "npy" {
         return read_npy_2d(path);
     }
-    let img = read_image(path)?;
-    let grey_png = ext(path) == "png" && img.channels == 1;
-    // A grey PNG holds heights, not colours: undo the sRGB decode read_image applied to 8-bit.
+    // Heights are values, not colours: the stored samples, without any sRGB decoding.
+    let (img, _) = read_samples(path)?;
     let data = img
         .data
         .chunks_exact(img.channels)
-        .map(|px| {
-            if grey_png {
-                linear_to_srgb(px[0])
-            } else {
-                px[0]
-            }
-        })
+        .map(|px| px[0])
         .collect();
     Ok(Grid {
         width: img.width,
@@ -347,6 +351,26 @@ mod tests {
         std::fs::write(&path, &bytes).unwrap();
         let g = read_grey(&path).unwrap();
         assert_eq!((g.width, g.height, g.data[5]), (3, 2, 6.0));
+    }
+
+    #[test]
+    fn grey_png_heights_are_raw_samples() {
+        // A 16-bit grey PNG holding 0, 1000, 65535 reads back as those values / 65535 exactly
+        // (no transfer function on heights), and an 8-bit one as value / 255.
+        let dir = tempfile::tempdir().unwrap();
+        let p16 = dir.path().join("h16.png");
+        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(3, 1, vec![0u16, 1000, 65535])
+            .unwrap()
+            .save(&p16)
+            .unwrap();
+        let g = read_grey(&p16).unwrap();
+        assert_eq!(g.data, vec![0.0, 1000.0 / 65535.0, 1.0]);
+        let p8 = dir.path().join("h8.png");
+        image::ImageBuffer::<image::Luma<u8>, _>::from_raw(2, 1, vec![51u8, 255])
+            .unwrap()
+            .save(&p8)
+            .unwrap();
+        assert_eq!(read_grey(&p8).unwrap().data, vec![51.0 / 255.0, 1.0]);
     }
 
     #[test]
