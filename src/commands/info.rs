@@ -33,9 +33,10 @@ fn kind_json(s: &KindSignature) -> Value {
 }
 
 fn describe(s: &KindSignature) -> String {
+    let device = format!("{:?}", s.device).to_lowercase();
     let mut out = format!(
-        "{} (version {}, {:?})\n  {}\n",
-        s.kind, s.version, s.device, s.doc
+        "{} (version {}, {device})\n  {}\n",
+        s.kind, s.version, s.doc
     );
     out.push_str("inputs:\n");
     if s.inputs.is_empty() {
@@ -58,7 +59,14 @@ fn describe(s: &KindSignature) -> String {
         .map(|r| r.iter().filter_map(Value::as_str).collect())
         .unwrap_or_default();
     for (name, schema) in props.into_iter().flatten() {
-        let ty = mesoflow_graph::params::expected_text(&s.params, schema);
+        let mut ty = mesoflow_graph::params::expected_text(&s.params, schema);
+        let bound = |k: &str| schema.get(k).map(|v| v.to_string());
+        match (bound("minimum"), bound("maximum")) {
+            (Some(lo), Some(hi)) => ty.push_str(&format!(" in [{lo}, {hi}]")),
+            (Some(lo), None) => ty.push_str(&format!(" ≥ {lo}")),
+            (None, Some(hi)) => ty.push_str(&format!(" ≤ {hi}")),
+            (None, None) => {}
+        }
         let default = match schema.get("default") {
             Some(d) => format!("default {d}"),
             None if required.contains(&name.as_str()) => "required".into(),
