@@ -42,7 +42,27 @@ impl Gpu {
     }
 
     fn create() -> Result<Gpu, String> {
-        let adapter = Self::adapter()?;
+        Self::from_adapter(Self::adapter()?)
+    }
+
+    /// A device on the given backends only, bypassing the engine's choice; for tests that hold
+    /// every available backend to the CPU path.
+    pub fn with_backends(backends: wgpu::Backends) -> Result<Gpu, String> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.backends = backends;
+        let adapter = pollster::block_on(wgpu::Instance::new(desc).request_adapter(
+            &wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                apply_limit_buckets: false,
+            },
+        ))
+        .map_err(|e| format!("no {backends:?} adapter: {e}"))?;
+        Self::from_adapter(adapter)
+    }
+
+    fn from_adapter(adapter: wgpu::Adapter) -> Result<Gpu, String> {
         let info = adapter.get_info();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("mesoflow"),

@@ -10,12 +10,16 @@ struct Params {
 @group(0) @binding(1) var<storage, read> heights: array<f32>;
 @group(0) @binding(2) var<storage, read_write> normals: array<f32>;
 
+// Periodic lookup for offsets of at most one tile. Comparisons rather than a signed `%`:
+// naga's OpenGL output of `%` on a negative operand gave wrong texels at the tile's edges.
+fn wrap(v: i32, n: i32) -> u32 {
+    return u32(select(select(v, v - n, v >= n), v + n, v < 0));
+}
+
 fn h(x: i32, y: i32) -> f32 {
-    let w = i32(params.width);
-    let hh = i32(params.height);
-    let xi = ((x % w) + w) % w;
-    let yi = ((y % hh) + hh) % hh;
-    return heights[u32(yi) * params.width + u32(xi)];
+    let xi = wrap(x, i32(params.width));
+    let yi = wrap(y, i32(params.height));
+    return heights[yi * params.width + xi];
 }
 
 @compute @workgroup_size(8, 8)
