@@ -2,4 +2,5 @@
 
 pub mod normals;
 pub mod procedural;
+pub mod raycast;
 pub mod read;
