@@ -2,6 +2,7 @@
 //! a graph can use. Nodes know nothing about scheduling or caching; each is a pure function of its
 //! parameters, inputs and declared files.
 
+pub mod btf;
 pub mod gpu;
 pub mod heightfield;
 pub mod io;

@@ -5,6 +5,7 @@ use mesoflow_runtime::Registry;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     crate::types::register(&mut r);
+    r.register(crate::btf::capture::Capture);
     r.register(crate::heightfield::procedural::Procedural);
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);

@@ -1,5 +1,6 @@
 //! `npy.write`: any array-like value as a NumPy `.npy` file (little-endian f32, C order). Layouts:
-//! `HeightField` (H, W) in texels; `Image` (H, W, C) linear; `NormalMap` (H, W, 3) unit vectors.
+//! `HeightField` (H, W) in texels; `Image` (H, W, C) linear; `NormalMap` (H, W, 3) unit vectors;
+//! `Btf` (pairs, 3, H, W) linear RGB planes, pairs view-major.
 //! Row 0 is the top of the image in every layout.
 
 use crate::types::ARRAY_TYPES;
@@ -24,7 +25,7 @@ impl Node for NpyWrite {
         NodeSpec {
             kind: "npy.write",
             version: 1,
-            doc: "Writes an array-like value as .npy (f32, C order): HeightField (H,W), Image (H,W,C), NormalMap (H,W,3).",
+            doc: "Writes an array-like value as .npy (f32, C order): HeightField (H,W), Image (H,W,C), NormalMap (H,W,3), Btf (pairs,3,H,W).",
             device: DevicePreference::Cpu,
             inputs: vec![Port::any_of("value", ARRAY_TYPES, "any array-like value")],
             outputs: vec![Port::output("file", "File", "the .npy file, written under the output folder")],
