@@ -18,27 +18,32 @@ impl Gpu {
     /// An adapter from the native APIs (Vulkan, Metal, DX12) first; OpenGL only when none exists,
     /// because probing GL drivers is slow and noisy where they are absent. `WGPU_BACKEND` overrides.
     fn adapter() -> Result<wgpu::Adapter, String> {
-        let from_env = wgpu::Backends::from_env();
-        let tries = match from_env {
+        let tries = match wgpu::Backends::from_env() {
             Some(b) => vec![b],
             None => vec![wgpu::Backends::PRIMARY, wgpu::Backends::GL],
         };
         let mut last = String::from("no backend tried");
         for backends in tries {
-            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-            desc.backends = backends;
-            let instance = wgpu::Instance::new(desc);
-            match pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                apply_limit_buckets: false,
-            })) {
+            match Self::request_adapter(backends) {
                 Ok(a) => return Ok(a),
-                Err(e) => last = e.to_string(),
+                Err(e) => last = e,
             }
         }
         Err(format!("no GPU adapter: {last}"))
+    }
+
+    /// The high-performance adapter of an instance limited to `backends`.
+    fn request_adapter(backends: wgpu::Backends) -> Result<wgpu::Adapter, String> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.backends = backends;
+        let options = wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            apply_limit_buckets: false,
+        };
+        pollster::block_on(wgpu::Instance::new(desc).request_adapter(&options))
+            .map_err(|e| e.to_string())
     }
 
     fn create() -> Result<Gpu, String> {
@@ -48,17 +53,8 @@ impl Gpu {
     /// A device on the given backends only, bypassing the engine's choice; for tests that hold
     /// every available backend to the CPU path.
     pub fn with_backends(backends: wgpu::Backends) -> Result<Gpu, String> {
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
-        desc.backends = backends;
-        let adapter = pollster::block_on(wgpu::Instance::new(desc).request_adapter(
-            &wgpu::RequestAdapterOptions {
-                power_preference: wgpu::PowerPreference::HighPerformance,
-                force_fallback_adapter: false,
-                compatible_surface: None,
-                apply_limit_buckets: false,
-            },
-        ))
-        .map_err(|e| format!("no {backends:?} adapter: {e}"))?;
+        let adapter =
+            Self::request_adapter(backends).map_err(|e| format!("no {backends:?} adapter: {e}"))?;
         Self::from_adapter(adapter)
     }
 

@@ -287,15 +287,7 @@ mod tests {
     use std::f64::consts::PI;
 
     fn field(n: usize, f: impl Fn(usize, usize) -> f32) -> HeightField {
-        let data = (0..n)
-            .flat_map(|j| (0..n).map(move |i| (i, j)))
-            .map(|(i, j)| f(i, j))
-            .collect();
-        HeightField {
-            width: n,
-            height: n,
-            data,
-        }
+        HeightField::from_fn(n, n, f)
     }
 
     fn capture(hf: HeightField, albedo: Option<Image>, p: &Params) -> Result<Btf, NodeError> {

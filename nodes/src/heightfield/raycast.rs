@@ -205,15 +205,7 @@ mod tests {
     use super::*;
 
     fn field(n: usize, f: impl Fn(usize, usize) -> f32) -> HeightField {
-        let data = (0..n)
-            .flat_map(|j| (0..n).map(move |i| (i, j)))
-            .map(|(i, j)| f(i, j))
-            .collect();
-        HeightField {
-            width: n,
-            height: n,
-            data,
-        }
+        HeightField::from_fn(n, n, f)
     }
 
     fn dir(theta_deg: f64, phi_deg: f64, down: bool) -> [f64; 3] {

@@ -16,6 +16,19 @@ pub struct HeightField {
 impl HeightField {
     pub const TYPE: &'static str = "HeightField";
 
+    /// A field of `width`×`height` samples with sample (x, y) = f(x, y).
+    pub fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> f32) -> Self {
+        let data = (0..height)
+            .flat_map(|y| (0..width).map(move |x| (x, y)))
+            .map(|(x, y)| f(x, y))
+            .collect();
+        HeightField {
+            width,
+            height,
+            data,
+        }
+    }
+
     /// Height at (x, y), wrapping around the tile in both directions.
     pub fn at_wrapped(&self, x: isize, y: isize) -> f32 {
         let xi = x.rem_euclid(self.width as isize) as usize;
