@@ -485,6 +485,24 @@ fn sweep_writes_csv_and_charts_and_computes_upstream_once() {
             );
         }
     }
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=1",
+            "--measure",
+            "normals.preview",
+            "--quiet",
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("a measure must be a scalar output"),
+        "{}",
+        r.stderr
+    );
     let computed =
         |i: usize| statuses(&report(&out.join(format!("runs/{i:03}"))))["surface"].clone();
     assert_eq!(computed(0), "computed");

@@ -106,11 +106,13 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         .map(|v| parse_vary(v))
         .collect::<anyhow::Result<_>>()?;
     let measures = parse_outputs(&args.measure)?;
-    let measured_nodes: Vec<String> = {
-        let mut v: Vec<String> = measures.iter().map(|m| m.node.clone()).collect();
-        v.dedup();
-        v
-    };
+    // Each measured node once, in the order of first mention.
+    let mut measured_nodes: Vec<String> = Vec::new();
+    for m in &measures {
+        if !measured_nodes.contains(&m.node) {
+            measured_nodes.push(m.node.clone());
+        }
+    }
     let engine = engine(&args.cache, &args.graph)?;
     let mut base_file = load::read(&args.graph)?;
     load::apply_sets(&mut base_file, &args.set)?;
@@ -128,6 +130,33 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             .map_err(invalid)?;
         }
         graphs.push(load::checked(&args.graph, &file, engine.registry())?);
+    }
+    for m in &measures {
+        let Some(node) = graphs[0].index(&m.node).map(|i| &graphs[0].nodes[i]) else {
+            return Err(invalid(format!(
+                "--measure {m}: no node `{}` in the graph",
+                m.node
+            )));
+        };
+        let ty = engine
+            .registry()
+            .node(&node.kind)
+            .and_then(|n| n.signature().output(&m.port).map(|o| o.ty.clone()));
+        match ty.as_deref() {
+            Some("Scalar") => {}
+            Some(other) => {
+                return Err(invalid(format!(
+                    "--measure {m}: `{}` is a {other}; a measure must be a scalar output",
+                    m.port
+                )))
+            }
+            None => {
+                return Err(invalid(format!(
+                    "--measure {m}: `{}` ({}) has no output `{}`",
+                    m.node, node.kind, m.port
+                )))
+            }
+        }
     }
     // Ask for the measured outputs as well as the sinks, so a measure is reported even when a
     // sink's cached result would otherwise make its node unnecessary.
