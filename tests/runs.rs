@@ -655,3 +655,51 @@ fn gpu_nodes_fall_back_to_the_cpu_unless_a_gpu_is_required() {
     assert!(r.status.success());
     assert!(report(&out)["warnings"].as_array().unwrap().is_empty());
 }
+
+#[test]
+fn btf_pipeline_reports_the_error_it_measures() {
+    // btf.pca reports the Eckart–Young RMSE; btf.compare measures the reconstruction. They agree
+    // to f32 storage precision of the basis (1e-4 relative is generous).
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let r = mesoflow(
+        &[
+            "run",
+            root.join("graphs/btf_compress.json").to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--set",
+            "surface.size=16",
+            "--set",
+            "surface.count=2",
+            "--set",
+            "pca.rank=3",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        root,
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out);
+    let metric = |id: &str, m: &str| {
+        rep["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["id"] == id)
+            .unwrap()["metrics"][m]
+            .as_f64()
+            .unwrap()
+    };
+    let (reported, measured) = (metric("pca", "rmse"), metric("compare", "rmse"));
+    assert!(
+        reported > 0.0 && (reported - measured).abs() <= 1e-4 * reported,
+        "{reported} vs {measured}"
+    );
+    assert_eq!(metric("pca", "rank"), 3.0);
+    let table = std::fs::read_to_string(out.join("btf_errors.csv")).unwrap();
+    assert_eq!(table.lines().count(), 1 + 9 * 9, "a row per direction pair");
+    assert!(table.contains(",30,0,"), "degrees print cleanly: {table}");
+    assert!(out.join("per_pair_rmse.exr").is_file() && out.join("capture.png").is_file());
+}

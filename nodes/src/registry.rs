@@ -6,6 +6,9 @@ pub fn registry() -> Registry {
     let mut r = Registry::new();
     crate::types::register(&mut r);
     r.register(crate::btf::capture::Capture);
+    r.register(crate::btf::compare::Compare);
+    r.register(crate::btf::pca::Pca);
+    r.register(crate::btf::reconstruct::Reconstruct);
     r.register(crate::heightfield::procedural::Procedural);
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);

@@ -1,12 +1,14 @@
 //! The domain value types that flow between nodes, each with its disk-cache encoding.
 
 mod btf;
+mod btf_basis;
 mod heightfield;
 mod image;
 pub use image::{linear_to_srgb, srgb_to_linear};
 mod normal_map;
 
 pub use btf::{Btf, Direction, DirectionPair};
+pub use btf_basis::BtfBasis;
 pub use heightfield::HeightField;
 pub use image::Image;
 pub use normal_map::NormalMap;
@@ -17,6 +19,7 @@ pub const ARRAY_TYPES: &[&str] = &[HeightField::TYPE, Image::TYPE, NormalMap::TY
 /// Registers the decoders of every type in this module.
 pub fn register(r: &mut mesoflow_runtime::Registry) {
     r.register_type(Btf::TYPE, Btf::decode);
+    r.register_type(BtfBasis::TYPE, BtfBasis::decode);
     r.register_type(HeightField::TYPE, HeightField::decode);
     r.register_type(Image::TYPE, Image::decode);
     r.register_type(NormalMap::TYPE, NormalMap::decode);
