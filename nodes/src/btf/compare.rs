@@ -99,7 +99,7 @@ impl Node for Compare {
             ));
         }
         let rmse = (sse / a.data.len().max(1) as f64).sqrt();
-        let peak = a.data.iter().fold(0f32, |m, v| m.max(*v)) as f64;
+        let peak = a.peak();
         let pair_rmse: Vec<f32> = per
             .iter()
             .map(|(s, _)| (s / plane as f64).sqrt() as f32)

@@ -202,7 +202,7 @@ impl Node for Pca {
         };
         ctx.progress(3, 3);
         let rmse = rmse_at(k);
-        let peak = btf.data.iter().fold(0f32, |m, v| m.max(*v)) as f64;
+        let peak = btf.peak();
         let stored = (c + t * k + c * k + k) as f64 * 4.0;
         let basis = BtfBasis {
             width: btf.width,
@@ -368,7 +368,7 @@ mod tests {
                 let measured = scalar(&cmp, "rmse");
                 // Below the floor the reconstruction's own f32 rounding (≈ 6e-8 of each value)
                 // dominates: compare against that instead.
-                let f32_floor = 1e-7 * btf.data.iter().fold(0f32, |m, v| m.max(*v)) as f64;
+                let f32_floor = 1e-7 * btf.peak();
                 assert!(
                     (measured - rmse).abs() <= 1e-4 * rmse + f32_floor,
                     "n {n} rank {rank}: measured {measured} vs reported {rmse}"

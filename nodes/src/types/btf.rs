@@ -78,6 +78,11 @@ impl Btf {
             .map(|(i, _)| i)
     }
 
+    /// The largest value: the peak of PSNR.
+    pub fn peak(&self) -> f64 {
+        self.data.iter().fold(0f32, |m, v| m.max(*v)) as f64
+    }
+
     /// One pair as an interleaved RGB image.
     pub fn preview(&self, pair: usize) -> crate::types::Image {
         let planes = self.pair_image(pair);
@@ -96,19 +101,8 @@ impl Btf {
     pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
         let width = d.u64()? as usize;
         let height = d.u64()? as usize;
-        let n = d.u64()? as usize;
-        let mut pairs = Vec::with_capacity(n.min(1 << 20));
-        for _ in 0..n {
-            let view = Direction {
-                theta: d.f64()?,
-                phi: d.f64()?,
-            };
-            let light = Direction {
-                theta: d.f64()?,
-                phi: d.f64()?,
-            };
-            pairs.push(DirectionPair { view, light });
-        }
+        let pairs = decode_pairs(d)?;
+        let n = pairs.len();
         let data = d.f32s()?;
         if data.len() != n * 3 * width * height {
             return Err(DecodeError::new(Self::TYPE, "size does not match the data"));
@@ -122,6 +116,34 @@ impl Btf {
     }
 }
 
+/// The direction-pair list of a cache encoding (shared by `Btf` and `BtfBasis`).
+pub(super) fn encode_pairs(out: &mut Encoder, pairs: &[DirectionPair]) {
+    out.u64(pairs.len() as u64);
+    for p in pairs {
+        out.f64(p.view.theta)
+            .f64(p.view.phi)
+            .f64(p.light.theta)
+            .f64(p.light.phi);
+    }
+}
+
+pub(super) fn decode_pairs(d: &mut Decoder) -> Result<Vec<DirectionPair>, DecodeError> {
+    let n = d.u64()? as usize;
+    let mut pairs = Vec::with_capacity(n.min(1 << 20));
+    for _ in 0..n {
+        let view = Direction {
+            theta: d.f64()?,
+            phi: d.f64()?,
+        };
+        let light = Direction {
+            theta: d.f64()?,
+            phi: d.f64()?,
+        };
+        pairs.push(DirectionPair { view, light });
+    }
+    Ok(pairs)
+}
+
 impl Value for Btf {
     fn type_name(&self) -> &'static str {
         Self::TYPE
@@ -130,15 +152,8 @@ impl Value for Btf {
         self.data.len() * 4 + self.pairs.len() * 32
     }
     fn encode(&self, out: &mut Encoder) {
-        out.u64(self.width as u64)
-            .u64(self.height as u64)
-            .u64(self.pairs.len() as u64);
-        for p in &self.pairs {
-            out.f64(p.view.theta)
-                .f64(p.view.phi)
-                .f64(p.light.theta)
-                .f64(p.light.phi);
-        }
+        out.u64(self.width as u64).u64(self.height as u64);
+        encode_pairs(out, &self.pairs);
         out.f32s(&self.data);
     }
     /// NPY layout: (pairs, 3, H, W) f32, linear RGB planes; pairs view-major.

@@ -5,7 +5,7 @@
 //! order): `mean` has C values, `coeffs` is T×k column-major (k coefficient maps), `basis` is C×k
 //! column-major, `singular` the k singular values, largest first.
 
-use super::btf::DirectionPair;
+use super::btf::{decode_pairs, encode_pairs, DirectionPair};
 use mesoflow_runtime::codec::{DecodeError, Decoder, Encoder};
 use mesoflow_runtime::{Value, ValueRef};
 use std::any::Any;
@@ -37,19 +37,7 @@ impl BtfBasis {
     pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
         let width = d.u64()? as usize;
         let height = d.u64()? as usize;
-        let n = d.u64()? as usize;
-        let mut pairs = Vec::with_capacity(n.min(1 << 20));
-        for _ in 0..n {
-            let view = super::btf::Direction {
-                theta: d.f64()?,
-                phi: d.f64()?,
-            };
-            let light = super::btf::Direction {
-                theta: d.f64()?,
-                phi: d.f64()?,
-            };
-            pairs.push(DirectionPair { view, light });
-        }
+        let pairs = decode_pairs(d)?;
         let rank = d.u64()? as usize;
         let b = BtfBasis {
             width,
@@ -81,15 +69,8 @@ impl Value for BtfBasis {
             + 32 * self.pairs.len()
     }
     fn encode(&self, out: &mut Encoder) {
-        out.u64(self.width as u64)
-            .u64(self.height as u64)
-            .u64(self.pairs.len() as u64);
-        for p in &self.pairs {
-            out.f64(p.view.theta)
-                .f64(p.view.phi)
-                .f64(p.light.theta)
-                .f64(p.light.phi);
-        }
+        out.u64(self.width as u64).u64(self.height as u64);
+        encode_pairs(out, &self.pairs);
         out.u64(self.rank as u64)
             .f32s(&self.mean)
             .f32s(&self.coeffs)
