@@ -5,5 +5,6 @@ pub mod brdf;
 pub mod capture;
 pub mod compare;
 pub mod directions;
+pub mod factor;
 pub mod pca;
 pub mod reconstruct;

@@ -1,6 +1,7 @@
-//! `btf.reconstruct`: a `BtfBasis` back to a `Btf`, value(pair, channel, x) = mean + Σ_k d_k(x) e_k.
+//! `btf.reconstruct`: a `BtfBasis` back to a `Btf`: per block, value = mean + Σ_k m_k(x) b_k(column),
+//! then the colour space back to RGB.
 
-use crate::types::{Btf, BtfBasis};
+use crate::types::{Btf, BtfBasis, Centring, ColorSpace};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 use rayon::prelude::*;
@@ -13,19 +14,48 @@ pub struct Params {}
 
 pub struct Reconstruct;
 
-/// The full BTF of a basis; each value summed over k in order (f64), so thread count is irrelevant.
-pub fn reconstruct(b: &BtfBasis) -> Btf {
-    let (t, c, k) = (b.texels(), b.columns(), b.rank);
-    let mut data = vec![0f32; t * c];
-    data.par_chunks_mut(t).enumerate().for_each(|(j, column)| {
-        for (i, out) in column.iter_mut().enumerate() {
-            let mut v = b.mean[j] as f64;
+/// Writes one direction pair's three RGB planes (3·T values) into `out`. `owners` is
+/// [`BtfBasis::column_owners`]. Each value is summed over k in order (f64), so the thread count
+/// is irrelevant.
+pub fn pair_into(b: &BtfBasis, owners: &[Option<(usize, usize)>], pair: usize, out: &mut [f32]) {
+    let t = b.texels();
+    let mut planes = [vec![0f64; t], vec![0f64; t], vec![0f64; t]];
+    for (ch, plane) in planes.iter_mut().enumerate() {
+        let Some((bi, j)) = owners[pair * 3 + ch] else {
+            continue;
+        };
+        let blk = &b.blocks[bi];
+        let (k, n) = (blk.rank(), blk.cols());
+        for (i, v) in plane.iter_mut().enumerate() {
+            let mut s = match blk.centring {
+                Centring::Columns => blk.mean[j] as f64,
+                Centring::Texels => blk.mean[i] as f64,
+            };
             for kk in 0..k {
-                v += b.coeffs[kk * t + i] as f64 * b.basis[kk * c + j] as f64;
+                s += blk.maps[kk * t + i] as f64 * blk.basis[kk * n + j] as f64;
             }
-            *out = v as f32;
+            *v = s;
         }
-    });
+    }
+    for i in 0..t {
+        let rgb = match b.color {
+            ColorSpace::Rgb => [planes[0][i], planes[1][i], planes[2][i]],
+            c => c.to_rgb([planes[0][i], planes[1][i], planes[2][i]]),
+        };
+        for ch in 0..3 {
+            out[ch * t + i] = rgb[ch] as f32;
+        }
+    }
+}
+
+/// The full BTF of a basis.
+pub fn reconstruct(b: &BtfBasis) -> Btf {
+    let t = b.texels();
+    let owners = b.column_owners();
+    let mut data = vec![0f32; t * b.columns()];
+    data.par_chunks_mut(3 * t.max(1))
+        .enumerate()
+        .for_each(|(pair, out)| pair_into(b, &owners, pair, out));
     Btf {
         width: b.width,
         height: b.height,
@@ -40,8 +70,8 @@ impl Node for Reconstruct {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "btf.reconstruct",
-            version: 1,
-            doc: "Expands a PCA basis back into a BTF (mean + Σ coefficient map × basis).",
+            version: 2,
+            doc: "Expands a PCA basis back into an RGB BTF (per block: mean + Σ map × basis).",
             device: DevicePreference::Cpu,
             inputs: vec![Port::input("basis", BtfBasis::TYPE, "the factorised BTF")],
             outputs: vec![Port::output("btf", Btf::TYPE, "the reconstruction")],

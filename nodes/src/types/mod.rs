@@ -8,7 +8,7 @@ pub use image::{linear_to_srgb, srgb_to_linear};
 mod normal_map;
 
 pub use btf::{Btf, Direction, DirectionPair};
-pub use btf_basis::BtfBasis;
+pub use btf_basis::{BasisBlock, BtfBasis, Centring, ColorSpace};
 pub use heightfield::HeightField;
 pub use image::Image;
 pub use normal_map::NormalMap;
