@@ -76,10 +76,15 @@ pub enum Precision {
 trait Elem: faer::traits::RealField + Copy + Send + Sync + 'static {
     fn of(x: f64) -> Self;
     fn f64(self) -> f64;
+    /// The f32 buffer as this type without a copy, where it is f32.
+    fn borrow(v: MatRef<'_, f32>) -> Option<MatRef<'_, Self>>;
 }
 impl Elem for f32 {
     fn of(x: f64) -> Self {
         x as f32
+    }
+    fn borrow(v: MatRef<'_, f32>) -> Option<MatRef<'_, f32>> {
+        Some(v)
     }
     fn f64(self) -> f64 {
         self as f64
@@ -89,8 +94,26 @@ impl Elem for f64 {
     fn of(x: f64) -> Self {
         x
     }
+    fn borrow(_: MatRef<'_, f32>) -> Option<MatRef<'_, f64>> {
+        None
+    }
     fn f64(self) -> f64 {
         self
+    }
+}
+
+/// A panel: a view into the f32 buffer or a centred copy.
+enum Panel<'a, E: Elem> {
+    View(MatRef<'a, E>),
+    Owned(Mat<E>),
+}
+
+impl<E: Elem> Panel<'_, E> {
+    fn as_ref(&self) -> MatRef<'_, E> {
+        match self {
+            Panel::View(v) => *v,
+            Panel::Owned(m) => m.as_ref(),
+        }
     }
 }
 
@@ -124,7 +147,7 @@ impl<'a> Block<'a> {
         b.mean = match centring {
             Centring::Columns => (0..cols)
                 .into_par_iter()
-                .map(|j| b.col(j).iter().map(|&v| v as f64).sum::<f64>() / rows.max(1) as f64)
+                .map(|j| lanes_sum(b.col(j), |v| v as f64) / rows.max(1) as f64)
                 .collect(),
             Centring::Texels => {
                 let mut m = vec![0f64; rows];
@@ -147,15 +170,17 @@ impl<'a> Block<'a> {
         };
         b.energy = (0..cols)
             .into_par_iter()
-            .map(|j| {
-                b.col(j)
+            .map(|j| match centring {
+                Centring::Columns => {
+                    let m = b.mean[j];
+                    lanes_sum(b.col(j), |v| (v as f64 - m) * (v as f64 - m))
+                }
+                Centring::Texels => b
+                    .col(j)
                     .iter()
-                    .enumerate()
-                    .map(|(i, &v)| {
-                        let x = v as f64 - b.centre(i, j);
-                        x * x
-                    })
-                    .sum::<f64>()
+                    .zip(&b.mean)
+                    .map(|(&v, m)| (v as f64 - m) * (v as f64 - m))
+                    .sum::<f64>(),
             })
             .collect::<Vec<_>>()
             .iter()
@@ -173,6 +198,23 @@ impl<'a> Block<'a> {
             Centring::Columns => self.mean[j],
             Centring::Texels => self.mean[i],
         }
+    }
+
+    /// A centred copy of the panel, or (f32 only) the uncentred buffer itself.
+    fn panel_or_view<E: Elem>(
+        &self,
+        centred: bool,
+        r0: usize,
+        nr: usize,
+        c0: usize,
+        nc: usize,
+    ) -> Panel<'_, E> {
+        if !centred {
+            if let Some(v) = E::borrow(self.view(r0, nr, c0, nc)) {
+                return Panel::View(v);
+            }
+        }
+        Panel::Owned(self.panel::<E>(r0, nr, c0, nc))
     }
 
     /// Centred panel rows r0..r0+nr × columns c0..c0+nc, column-major.
@@ -201,20 +243,81 @@ impl<'a> Block<'a> {
     /// X·M (T×l) for M n×l.
     pub fn mul(&self, m: MatRef<'_, f64>, precision: Precision) -> Mat<f64> {
         match precision {
-            Precision::F32 => self.mul_in::<f32>(m),
-            Precision::F64 => self.mul_in::<f64>(m),
+            Precision::F32 => {
+                // A·M straight from the f32 buffer (no panel copy), then the rank-one centring.
+                let mut y = self.mul_in::<f32>(m, false);
+                match self.centring {
+                    Centring::Columns => {
+                        let mu_m: Vec<f64> = (0..m.ncols())
+                            .map(|j| (0..m.nrows()).map(|i| self.mean[i] * m[(i, j)]).sum())
+                            .collect();
+                        for (j, c) in mu_m.iter().enumerate() {
+                            for v in y.col_as_slice_mut(j) {
+                                *v -= c;
+                            }
+                        }
+                    }
+                    Centring::Texels => {
+                        for j in 0..m.ncols() {
+                            let s: f64 = (0..m.nrows()).map(|i| m[(i, j)]).sum();
+                            for (v, mu) in y.col_as_slice_mut(j).iter_mut().zip(&self.mean) {
+                                *v -= mu * s;
+                            }
+                        }
+                    }
+                }
+                y
+            }
+            Precision::F64 => self.mul_in::<f64>(m, true),
         }
     }
 
     /// Xᵀ·Q (n×l) for Q T×l.
     pub fn tmul(&self, q: MatRef<'_, f64>, precision: Precision) -> Mat<f64> {
         match precision {
-            Precision::F32 => self.tmul_in::<f32>(q),
-            Precision::F64 => self.tmul_in::<f64>(q),
+            Precision::F32 => {
+                let mut z = self.tmul_in::<f32>(q, false);
+                match self.centring {
+                    Centring::Columns => {
+                        for j in 0..q.ncols() {
+                            let s: f64 = (0..q.nrows()).map(|i| q[(i, j)]).sum();
+                            for (v, mu) in z.col_as_slice_mut(j).iter_mut().zip(&self.mean) {
+                                *v -= mu * s;
+                            }
+                        }
+                    }
+                    Centring::Texels => {
+                        for j in 0..q.ncols() {
+                            let c: f64 = (0..q.nrows()).map(|i| self.mean[i] * q[(i, j)]).sum();
+                            for v in z.col_as_slice_mut(j) {
+                                *v -= c;
+                            }
+                        }
+                    }
+                }
+                z
+            }
+            Precision::F64 => self.tmul_in::<f64>(q, true),
         }
     }
 
-    fn mul_in<E: Elem>(&self, m: MatRef<'_, f64>) -> Mat<f64> {
+    /// The uncentred f32 submatrix rows r0.., columns c0.., as a strided view (no copy).
+    fn view(&self, r0: usize, nr: usize, c0: usize, nc: usize) -> MatRef<'_, f32> {
+        let start = self.offset + c0 * self.stride + r0;
+        let len = if nc == 0 {
+            0
+        } else {
+            (nc - 1) * self.stride + nr
+        };
+        MatRef::from_column_major_slice_with_stride(
+            &self.data[start..start + len],
+            nr,
+            nc,
+            self.stride,
+        )
+    }
+
+    fn mul_in<E: Elem>(&self, m: MatRef<'_, f64>, centred: bool) -> Mat<f64> {
         let l = m.ncols();
         let me = Mat::<E>::from_fn(m.nrows(), l, |i, j| E::of(m[(i, j)]));
         let starts: Vec<usize> = (0..self.rows).step_by(ROW_PANEL).collect();
@@ -225,7 +328,7 @@ impl<'a> Block<'a> {
                 let mut out = Mat::<E>::zeros(nr, l);
                 for c0 in (0..self.cols).step_by(DEPTH_PANEL) {
                     let nc = DEPTH_PANEL.min(self.cols - c0);
-                    let p = self.panel::<E>(r0, nr, c0, nc);
+                    let p = self.panel_or_view::<E>(centred, r0, nr, c0, nc);
                     matmul(
                         out.as_mut(),
                         Accum::Add,
@@ -249,7 +352,7 @@ impl<'a> Block<'a> {
         y
     }
 
-    fn tmul_in<E: Elem>(&self, q: MatRef<'_, f64>) -> Mat<f64> {
+    fn tmul_in<E: Elem>(&self, q: MatRef<'_, f64>, centred: bool) -> Mat<f64> {
         let l = q.ncols();
         let qe = Mat::<E>::from_fn(q.nrows(), l, |i, j| E::of(q[(i, j)]));
         let starts: Vec<usize> = (0..self.cols).step_by(COL_PANEL).collect();
@@ -260,7 +363,7 @@ impl<'a> Block<'a> {
                 let mut out = Mat::<E>::zeros(nc, l);
                 for r0 in (0..self.rows).step_by(DEPTH_PANEL) {
                     let nr = DEPTH_PANEL.min(self.rows - r0);
-                    let p = self.panel::<E>(r0, nr, c0, nc);
+                    let p = self.panel_or_view::<E>(centred, r0, nr, c0, nc);
                     matmul(
                         out.as_mut(),
                         Accum::Add,
@@ -479,7 +582,7 @@ pub fn iterative(
         Some(d) => d,
         None => {
             passes += 1;
-            x.mul(v.as_ref(), Precision::F64)
+            x.mul(v.as_ref(), precision)
         }
     };
     let kept: f64 = (0..k)
@@ -493,6 +596,21 @@ pub fn iterative(
         passes,
         unconverged,
     })
+}
+
+/// Σ f(v) in a fixed order with eight independent accumulators, which lets the compiler
+/// vectorise what a single running sum (a dependency chain) cannot.
+pub fn lanes_sum(values: &[f32], f: impl Fn(f32) -> f64) -> f64 {
+    let mut acc = [0f64; 8];
+    let chunks = values.chunks_exact(8);
+    let rest = chunks.remainder();
+    for c in chunks {
+        for k in 0..8 {
+            acc[k] += f(c[k]);
+        }
+    }
+    let tail: f64 = rest.iter().map(|&v| f(v)).sum();
+    acc.iter().sum::<f64>() + tail
 }
 
 /// A standard normal sample, a pure function of (seed, i, j) (Box–Muller on two hashed uniforms).

@@ -164,7 +164,7 @@ impl Node for Pca {
         let started = Instant::now();
         let btf = inputs.get::<Btf>("btf")?;
         let t = btf.width * btf.height;
-        if let Some(bad) = btf.data.iter().position(|v| !v.is_finite()) {
+        if let Some(bad) = btf.first_non_finite() {
             let pair = bad / (3 * t);
             return Err(NodeError::input(
                 "btf",

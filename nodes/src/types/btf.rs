@@ -80,7 +80,28 @@ impl Btf {
 
     /// The largest value: the peak of PSNR.
     pub fn peak(&self) -> f64 {
-        self.data.iter().fold(0f32, |m, v| m.max(*v)) as f64
+        use rayon::prelude::*;
+        // max is exact and associative, so the parallel reduction is deterministic.
+        self.data
+            .par_chunks(1 << 16)
+            .map(|c| c.iter().fold(0f32, |m, v| m.max(*v)))
+            .reduce(|| 0f32, f32::max) as f64
+    }
+
+    /// Index of the first value that is NaN or infinite.
+    pub fn first_non_finite(&self) -> Option<usize> {
+        use rayon::prelude::*;
+        const CHUNK: usize = 1 << 16;
+        self.data
+            .par_chunks(CHUNK)
+            .position_first(|c| c.iter().any(|v| !v.is_finite()))
+            .and_then(|ci| {
+                let start = ci * CHUNK;
+                self.data[start..]
+                    .iter()
+                    .position(|v| !v.is_finite())
+                    .map(|i| start + i)
+            })
     }
 
     /// One pair as an interleaved RGB image.
