@@ -6,6 +6,7 @@ pub mod btf;
 pub mod gpu;
 pub mod heightfield;
 pub mod io;
+pub mod memory;
 mod registry;
 pub mod rng;
 pub mod types;

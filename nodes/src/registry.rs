@@ -8,7 +8,10 @@ pub fn registry() -> Registry {
     r.register(crate::btf::capture::Capture);
     r.register(crate::btf::compare::Compare);
     r.register(crate::btf::pca::Pca);
+    r.register(crate::btf::lod::Lod);
+    r.register(crate::btf::read_ubo2003::ReadUbo2003);
     r.register(crate::btf::reconstruct::Reconstruct);
+    r.register(crate::btf::write_ubo2003::WriteUbo2003);
     r.register(crate::heightfield::procedural::Procedural);
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);

@@ -21,4 +21,4 @@ pub use key::{Key, KEY_SCHEME};
 pub use node::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 pub use registry::Registry;
 pub use report::{NodeReport, NodeStatus, RunReport, Warning};
-pub use value::{ArrayView, Artifact, Scalar, Value, ValueRef};
+pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};

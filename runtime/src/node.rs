@@ -162,6 +162,12 @@ impl NodeContext {
         }
     }
 
+    /// The same context resolving input paths against `base` (for calling file readers directly).
+    pub fn with_base(mut self, base: PathBuf) -> NodeContext {
+        self.base_dir = base;
+        self
+    }
+
     pub fn node_id(&self) -> &str {
         &self.node
     }

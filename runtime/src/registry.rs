@@ -2,7 +2,7 @@
 
 use crate::codec::{DecodeError, Decoder};
 use crate::node::{DynNode, Erased, Node};
-use crate::value::{Artifact, DecodeFn, Scalar, ValueRef};
+use crate::value::{Artifact, Artifacts, DecodeFn, Scalar, ValueRef};
 use mesoflow_graph::{Catalog, KindSignature};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -19,6 +19,7 @@ impl Registry {
         let mut r = Registry::default();
         r.register_type(Scalar::TYPE, Scalar::decode);
         r.register_type(Artifact::TYPE, Artifact::decode);
+        r.register_type(Artifacts::TYPE, Artifacts::decode);
         r
     }
 

@@ -14,7 +14,7 @@ use crate::engine::{DeviceMode, Engine, RunObserver, RunOptions};
 use crate::key::{self, Key, KeyParts};
 use crate::node::{DynNode, Inputs, NodeContext, NodeError, Outputs, Prepared, ProgressSink};
 use crate::report::{NodeReport, NodeStatus, RunReport, Warning};
-use crate::value::Artifact;
+use crate::value::{Artifact, Artifacts};
 use mesoflow_graph::{CheckedGraph, DevicePreference};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -601,10 +601,16 @@ fn write_artifacts(
     sink: &Sink,
     files: &mut Vec<String>,
 ) {
-    for v in outputs.values.values() {
-        let Some(a) = v.as_any().downcast_ref::<Artifact>() else {
-            continue;
-        };
+    let all = outputs.values.values().flat_map(|v| {
+        let one = v.as_any().downcast_ref::<Artifact>().into_iter();
+        let many = v
+            .as_any()
+            .downcast_ref::<Artifacts>()
+            .into_iter()
+            .flat_map(|s| s.files.iter());
+        one.chain(many)
+    });
+    for a in all {
         let path = out_dir.join(&a.path);
         // Re-running into the same folder is the common case while tuning; a file that already
         // holds these bytes is left alone (a read is cheaper than a write and a rename).

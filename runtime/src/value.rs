@@ -98,3 +98,42 @@ impl Value for Artifact {
         self
     }
 }
+
+/// A set of files a node produced (a folder of images), written like [`Artifact`]s.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Artifacts {
+    pub files: Vec<Artifact>,
+}
+
+impl Artifacts {
+    pub const TYPE: &'static str = "Files";
+    pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
+        let n = d.u64()? as usize;
+        let mut files = Vec::with_capacity(n.min(1 << 20));
+        for _ in 0..n {
+            files.push(Artifact {
+                path: d.str()?,
+                bytes: d.raw()?,
+            });
+        }
+        Ok(Arc::new(Artifacts { files }))
+    }
+}
+
+impl Value for Artifacts {
+    fn type_name(&self) -> &'static str {
+        Self::TYPE
+    }
+    fn byte_size(&self) -> usize {
+        self.files.iter().map(|a| a.byte_size()).sum()
+    }
+    fn encode(&self, out: &mut Encoder) {
+        out.u64(self.files.len() as u64);
+        for a in &self.files {
+            a.encode(out);
+        }
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+}

@@ -886,7 +886,7 @@ mod tests {
             .unwrap();
             // The bound: within 2% of exact with default parameters.
             let ratio = scalar(&r, "rmse") / e;
-            assert!((1.0 - 1e-6..=1.02).contains(&ratio), "rank {rank}: {ratio}");
+            assert!((1.0 - 1e-5..=1.02).contains(&ratio), "rank {rank}: {ratio}");
         }
         // A budget on the randomized path meets it.
         let target = scalar(&exact(6), "rmse") * 1.01;

@@ -46,7 +46,7 @@ impl Node for ImageWrite {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "image.write",
-            version: 1,
+            version: 2,
             doc:
                 "Writes an image: PNG (8 or 16 bit, sRGB-encoded for display) or EXR (linear f32).",
             device: DevicePreference::Cpu,
