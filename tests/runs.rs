@@ -703,3 +703,55 @@ fn btf_pipeline_reports_the_error_it_measures() {
     assert!(table.contains(",30,0,"), "degrees print cleanly: {table}");
     assert!(out.join("per_pair_rmse.exr").is_file() && out.join("capture.png").is_file());
 }
+
+#[test]
+fn ubo2003_files_written_by_one_graph_read_back_bit_exactly_in_another() {
+    // btf_capture.json writes EXR files; a second graph captures the same surface, reads the
+    // files and compares: EXR holds f32 exactly and the running index keeps the pair order, so
+    // the error is exactly zero.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let small = ["--set", "surface.size=16", "--set", "surface.count=2"];
+    let mut args = vec![
+        "run".to_string(),
+        root.join("graphs/btf_capture.json")
+            .to_str()
+            .unwrap()
+            .to_string(),
+    ];
+    args.extend(small.iter().map(|a| a.to_string()));
+    args.extend(["--quiet", "--no-cache", "--out-dir", out.to_str().unwrap()].map(String::from));
+    let r = mesoflow(&args.iter().map(String::as_str).collect::<Vec<_>>(), root);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let text = std::fs::read_to_string(root.join("graphs/btf_capture.json")).unwrap();
+    let mut g: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let nodes = g["nodes"].as_object_mut().unwrap();
+    nodes.remove("files");
+    nodes.remove("preview_png");
+    nodes.insert(
+        "read".into(),
+        serde_json::json!({ "kind": "btf.read_ubo2003", "params": { "path": "o/ubo2003" } }),
+    );
+    nodes.insert(
+        "compare".into(),
+        serde_json::json!({ "kind": "btf.compare",
+            "inputs": { "reference": "capture.btf", "btf": "read.btf" } }),
+    );
+    let graph = s.write("readback.json", &g.to_string());
+    let out2 = s.path("o2");
+    let mut args = vec!["run".to_string(), graph.to_str().unwrap().to_string()];
+    args.extend(small.iter().map(|a| a.to_string()));
+    args.extend(["--quiet", "--no-cache", "--out-dir", out2.to_str().unwrap()].map(String::from));
+    let r = mesoflow(&args.iter().map(String::as_str).collect::<Vec<_>>(), root);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out2);
+    let compare = rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "compare")
+        .unwrap();
+    assert_eq!(compare["metrics"]["rmse"], 0.0);
+    assert_eq!(compare["metrics"]["max_error"], 0.0);
+}

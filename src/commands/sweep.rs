@@ -260,18 +260,32 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             .iter()
             .position(|n| *n == m.node)
             .unwrap_or(0);
-        let points: Vec<(f64, f64)> = rows
-            .iter()
-            .filter_map(|r| Some((r.node_seconds[ni]?, r.measures[mi]?)))
-            .collect();
+        // One series per combination of the non-numeric varied values (e.g. each solver), so
+        // methods can be told apart on the cost–error plane.
+        let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+        for r in &rows {
+            let (Some(t), Some(y)) = (r.node_seconds[ni], r.measures[mi]) else {
+                continue;
+            };
+            let name: Vec<String> = varies
+                .iter()
+                .zip(&r.values)
+                .filter(|(_, x)| !x.is_number())
+                .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
+                .collect();
+            groups.entry(name.join(" ")).or_default().push((t, y));
+        }
         let c = Chart {
             title: format!("{}.{} against the time of `{}`", m.node, m.port, m.node),
             x_label: "seconds",
             y_label: &m.port,
-            series: vec![Series {
-                name: String::new(),
-                points,
-            }],
+            series: groups
+                .into_iter()
+                .map(|(name, mut points)| {
+                    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+                    Series { name, points }
+                })
+                .collect(),
             x_names: None,
         };
         if let Err(e) = chart::write(

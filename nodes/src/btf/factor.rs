@@ -193,6 +193,7 @@ impl<'a> Block<'a> {
         &self.data[s..s + self.rows]
     }
 
+    #[cfg(test)]
     fn centre(&self, i: usize, j: usize) -> f64 {
         match self.centring {
             Centring::Columns => self.mean[j],

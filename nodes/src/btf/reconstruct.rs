@@ -8,9 +8,23 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
-pub struct Params {}
+pub struct Params {
+    /// View direction [θ, φ] of the `preview` output (the nearest pair is shown).
+    pub preview_view: [f64; 2],
+    /// Light direction [θ, φ] of the `preview` output.
+    pub preview_light: [f64; 2],
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            preview_view: [0.0, 0.0],
+            preview_light: [45.0, 0.0],
+        }
+    }
+}
 
 pub struct Reconstruct;
 
@@ -74,12 +88,25 @@ impl Node for Reconstruct {
             doc: "Expands a PCA basis back into an RGB BTF (per block: mean + Σ map × basis).",
             device: DevicePreference::Cpu,
             inputs: vec![Port::input("basis", BtfBasis::TYPE, "the factorised BTF")],
-            outputs: vec![Port::output("btf", Btf::TYPE, "the reconstruction")],
+            outputs: vec![
+                Port::output("btf", Btf::TYPE, "the reconstruction"),
+                Port::output(
+                    "preview",
+                    crate::types::Image::TYPE,
+                    "the pair nearest (preview_view, preview_light)",
+                ),
+            ],
             disk_cache: false,
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, _p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        Ok(Outputs::new().with("btf", reconstruct(inputs.get::<BtfBasis>("basis")?)))
+    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let btf = reconstruct(inputs.get::<BtfBasis>("basis")?);
+        let d = |a: [f64; 2]| crate::types::Direction::degrees(a[0], a[1]);
+        let preview = btf
+            .nearest_pair(&d(p.preview_view), &d(p.preview_light))
+            .map(|i| btf.preview(i))
+            .ok_or_else(|| NodeError::input("basis", "has no direction pairs"))?;
+        Ok(Outputs::new().with("btf", btf).with("preview", preview))
     }
 }
