@@ -281,10 +281,8 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             y_label: &m.port,
             series: groups
                 .into_iter()
-                .map(|(name, mut points)| {
-                    points.sort_by(|a, b| a.0.total_cmp(&b.0));
-                    Series { name, points }
-                })
+                // In sweep order (e.g. increasing rank), so a line traces one method's trade-off.
+                .map(|(name, points)| Series { name, points })
                 .collect(),
             x_names: None,
         };

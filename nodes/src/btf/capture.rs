@@ -42,6 +42,8 @@ pub struct Params {
     pub preview_view: [f64; 2],
     /// Light direction [θ, φ] of the `preview` output.
     pub preview_light: [f64; 2],
+    /// Refuse a BTF larger than this (GB); default: 80% of physical memory.
+    pub memory_budget_gb: Option<f64>,
 }
 
 impl Default for Params {
@@ -56,6 +58,7 @@ impl Default for Params {
             roughness: 0.2,
             preview_view: [0.0, 0.0],
             preview_light: [45.0, 0.0],
+            memory_budget_gb: None,
         }
     }
 }
@@ -112,6 +115,11 @@ impl Node for Capture {
         }
         let scene = Scene::new(hf, albedo, p);
         let plane = width * height;
+        crate::memory::check(
+            (pairs.len() * 3 * plane * 4) as u64,
+            &format!("a BTF of {} pairs × {plane} texels × RGB f32", pairs.len()),
+            p.memory_budget_gb,
+        )?;
         let mut data = vec![0f32; pairs.len() * 3 * plane];
         let (done, missed) = (AtomicU64::new(0), AtomicU64::new(0));
         let scale = (
@@ -489,5 +497,13 @@ mod tests {
             matches!(&e, NodeError::Param { param, .. } if param == "lights"),
             "{e}"
         );
+        // 81 × 81 pairs at 1024² would be 82 GB: refused before allocating, with its size.
+        let p = Params {
+            resolution: Some(1024),
+            memory_budget_gb: Some(8.0),
+            ..Params::default()
+        };
+        let e = capture(field(4, |_, _| 0.0), None, &p).unwrap_err();
+        assert!(e.to_string().contains("needs 82.56 GB"), "{e}");
     }
 }
