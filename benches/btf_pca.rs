@@ -52,10 +52,7 @@ fn main() {
         .split(',')
         .filter_map(|v| v.parse().ok())
         .collect();
-    let npy: Option<String> = arg("--npy", String::new())
-        .parse()
-        .ok()
-        .filter(|s: &String| !s.is_empty());
+    let npy = Some(arg("--npy", String::new())).filter(|s| !s.is_empty());
     let ctx = NodeContext::detached(None);
 
     let p = procedural::Params {

@@ -60,8 +60,6 @@ pub struct Factors {
     pub sigma: Vec<f64>,
     /// Residual energy ‖X − D Vᵀ‖².
     pub residual: f64,
-    /// Passes over the data (for the report).
-    pub passes: usize,
     /// Set when the iterative exact solver hit its cap: the largest relative residual reached.
     pub unconverged: Option<f64>,
 }
@@ -484,7 +482,6 @@ pub fn dense(x: &Block, pick: &dyn Fn(&[f64]) -> usize) -> Result<(Factors, Vec<
             d,
             sigma,
             residual,
-            passes: 3,
             unconverged: None,
         },
         lambda,
@@ -517,7 +514,6 @@ pub fn iterative(
             d: Mat::zeros(x.rows, 0),
             sigma: vec![],
             residual: x.energy,
-            passes: 0,
             unconverged: None,
         });
     }
@@ -527,7 +523,6 @@ pub fn iterative(
     };
     let omega = Mat::<f64>::from_fn(x.cols, l, |i, j| gaussian(seed, i, j));
     let mut y = x.mul(omega.as_ref(), precision);
-    let mut passes = 1;
     let mut iteration = 0;
     let mut unconverged = None;
     let (v, sigma, d_from_iteration) = loop {
@@ -536,7 +531,6 @@ pub fn iterative(
         }
         let q = y.qr().compute_thin_Q();
         let z = x.tmul(q.as_ref(), precision);
-        passes += 1;
         // Z = Xᵀ Q = W S Pᵀ, so Qᵀ X = P S Wᵀ: W are right singular vectors, U = Q P.
         let svd = z
             .thin_svd()
@@ -549,11 +543,9 @@ pub fn iterative(
                     break (w, sigma, None);
                 }
                 y = x.mul(svd.U(), precision);
-                passes += 1;
             }
             Stop::Converged => {
                 y = x.mul(svd.U(), precision);
-                passes += 1;
                 // ‖X vᵢ − σᵢ uᵢ‖ with uᵢ = Q pᵢ.
                 let u = &q * svd.V();
                 let s0 = sigma[0].max(f64::MIN_POSITIVE);
@@ -584,7 +576,6 @@ pub fn iterative(
         None => {
             // f64 even for `randomized`: with f32 the kept energy carries ~1e-6 relative error,
             // which is most of a small residual, and the reported RMSE would be wrong.
-            passes += 1;
             x.mul(v.as_ref(), Precision::F64)
         }
     };
@@ -596,7 +587,6 @@ pub fn iterative(
         d,
         sigma: sigma[..k].to_vec(),
         residual: (x.energy - kept).max(0.0),
-        passes,
         unconverged,
     })
 }

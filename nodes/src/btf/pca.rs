@@ -124,8 +124,9 @@ pub fn psnr(peak: f64, rmse: f64) -> f64 {
 /// What one block asks of the solver.
 enum Budget {
     Rank(usize),
-    /// Largest allowed residual energy, or a fraction of the energy to keep.
+    /// Largest allowed residual energy.
     Residual(f64),
+    /// Fraction of the energy to keep.
     Energy(f64),
 }
 
@@ -134,7 +135,13 @@ struct Plan {
     first_pair: usize,
     pair_count: usize,
     channel: Option<u8>,
-    chroma: bool,
+}
+
+impl Plan {
+    /// Cb or Cr, which get `chroma_rank`.
+    fn chroma(&self) -> bool {
+        self.channel.is_some_and(|c| c > 0)
+    }
 }
 
 impl Node for Pca {
@@ -213,7 +220,7 @@ impl Node for Pca {
             };
             let x = Block::new(data, t, cols, offset, stride, centring);
             let full = t.min(cols);
-            let (param, wanted) = if pl.chroma {
+            let (param, wanted) = if pl.chroma() {
                 ("chroma_rank", chroma_rank)
             } else {
                 ("rank", luma_rank)
@@ -310,7 +317,6 @@ fn plan(btf: &Btf, p: &Params) -> Vec<Plan> {
                 first_pair,
                 pair_count,
                 channel,
-                chroma: channel.is_some_and(|c| c > 0),
             })
         })
         .collect()
@@ -417,7 +423,6 @@ fn truncate(x: &Block, f: Factors, keep: usize) -> Factors {
         d,
         sigma: f.sigma[..keep].to_vec(),
         residual: (x.energy - kept).max(0.0),
-        passes: f.passes,
         unconverged: f.unconverged,
     }
 }
@@ -514,15 +519,19 @@ mod tests {
             let col = &b.data[j * t..(j + 1) * t];
             col[i] as f64 - col.iter().map(|v| *v as f64).sum::<f64>() / t as f64
         });
-        let s = m
+        singular_values(&m)
+    }
+
+    /// faer's dense SVD, largest first.
+    fn singular_values(m: &Mat<f64>) -> Vec<f64> {
+        let mut s: Vec<f64> = m
             .thin_svd()
             .unwrap()
             .S()
             .column_vector()
             .iter()
             .copied()
-            .collect::<Vec<f64>>();
-        let mut s = s;
+            .collect();
         s.sort_by(|a, b| b.total_cmp(a));
         s
     }
@@ -545,12 +554,7 @@ mod tests {
                     },
                 )
                 .unwrap();
-                let basis = out
-                    .get("basis")
-                    .unwrap()
-                    .as_any()
-                    .downcast_ref::<BtfBasis>()
-                    .unwrap();
+                let basis = &basis_of(&out);
                 // Eckart–Young: the best rank-k error is the discarded singular values.
                 let ey =
                     (sigma[rank as usize..].iter().map(|s| s * s).sum::<f64>() / samples).sqrt();
@@ -677,12 +681,7 @@ mod tests {
             },
         )
         .unwrap();
-        let b = out
-            .get("basis")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<BtfBasis>()
-            .unwrap();
+        let b = basis_of(&out);
         assert!(b.blocks[0]
             .maps
             .iter()
@@ -736,15 +735,7 @@ mod tests {
             let row_mean = (0..c).map(|jj| btf.data[jj * t + i] as f64).sum::<f64>() / c as f64;
             btf.data[j * t + i] as f64 - row_mean
         });
-        let mut sigma: Vec<f64> = m
-            .thin_svd()
-            .unwrap()
-            .S()
-            .column_vector()
-            .iter()
-            .copied()
-            .collect();
-        sigma.sort_by(|a, b| b.total_cmp(a));
+        let sigma = singular_values(&m);
         let out = pca(
             &btf,
             Params {
@@ -794,15 +785,7 @@ mod tests {
                 let col = &btf.data[(v * cols + j) * t..(v * cols + j + 1) * t];
                 col[i] as f64 - col.iter().map(|x| *x as f64).sum::<f64>() / t as f64
             });
-            let mut s: Vec<f64> = m
-                .thin_svd()
-                .unwrap()
-                .S()
-                .column_vector()
-                .iter()
-                .copied()
-                .collect();
-            s.sort_by(|a, b| b.total_cmp(a));
+            let s = singular_values(&m);
             discarded += s[2..].iter().map(|x| x * x).sum::<f64>();
         }
         let ey = (discarded / btf.data.len() as f64).sqrt();

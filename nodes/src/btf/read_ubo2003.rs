@@ -232,7 +232,6 @@ impl Node for ReadUbo2003 {
             &format!("a BTF of {} pairs × {w}×{h} texels × RGB f32", kept.len()),
             p.memory_budget_gb,
         )?;
-        drop(first);
 
         let plane = w * h;
         let mut data = vec![0f32; kept.len() * 3 * plane];
@@ -240,9 +239,17 @@ impl Node for ReadUbo2003 {
         let total = kept.len() as u64;
         data.par_chunks_mut(3 * plane.max(1))
             .zip(kept.par_iter())
-            .try_for_each(|(out, (path, _))| -> Result<(), NodeError> {
+            .enumerate()
+            .try_for_each(|(i, (out, (path, _)))| -> Result<(), NodeError> {
                 ctx.check_cancel()?;
-                let img = formats::read_image(path)?;
+                // The first image was decoded above for its size.
+                let decoded;
+                let img = if i == 0 {
+                    &first
+                } else {
+                    decoded = formats::read_image(path)?;
+                    &decoded
+                };
                 if (img.width, img.height) != (fw, fh) {
                     return Err(NodeError::file(
                         path,

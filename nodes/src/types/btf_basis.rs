@@ -122,11 +122,6 @@ impl BtfBasis {
         self.pairs.len() * 3
     }
 
-    /// The largest rank of any block.
-    pub fn max_rank(&self) -> usize {
-        self.blocks.iter().map(|b| b.rank()).max().unwrap_or(0)
-    }
-
     /// For every global column, (block index, column within the block); `None` if uncovered.
     pub fn column_owners(&self) -> Vec<Option<(usize, usize)>> {
         let mut owners = vec![None; self.columns()];
