@@ -16,6 +16,9 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);
     r.register(crate::io::image_read::ImageRead);
+    r.register(crate::mdf::tabulate::Tabulate);
+    r.register(crate::mesh::primitive::Primitive);
+    r.register(crate::mesh::read::Read);
     r.register(crate::io::image_write::ImageWrite);
     r.register(crate::io::npy_write::NpyWrite);
     r.register(crate::util::scalar::Constant);

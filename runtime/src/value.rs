@@ -27,6 +27,11 @@ pub trait Value: Any + Send + Sync + Debug {
     fn as_array(&self) -> Option<ArrayView<'_>> {
         None
     }
+    /// JSON that must travel with the array for it to be interpreted (the MDF's view directions);
+    /// `npy.write` writes it beside the `.npy` as `<name>.json`.
+    fn array_sidecar(&self) -> Option<String> {
+        None
+    }
     fn as_any(&self) -> &dyn Any;
 }
 

@@ -1,11 +1,12 @@
 //! `npy.write`: any array-like value as a NumPy `.npy` file (little-endian f32, C order). Layouts:
 //! `HeightField` (H, W) in texels; `Image` (H, W, C) linear; `NormalMap` (H, W, 3) unit vectors;
-//! `Btf` (pairs, 3, H, W) linear RGB planes, pairs view-major.
+//! `Btf` (pairs, 3, H, W) linear RGB planes, pairs view-major; `Mdf` (views, H, W) texels, +inf for
+//! no hit, with a sidecar `<name>.json` listing the view directions in order.
 //! Row 0 is the top of the image in every layout.
 
 use crate::types::ARRAY_TYPES;
 use mesoflow_graph::DevicePreference;
-use mesoflow_runtime::{Artifact, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -24,11 +25,16 @@ impl Node for NpyWrite {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "npy.write",
-            version: 1,
-            doc: "Writes an array-like value as .npy (f32, C order): HeightField (H,W), Image (H,W,C), NormalMap (H,W,3), Btf (pairs,3,H,W).",
+            // 2: the output became a file set, for the MDF's sidecar.
+            version: 2,
+            doc: "Writes an array-like value as .npy (f32, C order): HeightField (H,W), Image (H,W,C), NormalMap (H,W,3), Btf (pairs,3,H,W), Mdf (views,H,W) + <name>.json.",
             device: DevicePreference::Cpu,
             inputs: vec![Port::any_of("value", ARRAY_TYPES, "any array-like value")],
-            outputs: vec![Port::output("file", "File", "the .npy file, written under the output folder")],
+            outputs: vec![Port::output(
+                "files",
+                Artifacts::TYPE,
+                "the .npy file (and its .json sidecar where the type has one), under the output folder",
+            )],
             disk_cache: true,
         }
     }
@@ -43,12 +49,17 @@ impl Node for NpyWrite {
         })?;
         let bytes =
             crate::io::formats::encode_npy(&array.shape, array.data).map_err(NodeError::Failed)?;
-        Ok(Outputs::new().with(
-            "file",
-            Artifact {
-                path: p.path.clone(),
-                bytes,
-            },
-        ))
+        let mut files = vec![Artifact {
+            path: p.path.clone(),
+            bytes,
+        }];
+        if let Some(json) = value.array_sidecar() {
+            let stem = p.path.strip_suffix(".npy").unwrap_or(&p.path);
+            files.push(Artifact {
+                path: format!("{stem}.json"),
+                bytes: json.into_bytes(),
+            });
+        }
+        Ok(Outputs::new().with("files", Artifacts { files }))
     }
 }

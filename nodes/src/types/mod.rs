@@ -4,6 +4,8 @@ mod btf;
 mod btf_basis;
 mod heightfield;
 mod image;
+mod mdf;
+mod mesh;
 pub use image::{linear_to_srgb, srgb_to_linear};
 mod normal_map;
 
@@ -11,10 +13,12 @@ pub use btf::{Btf, Direction, DirectionPair};
 pub use btf_basis::{BasisBlock, BtfBasis, Centring, ColorSpace};
 pub use heightfield::HeightField;
 pub use image::Image;
+pub use mdf::Mdf;
+pub use mesh::Mesh;
 pub use normal_map::NormalMap;
 
 /// Every array-like type, i.e. what `npy.write` accepts.
-pub const ARRAY_TYPES: &[&str] = &[HeightField::TYPE, Image::TYPE, NormalMap::TYPE, Btf::TYPE];
+pub const ARRAY_TYPES: &[&str] = &[HeightField::TYPE, Image::TYPE, NormalMap::TYPE, Btf::TYPE, Mdf::TYPE];
 
 /// Registers the decoders of every type in this module.
 pub fn register(r: &mut mesoflow_runtime::Registry) {
@@ -23,4 +27,6 @@ pub fn register(r: &mut mesoflow_runtime::Registry) {
     r.register_type(HeightField::TYPE, HeightField::decode);
     r.register_type(Image::TYPE, Image::decode);
     r.register_type(NormalMap::TYPE, NormalMap::decode);
+    r.register_type(Mdf::TYPE, Mdf::decode);
+    r.register_type(Mesh::TYPE, Mesh::decode);
 }

@@ -1,0 +1,3 @@
+//! Mesostructure distance functions (thesis ch. 4): tabulation from a height field.
+
+pub mod tabulate;
