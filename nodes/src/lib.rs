@@ -10,6 +10,7 @@ pub mod mdf;
 pub mod memory;
 pub mod mesh;
 mod registry;
+pub mod render;
 pub mod rng;
 pub mod types;
 pub mod util;

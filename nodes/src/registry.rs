@@ -19,6 +19,7 @@ pub fn registry() -> Registry {
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);
     r.register(crate::mesh::read::Read);
+    r.register(crate::render::render_mesh::RenderMesh);
     r.register(crate::io::image_write::ImageWrite);
     r.register(crate::io::npy_write::NpyWrite);
     r.register(crate::util::scalar::Constant);

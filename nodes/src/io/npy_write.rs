@@ -6,7 +6,9 @@
 
 use crate::types::ARRAY_TYPES;
 use mesoflow_graph::DevicePreference;
-use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+use mesoflow_runtime::{
+    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port,
+};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 

@@ -11,7 +11,9 @@ use crate::btf::directions::{DirectionSet, Named};
 use crate::heightfield::raycast::Caster;
 use crate::types::{Direction, HeightField, Mdf};
 use mesoflow_graph::DevicePreference;
-use mesoflow_runtime::{Gpu, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
+use mesoflow_runtime::{
+    Gpu, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar,
+};
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -131,7 +133,9 @@ fn setup(hf: &HeightField, p: &Params) -> Result<Setup, NodeError> {
     if !(depth >= range - 1e-6 * range.abs().max(1.0)) || !depth.is_finite() {
         return Err(NodeError::param(
             "depth",
-            format!("a shell of {depth} texels cannot hold a tile whose heights span {range} texels"),
+            format!(
+                "a shell of {depth} texels cannot hold a tile whose heights span {range} texels"
+            ),
         ));
     }
     let width = p.resolution.map_or(hf.width, |r| r as usize);
@@ -154,11 +158,7 @@ fn setup(hf: &HeightField, p: &Params) -> Result<Setup, NodeError> {
     })
 }
 
-fn tabulate_cpu(
-    ctx: &NodeContext,
-    hf: &HeightField,
-    s: &Setup,
-) -> Result<Vec<f32>, NodeError> {
+fn tabulate_cpu(ctx: &NodeContext, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, NodeError> {
     let plane = s.width * s.height;
     let mut data = vec![0f32; plane * s.views.len()];
     let done = AtomicU64::new(0);
@@ -172,13 +172,20 @@ fn tabulate_cpu(
             let d = s.ray(k);
             for (i, v) in out.iter_mut().enumerate() {
                 let (x, y) = (i % s.width, i / s.width);
-                let o = [(x as f64 + 0.5) * sx - 0.5, (y as f64 + 0.5) * sy - 0.5, s.top];
+                let o = [
+                    (x as f64 + 0.5) * sx - 0.5,
+                    (y as f64 + 0.5) * sy - 0.5,
+                    s.top,
+                ];
                 *v = match caster.cast(o, d, 0.0) {
                     Ok(hit) => (hit.t / sx) as f32,
                     Err(_) => f32::INFINITY,
                 };
             }
-            ctx.progress(done.fetch_add(1, Ordering::Relaxed) + 1, s.views.len() as u64);
+            ctx.progress(
+                done.fetch_add(1, Ordering::Relaxed) + 1,
+                s.views.len() as u64,
+            );
             Ok::<(), NodeError>(())
         })?;
     Ok(data)
@@ -188,7 +195,12 @@ fn tabulate_gpu(gpu: &Gpu, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, Node
     let mut input = hf.data.clone();
     for k in 0..s.views.len() {
         let d = s.ray(k);
-        input.extend([d[0] as f32, d[1] as f32, d[2] as f32, s.horizontal_limit(k) as f32]);
+        input.extend([
+            d[0] as f32,
+            d[1] as f32,
+            d[2] as f32,
+            s.horizontal_limit(k) as f32,
+        ]);
     }
     let u = |v: usize| (v as u32).to_le_bytes();
     let f = |v: f64| (v as f32).to_le_bytes();
@@ -213,7 +225,10 @@ fn tabulate_gpu(gpu: &Gpu, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, Node
     .concat();
     let rows = s.height * s.views.len();
     if rows > u32::MAX as usize {
-        return Err(NodeError::param("views", "too many views × rows for one dispatch"));
+        return Err(NodeError::param(
+            "views",
+            "too many views × rows for one dispatch",
+        ));
     }
     let pass = crate::gpu::Pass2d {
         label: "mdf.tabulate",
@@ -234,7 +249,13 @@ mod tests {
 
     fn run_cpu(hf: &HeightField, p: &Params) -> Mdf {
         let ctx = NodeContext::detached(None);
-        let out = Tabulate.run(&ctx, p, &Inputs::new().with("height", std::sync::Arc::new(hf.clone()))).unwrap();
+        let out = Tabulate
+            .run(
+                &ctx,
+                p,
+                &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
+            )
+            .unwrap();
         out.get("mdf")
             .unwrap()
             .as_any()
@@ -260,7 +281,10 @@ mod tests {
         for (k, v) in m.views.iter().enumerate() {
             let expected = 3.0 / v.theta.cos();
             for d in m.plane(k) {
-                assert!(((*d as f64) - expected).abs() < 1e-5 * expected, "{d} vs {expected}");
+                assert!(
+                    ((*d as f64) - expected).abs() < 1e-5 * expected,
+                    "{d} vs {expected}"
+                );
             }
         }
         assert_eq!(m.depth, 3.0);
@@ -348,7 +372,11 @@ mod tests {
             ..Default::default()
         };
         let e = Tabulate
-            .run(&ctx, &p, &Inputs::new().with("height", std::sync::Arc::new(hf)))
+            .run(
+                &ctx,
+                &p,
+                &Inputs::new().with("height", std::sync::Arc::new(hf)),
+            )
             .unwrap_err()
             .to_string();
         assert!(e.contains("depth"), "{e}");

@@ -78,7 +78,11 @@ fn surface(p: &Params, u: f32, v: f32) -> ([f32; 3], [f32; 3]) {
         Shape::Sphere => {
             // Longitude grows counter-clockwise seen from +y, so the frame (u, v, n) is right-handed.
             let (phi, theta) = (-TAU * u, PI * (1.0 - v));
-            let n = [theta.sin() * phi.cos(), theta.cos(), theta.sin() * phi.sin()];
+            let n = [
+                theta.sin() * phi.cos(),
+                theta.cos(),
+                theta.sin() * phi.sin(),
+            ];
             ([r * n[0], r * n[1], r * n[2]], n)
         }
         Shape::Cylinder => {
@@ -177,7 +181,10 @@ mod tests {
                     continue; // pole triangles of the sphere
                 }
                 let n = m.normals[a];
-                assert!(f[0] * n[0] + f[1] * n[1] + f[2] * n[2] > 0.0, "{shape:?} triangle {t}");
+                assert!(
+                    f[0] * n[0] + f[1] * n[1] + f[2] * n[2] > 0.0,
+                    "{shape:?} triangle {t}"
+                );
                 checked += 1;
             }
             assert!(checked > 0);

@@ -94,7 +94,8 @@ pub fn load(path: &Path, generate: UvProjection) -> Result<Mesh, NodeError> {
                 .extend(m.normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
         }
         if with_uvs {
-            mesh.uvs.extend(m.texcoords.chunks_exact(2).map(|c| [c[0], c[1]]));
+            mesh.uvs
+                .extend(m.texcoords.chunks_exact(2).map(|c| [c[0], c[1]]));
         }
         mesh.indices.extend(m.indices.iter().map(|i| base + i));
     }
@@ -118,8 +119,15 @@ pub fn load(path: &Path, generate: UvProjection) -> Result<Mesh, NodeError> {
             projection => project_uvs(&mesh, projection),
         };
     }
-    if let Some(i) = mesh.indices.iter().find(|&&i| i as usize >= mesh.positions.len()) {
-        return Err(NodeError::file(path, format!("vertex index {i} is out of range")));
+    if let Some(i) = mesh
+        .indices
+        .iter()
+        .find(|&&i| i as usize >= mesh.positions.len())
+    {
+        return Err(NodeError::file(
+            path,
+            format!("vertex index {i} is out of range"),
+        ));
     }
     mesh.compute_tangents();
     mesh.check().map_err(|e| NodeError::file(path, e))?;
@@ -151,7 +159,8 @@ fn project_uvs(mesh: &Mesh, projection: UvProjection) -> Vec<[f32; 2]> {
 mod tests {
     use super::*;
 
-    const QUAD: &str = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n";
+    const QUAD: &str =
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nf 1/1 2/2 3/3 4/4\n";
 
     fn write(text: &str) -> tempfile::NamedTempFile {
         let f = tempfile::Builder::new().suffix(".obj").tempfile().unwrap();

@@ -112,8 +112,14 @@ impl Mesh {
                 sub(self.positions[b], self.positions[a]),
                 sub(self.positions[c], self.positions[a]),
             );
-            let (du1, dv1) = (self.uvs[b][0] - self.uvs[a][0], self.uvs[b][1] - self.uvs[a][1]);
-            let (du2, dv2) = (self.uvs[c][0] - self.uvs[a][0], self.uvs[c][1] - self.uvs[a][1]);
+            let (du1, dv1) = (
+                self.uvs[b][0] - self.uvs[a][0],
+                self.uvs[b][1] - self.uvs[a][1],
+            );
+            let (du2, dv2) = (
+                self.uvs[c][0] - self.uvs[a][0],
+                self.uvs[c][1] - self.uvs[a][1],
+            );
             let det = du1 * dv2 - du2 * dv1;
             if det.abs() < 1e-20 || !det.is_finite() {
                 continue;
@@ -155,7 +161,10 @@ impl Mesh {
     pub fn check(&self) -> Result<(), String> {
         let n = self.positions.len();
         if self.indices.len() % 3 != 0 {
-            return Err(format!("{} indices is not a whole number of triangles", self.indices.len()));
+            return Err(format!(
+                "{} indices is not a whole number of triangles",
+                self.indices.len()
+            ));
         }
         if let Some(i) = self.indices.iter().find(|&&i| i as usize >= n) {
             return Err(format!("index {i} is out of range ({n} vertices)"));
@@ -188,8 +197,14 @@ impl Mesh {
             return Err(bad());
         }
         let m = Mesh {
-            positions: positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
-            normals: normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            positions: positions
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
+            normals: normals
+                .chunks_exact(3)
+                .map(|c| [c[0], c[1], c[2]])
+                .collect(),
             uvs: uvs.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
             tangents: tangents
                 .chunks_exact(4)

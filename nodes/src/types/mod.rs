@@ -18,7 +18,13 @@ pub use mesh::Mesh;
 pub use normal_map::NormalMap;
 
 /// Every array-like type, i.e. what `npy.write` accepts.
-pub const ARRAY_TYPES: &[&str] = &[HeightField::TYPE, Image::TYPE, NormalMap::TYPE, Btf::TYPE, Mdf::TYPE];
+pub const ARRAY_TYPES: &[&str] = &[
+    HeightField::TYPE,
+    Image::TYPE,
+    NormalMap::TYPE,
+    Btf::TYPE,
+    Mdf::TYPE,
+];
 
 /// Registers the decoders of every type in this module.
 pub fn register(r: &mut mesoflow_runtime::Registry) {

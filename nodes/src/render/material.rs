@@ -1,0 +1,258 @@
+//! What the renderer samples: a BTF (raw or PCA basis) and an optional MDF, behind one lookup
+//! with the interpolation scheme documented here (the GPU shader follows it line for line).
+//!
+//! **Directions.** A query direction is matched against the sampled directions (the BTF's
+//! distinct views and distinct lights, the MDF's views) by angle. If the nearest is within
+//! 1e-4 rad it is used alone (exact reproduction of measured directions); otherwise the three
+//! nearest (fewer if fewer exist) are blended with weights ∝ 1/angle. The BTF blends the 3 × 3
+//! (view, light) pairs with the product weights, skipping pairs it does not have and
+//! renormalising. This is defined for any direction set, including a single direction, and for
+//! queries outside the sampled cone (grazing views beyond θ = 75° take the nearest rings).
+//!
+//! **Texels.** Bilinear and periodic at texel centres: texel (x, y) (row 0 at the top) sits at
+//! u = (x + 0.5)/W, v = 1 − (y + 0.5)/H of one tile. The MDF blends only its finite entries and
+//! reports +∞ when they carry less than half the weight (a ray that mostly misses misses).
+
+use crate::types::{Btf, BtfBasis, Centring, ColorSpace, Direction, Mdf};
+
+/// Up to three (index, weight) pairs, weights summing to 1.
+pub type Blend = Vec<(usize, f64)>;
+
+/// Nearest-direction blend of `q` (unit vector, tangent frame) over `dirs` (unit vectors).
+pub fn blend(dirs: &[[f64; 3]], q: [f64; 3]) -> Blend {
+    let mut best: Vec<(usize, f64)> = Vec::with_capacity(4);
+    for (i, d) in dirs.iter().enumerate() {
+        let c = (d[0] * q[0] + d[1] * q[1] + d[2] * q[2]).clamp(-1.0, 1.0);
+        let angle = c.acos();
+        // Insertion into a sorted list of 3 keeps the first-found on ties, like the shader.
+        let pos = best.iter().position(|b| angle < b.1).unwrap_or(best.len());
+        if pos < 3 {
+            best.insert(pos, (i, angle));
+            best.truncate(3);
+        }
+    }
+    if best.is_empty() {
+        return best;
+    }
+    if best[0].1 < 1e-4 {
+        return vec![(best[0].0, 1.0)];
+    }
+    let total: f64 = best.iter().map(|b| 1.0 / b.1).sum();
+    best.into_iter()
+        .map(|(i, a)| (i, 1.0 / a / total))
+        .collect()
+}
+
+/// Bilinear periodic taps of texture coordinate (u, v) on a W×H tile: (x, y, weight).
+pub fn texel_taps(u: f64, v: f64, w: usize, h: usize) -> [(usize, usize, f64); 4] {
+    let x = u * w as f64 - 0.5;
+    let y = (1.0 - v) * h as f64 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let wrap = |a: f64, n: usize| (a as i64).rem_euclid(n as i64) as usize;
+    let (xa, xb) = (wrap(x0, w), wrap(x0 + 1.0, w));
+    let (ya, yb) = (wrap(y0, h), wrap(y0 + 1.0, h));
+    [
+        (xa, ya, (1.0 - fx) * (1.0 - fy)),
+        (xb, ya, fx * (1.0 - fy)),
+        (xa, yb, (1.0 - fx) * fy),
+        (xb, yb, fx * fy),
+    ]
+}
+
+pub enum Source<'a> {
+    Raw(&'a Btf),
+    Basis {
+        basis: &'a BtfBasis,
+        owners: Vec<Option<(usize, usize)>>,
+    },
+}
+
+/// The BTF as the renderer sees it: distinct view and light directions, and the pair of each
+/// (view, light) combination.
+pub struct Material<'a> {
+    pub source: Source<'a>,
+    pub width: usize,
+    pub height: usize,
+    pub views: Vec<[f64; 3]>,
+    pub lights: Vec<[f64; 3]>,
+    /// `pair_of[view · lights + light]`, `None` where the BTF lacks the combination.
+    pub pair_of: Vec<Option<usize>>,
+}
+
+fn distinct(dirs: impl Iterator<Item = Direction>, out: &mut Vec<Direction>) -> Vec<usize> {
+    dirs.map(|d| match out.iter().position(|e| *e == d) {
+        Some(i) => i,
+        None => {
+            out.push(d);
+            out.len() - 1
+        }
+    })
+    .collect()
+}
+
+impl<'a> Material<'a> {
+    pub fn new(source: Source<'a>) -> Material<'a> {
+        let (pairs, width, height) = match &source {
+            Source::Raw(b) => (&b.pairs, b.width, b.height),
+            Source::Basis { basis, .. } => (&basis.pairs, basis.width, basis.height),
+        };
+        let (mut views, mut lights) = (Vec::new(), Vec::new());
+        let vi = distinct(pairs.iter().map(|p| p.view), &mut views);
+        let li = distinct(pairs.iter().map(|p| p.light), &mut lights);
+        let mut pair_of = vec![None; views.len() * lights.len()];
+        for (p, (v, l)) in vi.iter().zip(&li).enumerate() {
+            pair_of[v * lights.len() + l].get_or_insert(p);
+        }
+        Material {
+            source,
+            width,
+            height,
+            views: views.iter().map(|d| d.vector()).collect(),
+            lights: lights.iter().map(|d| d.vector()).collect(),
+            pair_of,
+        }
+    }
+
+    pub fn from_basis(basis: &'a BtfBasis) -> Material<'a> {
+        let owners = basis.column_owners();
+        Material::new(Source::Basis { basis, owners })
+    }
+
+    /// One texel of one pair, linear RGB.
+    pub fn texel(&self, pair: usize, x: usize, y: usize) -> [f64; 3] {
+        let t = y * self.width + x;
+        match &self.source {
+            Source::Raw(b) => {
+                let n = b.width * b.height;
+                let base = pair * 3 * n + t;
+                [
+                    b.data[base] as f64,
+                    b.data[base + n] as f64,
+                    b.data[base + 2 * n] as f64,
+                ]
+            }
+            Source::Basis { basis, owners } => {
+                let texels = basis.texels();
+                let mut c = [0.0; 3];
+                for (ch, v) in c.iter_mut().enumerate() {
+                    let Some((bi, j)) = owners[pair * 3 + ch] else {
+                        continue;
+                    };
+                    let blk = &basis.blocks[bi];
+                    let (k, n) = (blk.rank(), blk.cols());
+                    let mut s = match blk.centring {
+                        Centring::Columns => blk.mean[j] as f64,
+                        Centring::Texels => blk.mean[t] as f64,
+                    };
+                    for kk in 0..k {
+                        s += blk.maps[kk * texels + t] as f64 * blk.basis[kk * n + j] as f64;
+                    }
+                    *v = s;
+                }
+                match basis.color {
+                    ColorSpace::Rgb => c,
+                    space => space.to_rgb(c),
+                }
+            }
+        }
+    }
+
+    /// Radiance factor at (u, v) for local view `wo` and light `wi` (unit, tangent frame).
+    pub fn eval(&self, u: f64, v: f64, wo: [f64; 3], wi: [f64; 3]) -> [f64; 3] {
+        let (bv, bl) = (blend(&self.views, wo), blend(&self.lights, wi));
+        let mut weights: Vec<(usize, f64)> = Vec::with_capacity(9);
+        for &(vi, wv) in &bv {
+            for &(li, wl) in &bl {
+                if let Some(p) = self.pair_of[vi * self.lights.len() + li] {
+                    weights.push((p, wv * wl));
+                }
+            }
+        }
+        let total: f64 = weights.iter().map(|w| w.1).sum();
+        if total <= 0.0 {
+            return [0.0; 3];
+        }
+        let taps = texel_taps(u, v, self.width, self.height);
+        let mut out = [0.0; 3];
+        for (p, w) in weights {
+            for &(x, y, tw) in &taps {
+                if tw == 0.0 {
+                    continue;
+                }
+                let c = self.texel(p, x, y);
+                for k in 0..3 {
+                    out[k] += c[k] * w * tw / total;
+                }
+            }
+        }
+        out
+    }
+}
+
+/// The MDF as the renderer samples it.
+pub struct MdfLookup<'a> {
+    pub mdf: &'a Mdf,
+    pub views: Vec<[f64; 3]>,
+}
+
+impl<'a> MdfLookup<'a> {
+    pub fn new(mdf: &'a Mdf) -> Self {
+        MdfLookup {
+            views: mdf.views.iter().map(|d| d.vector()).collect(),
+            mdf,
+        }
+    }
+
+    /// Distance in MDF texels at (u, v) for local view `wo`; +∞ for a miss.
+    pub fn eval(&self, u: f64, v: f64, wo: [f64; 3]) -> f64 {
+        let taps = texel_taps(u, v, self.mdf.width, self.mdf.height);
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for (k, wk) in blend(&self.views, wo) {
+            for &(x, y, tw) in &taps {
+                let d = self.mdf.at(k, x as isize, y as isize) as f64;
+                if d.is_finite() && tw > 0.0 {
+                    sum += d * wk * tw;
+                    weight += wk * tw;
+                }
+            }
+        }
+        if weight < 0.5 {
+            f64::INFINITY
+        } else {
+            sum / weight
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn blend_is_exact_on_samples_and_defined_for_one_direction() {
+        let dirs: Vec<[f64; 3]> = crate::btf::directions::ubo81()
+            .iter()
+            .map(|d| d.vector())
+            .collect();
+        assert_eq!(blend(&dirs, dirs[17]), vec![(17, 1.0)]);
+        let q = Direction::degrees(22.0, 33.0).vector();
+        let b = blend(&dirs, q);
+        assert_eq!(b.len(), 3);
+        assert!((b.iter().map(|x| x.1).sum::<f64>() - 1.0).abs() < 1e-12);
+        // One sampled direction: every query gets it, even a grazing one.
+        let one = vec![[0.0, 0.0, 1.0]];
+        assert_eq!(
+            blend(&one, Direction::degrees(89.0, 0.0).vector()),
+            vec![(0, 1.0)]
+        );
+    }
+
+    #[test]
+    fn texel_centres_tap_one_texel() {
+        let taps = texel_taps((3.0 + 0.5) / 8.0, 1.0 - (2.0 + 0.5) / 4.0, 8, 4);
+        let main: Vec<_> = taps.iter().filter(|t| t.2 > 1e-9).collect();
+        assert_eq!(main.len(), 1);
+        assert_eq!((main[0].0, main[0].1), (3, 2));
+    }
+}

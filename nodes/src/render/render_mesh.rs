@@ -1,0 +1,521 @@
+//! `render.mesh`: a BTF-mapped mesh rendered with optional MDF silhouettes and shadows, into a
+//! linear HDR image. The CPU path ray-casts the depth-peeled visibility layers and resolves them
+//! with the shell test (`shade`); it is the reference for tests and the fallback without a GPU.
+
+use super::camera::{dot, normalize, sub, Camera, CameraParams};
+use super::layers;
+use super::material::{Material, MdfLookup, Source};
+use super::shade::{Light, Scene, ShadowMap};
+use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
+use mesoflow_graph::DevicePreference;
+use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
+use rayon::prelude::*;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct LightParams {
+    /// Direction towards a directional light (world, need not be unit length).
+    pub direction: [f64; 3],
+    /// Position of a point light; when set the light is a point light with 1/r² falloff.
+    pub position: Option<[f64; 3]>,
+    /// Irradiance on a plane facing a directional light (or intensity of a point light).
+    #[schemars(range(min = 0.0))]
+    pub intensity: f64,
+}
+
+impl Default for LightParams {
+    fn default() -> Self {
+        LightParams {
+            direction: [0.6, 0.7, 0.9],
+            position: None,
+            intensity: 3.0,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    pub camera: CameraParams,
+    pub light: LightParams,
+    /// Texture tiles per unit of texture coordinate.
+    #[schemars(range(min = 0.0))]
+    pub tiling: f64,
+    /// Shell thickness in world units: the depth the MDF's shell is mapped onto.
+    #[schemars(range(min = 0.0))]
+    pub shell: f64,
+    /// Shadows from a shadow map of the (MDF-displaced) surface.
+    pub shadows: bool,
+    /// Shadow map size in texels (square).
+    #[schemars(range(min = 1, max = 16384))]
+    pub shadow_resolution: u32,
+    /// Depth-peeling layers (2 covers a torus seen from most angles).
+    #[schemars(range(min = 1, max = 8))]
+    pub layers: u32,
+    /// Linear RGB where no mesostructure is hit.
+    pub background: [f64; 3],
+    /// Frames rendered for the timing metrics (the image is the last one).
+    #[schemars(range(min = 1, max = 1000))]
+    pub frames: u32,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            camera: CameraParams::default(),
+            light: LightParams::default(),
+            tiling: 4.0,
+            shell: 0.05,
+            shadows: false,
+            shadow_resolution: 1024,
+            layers: 2,
+            background: [0.0; 3],
+            frames: 1,
+        }
+    }
+}
+
+/// The largest image or shadow map the CPU path accepts, per side.
+const CPU_MAX_SIDE: u32 = 16384;
+
+pub struct RenderMesh;
+
+impl Node for RenderMesh {
+    type Params = Params;
+
+    fn spec(&self) -> NodeSpec {
+        NodeSpec {
+            kind: "render.mesh",
+            version: 1,
+            doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image.",
+            device: DevicePreference::Cpu,
+            inputs: vec![
+                Port::input("mesh", Mesh::TYPE, "the mesh, top of the mesostructure shell"),
+                Port::any_of("btf", &[Btf::TYPE, BtfBasis::TYPE], "material: raw BTF or PCA basis"),
+                Port::optional("mdf", Mdf::TYPE, "mesostructure distance function of the same tile"),
+            ],
+            outputs: vec![
+                Port::output("image", Image::TYPE, "linear HDR RGB"),
+                Port::output("coverage", "Scalar", "fraction of pixels showing mesostructure"),
+                Port::output("frame_ms", "Scalar", "mean time per frame, ms"),
+                Port::output("fps", "Scalar", "frames per second"),
+            ],
+            disk_cache: true,
+        }
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let mesh = inputs.get::<Mesh>("mesh")?;
+        mesh.check().map_err(|e| NodeError::input("mesh", e))?;
+        let value = inputs.value("btf")?;
+        let source = if let Some(b) = value.as_any().downcast_ref::<Btf>() {
+            Source::Raw(b)
+        } else if let Some(b) = value.as_any().downcast_ref::<BtfBasis>() {
+            b.check().map_err(|e| NodeError::input("btf", e))?;
+            Source::Basis {
+                basis: b,
+                owners: b.column_owners(),
+            }
+        } else {
+            return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
+        };
+        let material = Material::new(source);
+        let mdf = inputs.opt::<Mdf>("mdf")?;
+        let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+        let [w, h] = p.camera.resolution;
+        if w > CPU_MAX_SIDE || h > CPU_MAX_SIDE {
+            return Err(NodeError::param(
+                "camera",
+                format!(
+                    "resolution {w}×{h} exceeds the CPU renderer's {CPU_MAX_SIDE} pixels per side"
+                ),
+            ));
+        }
+        let light = light(&p.light)?;
+        for (name, v) in [("tiling", p.tiling), ("shell", p.shell)] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(NodeError::param(name, "must be finite and not negative"));
+            }
+        }
+        let degenerate = mesh.degenerate_triangles();
+        if degenerate > 0 {
+            ctx.warn(format!("{degenerate} zero-area triangles are skipped"));
+        }
+        let scene = Scene {
+            mesh,
+            material: &material,
+            mdf: mdf.map(MdfLookup::new),
+            light,
+            tiling: p.tiling,
+            shell: p.shell,
+            background: p.background,
+        };
+        let start = Instant::now();
+        let mut data = Vec::new();
+        let mut coverage = 0.0;
+        for frame in 0..p.frames {
+            ctx.check_cancel()?;
+            (data, coverage) = render_cpu(&scene, &camera, p)?;
+            ctx.progress(frame as u64 + 1, p.frames as u64);
+        }
+        let ms = start.elapsed().as_secs_f64() * 1e3 / p.frames as f64;
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(NodeError::Failed(format!(
+                "pixel {} is not finite: a bug, please report it with the graph",
+                i / 3
+            )));
+        }
+        Ok(Outputs::new()
+            .with(
+                "image",
+                Image {
+                    width: w as usize,
+                    height: h as usize,
+                    channels: 3,
+                    data,
+                },
+            )
+            .with("coverage", Scalar(coverage))
+            .with("frame_ms", Scalar(ms))
+            .with("fps", Scalar(1e3 / ms.max(1e-9))))
+    }
+}
+
+fn light(p: &LightParams) -> Result<Light, NodeError> {
+    let direction = normalize(p.direction)
+        .ok_or_else(|| NodeError::param("light", "direction has zero length"))?;
+    if !(p.intensity >= 0.0 && p.intensity.is_finite()) {
+        return Err(NodeError::param(
+            "light",
+            "intensity must be finite and not negative",
+        ));
+    }
+    Ok(Light {
+        direction,
+        position: p.position,
+        intensity: p.intensity,
+    })
+}
+
+/// The mesh's bounding sphere (centre, radius).
+pub fn bounding_sphere(mesh: &Mesh) -> ([f64; 3], f64) {
+    let (lo, hi) = mesh.bounds();
+    let c = [0, 1, 2].map(|k| 0.5 * (lo[k] as f64 + hi[k] as f64));
+    let r = mesh
+        .positions
+        .iter()
+        .map(|q| {
+            let d = sub(q.map(|v| v as f64), c);
+            dot(d, d).sqrt()
+        })
+        .fold(0.0, f64::max);
+    (c, r.max(1e-9))
+}
+
+/// The shadow camera: orthographic along a directional light, a pinhole at a point light.
+pub fn shadow_camera(scene: &Scene, size: u32) -> Result<Camera, NodeError> {
+    let (c, r) = bounding_sphere(scene.mesh);
+    let (dir, from) = match scene.light.position {
+        Some(lp) => (
+            normalize(sub(c, lp)).ok_or_else(|| {
+                NodeError::param("light", "the point light is at the mesh's centre")
+            })?,
+            Some(lp),
+        ),
+        None => (scene.light.direction.map(|v| -v), None),
+    };
+    Camera::enclosing(c, r, dir, from, size).map_err(|e| NodeError::param("light", e))
+}
+
+/// One frame on the CPU: (RGB data, coverage).
+pub fn render_cpu(
+    scene: &Scene,
+    camera: &Camera,
+    p: &Params,
+) -> Result<(Vec<f32>, f64), NodeError> {
+    let count = p.layers.max(1) as usize;
+    let shadow = if p.shadows {
+        if p.shadow_resolution == 0 || p.shadow_resolution > CPU_MAX_SIDE {
+            return Err(NodeError::param(
+                "shadow_resolution",
+                format!("must be in 1..={CPU_MAX_SIDE}"),
+            ));
+        }
+        let cam = shadow_camera(scene, p.shadow_resolution)?;
+        let l = layers::trace(scene.mesh, &cam, count);
+        let radius = bounding_sphere(scene.mesh).1;
+        Some(ShadowMap::build(scene, cam, &l, radius))
+    } else {
+        None
+    };
+    let l = layers::trace(scene.mesh, camera, count);
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let pixels: Vec<([f64; 3], bool)> = (0..w * h)
+        .into_par_iter()
+        .map(|px| {
+            let (o, d) = camera.ray((px % w) as u32, (px / w) as u32);
+            let hit = scene.hit(&l, px, d).is_some();
+            (scene.shade(&l, px, o, d, shadow.as_ref()), hit)
+        })
+        .collect();
+    let covered = pixels.iter().filter(|p| p.1).count();
+    let data = pixels
+        .iter()
+        .flat_map(|(c, _)| c.map(|v| v as f32))
+        .collect();
+    Ok((data, covered as f64 / (w * h) as f64))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::btf::directions::DirectionSet;
+    use crate::mesh::primitive::{build, Params as MeshParams, Shape};
+    use crate::types::{Direction, DirectionPair, HeightField};
+    use std::sync::Arc;
+
+    /// A BTF with the given views × lights over `n`×`n` texels, values from a hash.
+    pub(crate) fn test_btf(n: usize, views: &[[f64; 2]], lights: &[[f64; 2]]) -> Btf {
+        let pairs: Vec<DirectionPair> = views
+            .iter()
+            .flat_map(|v| {
+                lights.iter().map(|l| DirectionPair {
+                    view: Direction::degrees(v[0], v[1]),
+                    light: Direction::degrees(l[0], l[1]),
+                })
+            })
+            .collect();
+        let data = (0..pairs.len() * 3 * n * n)
+            .map(|i| crate::rng::unit(crate::rng::hash(7, &[i as u64])) as f32)
+            .collect();
+        Btf {
+            width: n,
+            height: n,
+            pairs,
+            data,
+        }
+    }
+
+    fn render(
+        mesh: Mesh,
+        btf: Arc<dyn mesoflow_runtime::Value>,
+        mdf: Option<Mdf>,
+        p: &Params,
+    ) -> Result<(Image, f64), NodeError> {
+        let ctx = NodeContext::detached(None);
+        let mut inputs = Inputs::new().with("mesh", Arc::new(mesh)).with("btf", btf);
+        if let Some(m) = mdf {
+            inputs = inputs.with("mdf", Arc::new(m));
+        }
+        let out = RenderMesh.run(&ctx, p, &inputs)?;
+        let img = out
+            .get("image")
+            .unwrap()
+            .as_any()
+            .downcast_ref::<Image>()
+            .unwrap()
+            .clone();
+        let cov = out.get("coverage").unwrap().as_scalar().unwrap();
+        Ok((img, cov))
+    }
+
+    fn plane_params(n: u32) -> Params {
+        Params {
+            camera: CameraParams {
+                eye: [0.0, 0.0, 5.0],
+                target: [0.0, 0.0, 0.0],
+                orthographic: Some(1.0),
+                resolution: [n, n],
+                ..Default::default()
+            },
+            light: LightParams {
+                direction: [1.0, 0.0, 1.0],
+                position: None,
+                intensity: 1.0,
+            },
+            tiling: 1.0,
+            ..Default::default()
+        }
+    }
+
+    fn plane() -> Mesh {
+        build(&MeshParams {
+            shape: Shape::Plane,
+            size: 2.0,
+            segments: [1, 1],
+            ..Default::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_plane_seen_head_on_reproduces_the_btf_view_texel_for_texel() {
+        // Orthographic, 1 pixel per texel, pixel centres on texel centres: the local view is
+        // exactly (θ = 0) and the light exactly (45°, 0°), so the pixel is that pair's texel.
+        let btf = test_btf(8, &[[0.0, 0.0], [30.0, 0.0]], &[[45.0, 0.0], [45.0, 90.0]]);
+        let (img, cov) = render(plane(), Arc::new(btf.clone()), None, &plane_params(8)).unwrap();
+        assert_eq!(cov, 1.0);
+        let pair = btf
+            .pairs
+            .iter()
+            .position(|p| p.view.theta == 0.0 && p.light.phi == 0.0)
+            .unwrap();
+        let plane = btf.pair_image(pair);
+        for y in 0..8 {
+            for x in 0..8 {
+                for c in 0..3 {
+                    let want = plane[c * 64 + y * 8 + x];
+                    let got = img.data[(y * 8 + x) * 3 + c];
+                    // f32 storage, f64 arithmetic: only the bilinear weights' rounding (~1e-16).
+                    assert!(
+                        (got - want).abs() < 1e-6,
+                        "({x}, {y}, {c}): {got} vs {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_full_rank_basis_renders_what_the_raw_btf_renders() {
+        let btf = test_btf(
+            8,
+            &[[0.0, 0.0], [30.0, 0.0], [30.0, 180.0]],
+            &[[45.0, 0.0], [20.0, 90.0]],
+        );
+        let ctx = NodeContext::detached(None);
+        let p: crate::btf::pca::Params = serde_json::from_str(r#"{"rank": 18}"#).unwrap();
+        let out = crate::btf::pca::Pca
+            .run(&ctx, &p, &Inputs::new().with("btf", Arc::new(btf.clone())))
+            .unwrap();
+        let basis = out.get("basis").unwrap().clone();
+        let mut params = plane_params(16);
+        params.camera.orthographic = None;
+        params.camera.eye = [0.4, 0.3, 2.0];
+        let (raw, _) = render(plane(), Arc::new(btf), None, &params).unwrap();
+        let (pca, _) = render(plane(), basis, None, &params).unwrap();
+        // Full rank reconstructs the BTF to f32 rounding of the factors (~1e-6 of values ≤ 1).
+        let max = raw
+            .data
+            .iter()
+            .zip(&pca.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0f32, f32::max);
+        assert!(max < 1e-4, "max difference {max}");
+    }
+
+    /// MDF of a flat tile sunk `depth` texels below the reference plane, at many views.
+    fn sunken_mdf(depth: f64) -> Mdf {
+        let hf = HeightField::from_fn(8, 8, |_, _| 0.0);
+        let p = crate::mdf::tabulate::Params {
+            views: DirectionSet::Rings {
+                thetas: vec![
+                    0.0, 15.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0, 88.0, 89.5,
+                ],
+                phis: (0..8).map(|k| k as f64 * 45.0).collect(),
+            },
+            depth: Some(depth),
+            resolution: None,
+        };
+        let ctx = NodeContext::detached(None);
+        let out = crate::mdf::tabulate::Tabulate
+            .run(&ctx, &p, &Inputs::new().with("height", Arc::new(hf)))
+            .unwrap();
+        out.get("mdf")
+            .unwrap()
+            .as_any()
+            .downcast_ref::<Mdf>()
+            .unwrap()
+            .clone()
+    }
+
+    fn sphere() -> Mesh {
+        build(&MeshParams {
+            shape: Shape::Sphere,
+            size: 1.0,
+            segments: [96, 48],
+            ..Default::default()
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn a_sunken_mdf_shrinks_the_sphere_outline_by_the_shell_test_amount() {
+        // Closed form for the shell test on a sphere of radius R with a flat mesostructure at
+        // depth T (d = T/cos θ at both faces): a ray at distance ρ from the centre hits iff its
+        // chord 2√(R²−ρ²) exceeds 2T·R/√(R²−ρ²), i.e. ρ² < R(R − T). Orthographic, so the
+        // covered area shrinks from πR² to πR(R − T): a fraction T/R of the plain disc.
+        let btf = test_btf(4, &[[0.0, 0.0]], &[[0.0, 0.0]]);
+        let mut p = plane_params(160);
+        p.camera.orthographic = Some(1.1);
+        p.shell = 0.1;
+        let (_, plain) = render(sphere(), Arc::new(btf.clone()), None, &p).unwrap();
+        let (_, zero) = render(sphere(), Arc::new(btf.clone()), Some(sunken_mdf(0.0)), &p).unwrap();
+        assert_eq!(plain, zero, "a zero-depth MDF changes nothing");
+        let (_, deep) = render(sphere(), Arc::new(btf), Some(sunken_mdf(4.0)), &p).unwrap();
+        let lost = (plain - deep) / plain;
+        eprintln!("plain coverage {plain}, with the MDF {deep}: lost fraction {lost}");
+        // The MDF blends views between sampled rings (d = T/cos θ is convex in θ, so a blend
+        // overestimates it slightly near the outline) and the disc's edge is pixelated
+        // (160 px across: ~2% of the ring's area): 15% of the 10% covers both.
+        assert!(
+            (lost - 0.1).abs() < 0.015,
+            "lost fraction {lost}, expected 0.1"
+        );
+    }
+
+    #[test]
+    fn missing_hits_grazing_views_and_few_directions_stay_finite() {
+        let btf = test_btf(4, &[[0.0, 0.0]], &[[30.0, 0.0]]);
+        let mut mdf = sunken_mdf(2.0);
+        mdf.data
+            .iter_mut()
+            .step_by(3)
+            .for_each(|d| *d = f32::INFINITY);
+        let mut p = plane_params(32);
+        p.camera.orthographic = None;
+        p.camera.eye = [0.0, -3.0, 0.05]; // θ ≈ 89° over the plane
+        p.camera.target = [0.0, 0.0, 0.0];
+        p.camera.up = [0.0, 0.0, 1.0];
+        let (img, _) = render(plane(), Arc::new(btf.clone()), Some(mdf.clone()), &p).unwrap();
+        assert!(img.data.iter().all(|v| v.is_finite()));
+        // An MDF that never hits shows only background.
+        mdf.data.iter_mut().for_each(|d| *d = f32::INFINITY);
+        let (img, cov) = render(
+            sphere(),
+            Arc::new(btf.clone()),
+            Some(mdf),
+            &plane_params(16),
+        )
+        .unwrap();
+        assert_eq!(cov, 0.0);
+        assert!(img.data.iter().all(|v| *v == 0.0));
+        // 1×1 works; a huge image is refused, naming the camera.
+        let mut p = plane_params(1);
+        let (img, _) = render(plane(), Arc::new(btf.clone()), None, &p).unwrap();
+        assert_eq!(img.data.len(), 3);
+        p.camera.resolution = [100_000, 10];
+        let e = render(plane(), Arc::new(btf), None, &p)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("camera") && e.contains("100000"), "{e}");
+    }
+
+    #[test]
+    fn degenerate_triangles_are_skipped_without_nan() {
+        let btf = test_btf(4, &[[0.0, 0.0]], &[[30.0, 0.0]]);
+        let mut m = plane();
+        let n = m.positions.len() as u32;
+        m.positions.push([0.0, 0.0, 0.5]);
+        m.normals.push([0.0, 0.0, 1.0]);
+        m.uvs.push([0.5, 0.5]);
+        m.tangents.push([1.0, 0.0, 0.0, 1.0]);
+        m.indices.extend_from_slice(&[n, n, n, 0, 0, 1]);
+        let (img, cov) = render(m, Arc::new(btf), None, &plane_params(8)).unwrap();
+        assert_eq!(cov, 1.0);
+        assert!(img.data.iter().all(|v| v.is_finite()));
+    }
+}

@@ -1,0 +1,206 @@
+//! Resolving visibility layers into pixels: the MDF shell test and shading (CPU path; the GPU
+//! resolve shader follows it). The mesh is the top of a shell of world thickness `shell`
+//! extruded inwards. Along a pixel's ray, layer k's front face (distance t_f, MDF distance d_f
+//! for the local view) and back face (t_b, d_b for the ray leaving through it) bound one pass
+//! through the shell; the ray meets mesostructure in it when t_f + d_f < t_b − d_b (thesis
+//! ch. 4; an open mesh has t_b = ∞). Otherwise the next layer is tried; a ray that passes all
+//! of them shows the background, which is what carves the silhouette.
+//!
+//! MDF distances are in MDF texels; one texel of depth is `shell / mdf.depth` world units, and
+//! laterally the hit moves d·(−ω_o.x, −ω_o.y) texels in texture space (the MDF lives in texture
+//! space, as in the thesis: the shell sets the vertical scale, the UV map the lateral one). The
+//! hit is shaded with the BTF at the displaced texture coordinate, in the front face's tangent
+//! frame, times the light's irradiance and the shadow map's visibility.
+
+use super::camera::{add, cross, dot, mul, normalize, sub, Camera, V3};
+use super::layers::{Frag, Layers};
+use super::material::{Material, MdfLookup};
+use crate::types::Mesh;
+use rayon::prelude::*;
+
+#[derive(Clone, Debug)]
+pub struct Light {
+    /// Unit direction towards a directional light.
+    pub direction: V3,
+    /// Position of a point light (then `direction` is unused).
+    pub position: Option<V3>,
+    pub intensity: f64,
+}
+
+/// A shadow map: distance along the light camera's ray to the displaced surface per texel.
+pub struct ShadowMap {
+    pub camera: Camera,
+    pub depth: Vec<f64>,
+    /// Depth bias, world units (two texels' footprint at the scene).
+    pub bias: f64,
+}
+
+pub struct Scene<'a> {
+    pub mesh: &'a Mesh,
+    pub material: &'a Material<'a>,
+    pub mdf: Option<MdfLookup<'a>>,
+    pub light: Light,
+    pub tiling: f64,
+    pub shell: f64,
+    pub background: [f64; 3],
+}
+
+/// Position, texture coordinate and tangent frame (t, b, n) at a visibility sample.
+pub struct Surface {
+    pub p: V3,
+    pub uv: [f64; 2],
+    pub t: V3,
+    pub b: V3,
+    pub n: V3,
+}
+
+impl Scene<'_> {
+    pub fn surface(&self, f: &Frag) -> Surface {
+        let m = self.mesh;
+        let [i0, i1, i2] = m.corners(f.tri as usize);
+        let w = [1.0 - f.b1 - f.b2, f.b1, f.b2];
+        let lerp3 = |a: &dyn Fn(usize) -> V3| {
+            let (x, y, z) = (a(i0), a(i1), a(i2));
+            add(add(mul(x, w[0]), mul(y, w[1])), mul(z, w[2]))
+        };
+        let p = lerp3(&|i| m.positions[i].map(|v| v as f64));
+        let n0 = lerp3(&|i| m.normals[i].map(|v| v as f64));
+        let t0 = lerp3(&|i| {
+            let t = m.tangents[i];
+            [t[0] as f64, t[1] as f64, t[2] as f64]
+        });
+        let hand = m.tangents[i0][3] as f64;
+        let uv = [0, 1].map(|k| {
+            (m.uvs[i0][k] as f64 * w[0] + m.uvs[i1][k] as f64 * w[1] + m.uvs[i2][k] as f64 * w[2])
+                * self.tiling
+        });
+        let n = normalize(n0).unwrap_or([0.0, 0.0, 1.0]);
+        let t = normalize(sub(t0, mul(n, dot(n, t0))))
+            .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
+        let b = mul(cross(n, t), hand);
+        Surface { p, uv, t, b, n }
+    }
+
+    fn local(s: &Surface, v: V3) -> V3 {
+        [dot(v, s.t), dot(v, s.b), dot(v, s.n)]
+    }
+
+    /// MDF distance in world units and texels for a ray leaving the viewer along `wo` (local,
+    /// pointing to the viewer); 0 without an MDF.
+    fn mdf_distance(&self, s: &Surface, wo: V3) -> (f64, f64) {
+        match &self.mdf {
+            Some(m) if m.mdf.depth > 0.0 => {
+                let d = m.eval(s.uv[0], s.uv[1], wo);
+                (d * self.shell / m.mdf.depth, d)
+            }
+            _ => (0.0, 0.0),
+        }
+    }
+
+    /// Where the ray `(o, d)` first meets mesostructure, as (distance, surface frame at the
+    /// front face, local view, displaced uv); `None` if it passes every layer.
+    pub fn hit(&self, layers: &Layers, px: usize, d: V3) -> Option<(f64, Surface, V3, [f64; 2])> {
+        let plane = layers.width * layers.height;
+        for k in 0..layers.count {
+            let Some(f) = layers.front[k * plane + px] else {
+                break;
+            };
+            let s = self.surface(&f);
+            let wo = local_up(Self::local(&s, mul(d, -1.0)));
+            let (df, dtex) = self.mdf_distance(&s, wo);
+            let tb = match layers.back[k * plane + px] {
+                Some(b) => {
+                    let sb = self.surface(&b);
+                    let out = local_up(Self::local(&sb, d));
+                    b.t - self.mdf_distance(&sb, out).0
+                }
+                None => f64::INFINITY,
+            };
+            if df.is_finite() && f.t + df < tb {
+                let (sx, sy) = match &self.mdf {
+                    Some(m) => (m.mdf.width as f64, m.mdf.height as f64),
+                    None => (1.0, 1.0),
+                };
+                let uv = [s.uv[0] - dtex * wo[0] / sx, s.uv[1] - dtex * wo[1] / sy];
+                return Some((f.t + df, s, wo, uv));
+            }
+        }
+        None
+    }
+
+    /// Linear RGB of pixel `px` whose ray is (o, d).
+    pub fn shade(
+        &self,
+        layers: &Layers,
+        px: usize,
+        o: V3,
+        d: V3,
+        shadow: Option<&ShadowMap>,
+    ) -> [f64; 3] {
+        let Some((t, s, wo, uv)) = self.hit(layers, px, d) else {
+            return self.background;
+        };
+        let p = add(o, mul(d, t));
+        let (to_light, falloff) = match self.light.position {
+            Some(lp) => {
+                let v = sub(lp, p);
+                let r2 = dot(v, v);
+                (normalize(v).unwrap_or(s.n), 1.0 / r2.max(1e-12))
+            }
+            None => (self.light.direction, 1.0),
+        };
+        let wi = Self::local(&s, to_light);
+        if wi[2] <= 0.0 {
+            return [0.0; 3];
+        }
+        let visible = shadow.is_none_or(|sm| sm.lit(p));
+        if !visible {
+            return [0.0; 3];
+        }
+        let f = self.material.eval(uv[0], uv[1], wo, wi);
+        f.map(|c| c * self.light.intensity * falloff)
+    }
+}
+
+/// A local direction nudged above the horizon: interpolated normals can put the view a hair
+/// below it at silhouettes, where the tables have no data.
+fn local_up(v: V3) -> V3 {
+    if v[2] >= 1e-4 {
+        return v;
+    }
+    let h = (v[0] * v[0] + v[1] * v[1]).sqrt().max(1e-12);
+    let s = (1.0 - 1e-8f64).sqrt();
+    [v[0] / h * s, v[1] / h * s, 1e-4]
+}
+
+impl ShadowMap {
+    pub fn build(scene: &Scene, camera: Camera, layers: &Layers, radius: f64) -> ShadowMap {
+        let (w, h) = (camera.width, camera.height);
+        let depth = (0..(w * h) as usize)
+            .into_par_iter()
+            .map(|px| {
+                let (_, d) = camera.ray(px as u32 % w, px as u32 / w);
+                scene.hit(layers, px, d).map_or(f64::INFINITY, |(t, ..)| t)
+            })
+            .collect();
+        let texel = 2.0 * radius / w as f64;
+        ShadowMap {
+            camera,
+            depth,
+            bias: 2.0 * texel,
+        }
+    }
+
+    /// Whether the light sees `p` (nearest shadow-map texel, biased comparison).
+    pub fn lit(&self, p: V3) -> bool {
+        let Some((x, y, t)) = self.camera.project(p) else {
+            return true;
+        };
+        let (w, h) = (self.camera.width as f64, self.camera.height as f64);
+        if !(0.0..w).contains(&x) || !(0.0..h).contains(&y) {
+            return true;
+        }
+        let i = y as usize * self.camera.width as usize + x as usize;
+        t <= self.depth[i] + self.bias
+    }
+}
