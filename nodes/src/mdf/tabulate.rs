@@ -130,7 +130,7 @@ fn setup(hf: &HeightField, p: &Params) -> Result<Setup, NodeError> {
     let range = hi - lo;
     let depth = p.depth.unwrap_or(range);
     // Heights are f32, so a shell exactly as thick as the range is fine; thinner is not.
-    if !(depth >= range - 1e-6 * range.abs().max(1.0)) || !depth.is_finite() {
+    if depth.is_nan() || depth < range - 1e-6 * range.abs().max(1.0) || !depth.is_finite() {
         return Err(NodeError::param(
             "depth",
             format!(

@@ -57,6 +57,9 @@ pub fn intersect(o: V3, d: V3, p0: V3, p1: V3, p2: V3) -> Option<(f64, f64, f64,
 
 const TILE: u32 = 16;
 
+/// A pixel's index and its layers (front, back).
+type PixelLayers = (usize, Vec<(Option<Frag>, Option<Frag>)>);
+
 pub fn trace(mesh: &Mesh, cam: &Camera, count: usize) -> Layers {
     let (w, h) = (cam.width, cam.height);
     let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
@@ -92,7 +95,7 @@ pub fn trace(mesh: &Mesh, cam: &Camera, count: usize) -> Layers {
         }
     }
     let plane = (w * h) as usize;
-    let per_tile: Vec<Vec<(usize, Vec<(Option<Frag>, Option<Frag>)>)>> = bins
+    let per_tile: Vec<Vec<PixelLayers>> = bins
         .par_iter()
         .enumerate()
         .map(|(b, tris)| {

@@ -173,6 +173,11 @@ fn local_up(v: V3) -> V3 {
     [v[0] / h * s, v[1] / h * s, 1e-4]
 }
 
+/// Two shadow-map texels' footprint across the scene: enough for the slopes a texel spans.
+pub fn shadow_bias(radius: f64, size: u32) -> f64 {
+    2.0 * (2.0 * radius / size as f64)
+}
+
 impl ShadowMap {
     pub fn build(scene: &Scene, camera: Camera, layers: &Layers, radius: f64) -> ShadowMap {
         let (w, h) = (camera.width, camera.height);
@@ -183,11 +188,10 @@ impl ShadowMap {
                 scene.hit(layers, px, d).map_or(f64::INFINITY, |(t, ..)| t)
             })
             .collect();
-        let texel = 2.0 * radius / w as f64;
         ShadowMap {
+            bias: shadow_bias(radius, camera.width),
             camera,
             depth,
-            bias: 2.0 * texel,
         }
     }
 

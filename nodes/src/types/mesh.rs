@@ -160,7 +160,7 @@ impl Mesh {
     /// Structural checks: index range, attribute counts, finite values.
     pub fn check(&self) -> Result<(), String> {
         let n = self.positions.len();
-        if self.indices.len() % 3 != 0 {
+        if !self.indices.len().is_multiple_of(3) {
             return Err(format!(
                 "{} indices is not a whole number of triangles",
                 self.indices.len()

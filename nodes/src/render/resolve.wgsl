@@ -1,0 +1,399 @@
+// Resolve of the visibility layers: the MDF shell test and shading, line for line the CPU path
+// in shade.rs and material.rs (same interpolation scheme, same rules), in f32.
+
+struct Cam {
+    eye: vec4<f32>,
+    fwd: vec4<f32>,
+    right: vec4<f32>,
+    up: vec4<f32>,
+    size: vec4<f32>,
+};
+
+struct Params {
+    cam: Cam,
+    scam: Cam,
+    light: vec4<f32>,      // direction towards the light, intensity
+    light_pos: vec4<f32>,  // xyz, w = 1 for a point light
+    misc: vec4<f32>,       // tiling, shell, shadow bias, unused
+    background: vec4<f32>,
+    mdf: vec4<f32>,        // width, height, depth, present
+    mat: vec4<u32>,        // kind (0 raw, 1 basis), width, height, ycbcr
+    dirs: vec4<u32>,       // btf views, btf lights, mdf views, layers
+    offs: vec4<u32>,       // vertices, mode (0 shadow depth, 1 shade), shadows, owners offset
+    offs2: vec4<u32>,      // blocks offset in `tables`, light dirs offset, mdf dirs offset, pair_of offset
+};
+
+@group(0) @binding(0) var<uniform> P: Params;
+@group(0) @binding(1) var<storage, read> mesh: array<f32>;      // pos | nrm | uv | tangent
+@group(0) @binding(2) var<storage, read> tables: array<u32>;    // indices | pair_of | owners | blocks
+@group(0) @binding(3) var<storage, read> material: array<f32>;  // raw BTF, or basis floats
+@group(0) @binding(4) var<storage, read> dirs: array<f32>;      // btf views | lights | mdf views
+@group(0) @binding(5) var<storage, read> mdf: array<f32>;
+@group(0) @binding(6) var<storage, read> shadow: array<f32>;
+@group(0) @binding(7) var<storage, read_write> out: array<vec4<f32>>;
+@group(0) @binding(8) var layers: texture_2d_array<f32>;
+
+const NONE: u32 = 0xffffffffu;
+
+fn inf() -> f32 {
+    return bitcast<f32>(0x7f800000u);
+}
+
+struct Ray {
+    o: vec3<f32>,
+    d: vec3<f32>,
+};
+
+fn cam_ray(c: Cam, x: u32, y: u32) -> Ray {
+    let sx = (2.0 * (f32(x) + 0.5) / c.size.x - 1.0) * c.right.w;
+    let sy = 1.0 - 2.0 * (f32(y) + 0.5) / c.size.y;
+    var r: Ray;
+    if (c.eye.w > 0.5) {
+        r.o = c.eye.xyz + c.right.xyz * (sx * c.fwd.w) + c.up.xyz * (sy * c.fwd.w);
+        r.d = c.fwd.xyz;
+    } else {
+        r.o = c.eye.xyz;
+        r.d = normalize(c.fwd.xyz + c.right.xyz * (sx * c.fwd.w) + c.up.xyz * (sy * c.fwd.w));
+    }
+    return r;
+}
+
+struct Surface {
+    p: vec3<f32>,
+    uv: vec2<f32>,
+    t: vec3<f32>,
+    b: vec3<f32>,
+    n: vec3<f32>,
+};
+
+fn v3(base: u32, i: u32) -> vec3<f32> {
+    return vec3<f32>(mesh[base + 3u * i], mesh[base + 3u * i + 1u], mesh[base + 3u * i + 2u]);
+}
+
+fn surface(f: vec4<f32>) -> Surface {
+    let n = P.offs.x;
+    let tri = u32(f.w);
+    let i0 = tables[3u * tri];
+    let i1 = tables[3u * tri + 1u];
+    let i2 = tables[3u * tri + 2u];
+    let w = vec3<f32>(1.0 - f.y - f.z, f.y, f.z);
+    var s: Surface;
+    s.p = v3(0u, i0) * w.x + v3(0u, i1) * w.y + v3(0u, i2) * w.z;
+    let n0 = v3(3u * n, i0) * w.x + v3(3u * n, i1) * w.y + v3(3u * n, i2) * w.z;
+    let ub = 6u * n;
+    let uv0 = vec2<f32>(mesh[ub + 2u * i0], mesh[ub + 2u * i0 + 1u]);
+    let uv1 = vec2<f32>(mesh[ub + 2u * i1], mesh[ub + 2u * i1 + 1u]);
+    let uv2 = vec2<f32>(mesh[ub + 2u * i2], mesh[ub + 2u * i2 + 1u]);
+    s.uv = (uv0 * w.x + uv1 * w.y + uv2 * w.z) * P.misc.x;
+    let tb = 8u * n;
+    let t0 = vec3<f32>(mesh[tb + 4u * i0], mesh[tb + 4u * i0 + 1u], mesh[tb + 4u * i0 + 2u]) * w.x
+        + vec3<f32>(mesh[tb + 4u * i1], mesh[tb + 4u * i1 + 1u], mesh[tb + 4u * i1 + 2u]) * w.y
+        + vec3<f32>(mesh[tb + 4u * i2], mesh[tb + 4u * i2 + 1u], mesh[tb + 4u * i2 + 2u]) * w.z;
+    let hand = mesh[tb + 4u * i0 + 3u];
+    var nn = vec3<f32>(0.0, 0.0, 1.0);
+    if (length(n0) > 1e-30) {
+        nn = normalize(n0);
+    }
+    var tt = t0 - nn * dot(nn, t0);
+    if (length(tt) > 1e-30) {
+        tt = normalize(tt);
+    } else {
+        tt = normalize(cross(nn, vec3<f32>(0.0, 1.0, 0.3)));
+    }
+    s.n = nn;
+    s.t = tt;
+    s.b = cross(nn, tt) * hand;
+    return s;
+}
+
+fn local(s: Surface, v: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(dot(v, s.t), dot(v, s.b), dot(v, s.n));
+}
+
+fn local_up(v: vec3<f32>) -> vec3<f32> {
+    if (v.z >= 1e-4) {
+        return v;
+    }
+    let h = max(length(v.xy), 1e-12);
+    return vec3<f32>(v.x / h, v.y / h, 1e-4);
+}
+
+struct Blend {
+    idx: vec3<u32>,
+    w: vec3<f32>,
+    count: u32,
+};
+
+// The three nearest of `count` directions at dirs[base..] to q; exact within 1e-4 rad.
+fn blend(base: u32, count: u32, q: vec3<f32>) -> Blend {
+    var bi = vec3<u32>(NONE, NONE, NONE);
+    var ba = vec3<f32>(1e9, 1e9, 1e9);
+    for (var i = 0u; i < count; i = i + 1u) {
+        let d = vec3<f32>(dirs[base + 3u * i], dirs[base + 3u * i + 1u], dirs[base + 3u * i + 2u]);
+        let a = acos(clamp(dot(d, q), -1.0, 1.0));
+        if (a < ba.x) {
+            ba = vec3<f32>(a, ba.x, ba.y);
+            bi = vec3<u32>(i, bi.x, bi.y);
+        } else if (a < ba.y) {
+            ba = vec3<f32>(ba.x, a, ba.y);
+            bi = vec3<u32>(bi.x, i, bi.y);
+        } else if (a < ba.z) {
+            ba.z = a;
+            bi.z = i;
+        }
+    }
+    var b: Blend;
+    b.idx = bi;
+    b.count = min(count, 3u);
+    if (ba.x < 1e-4) {
+        b.count = 1u;
+        b.w = vec3<f32>(1.0, 0.0, 0.0);
+        return b;
+    }
+    var inv = vec3<f32>(1.0 / ba.x, 0.0, 0.0);
+    if (b.count > 1u) {
+        inv.y = 1.0 / ba.y;
+    }
+    if (b.count > 2u) {
+        inv.z = 1.0 / ba.z;
+    }
+    b.w = inv / (inv.x + inv.y + inv.z);
+    return b;
+}
+
+fn wrapi(v: i32, n: i32) -> u32 {
+    let r = v - n * i32(floor(f32(v) / f32(n)));
+    return u32(select(select(r, r - n, r >= n), r + n, r < 0));
+}
+
+struct Taps {
+    x: vec2<u32>,
+    y: vec2<u32>,
+    f: vec2<f32>,
+};
+
+fn taps(uv: vec2<f32>, w: u32, h: u32) -> Taps {
+    let x = uv.x * f32(w) - 0.5;
+    let y = (1.0 - uv.y) * f32(h) - 0.5;
+    let x0 = floor(x);
+    let y0 = floor(y);
+    var t: Taps;
+    t.f = vec2<f32>(x - x0, y - y0);
+    t.x = vec2<u32>(wrapi(i32(x0), i32(w)), wrapi(i32(x0) + 1, i32(w)));
+    t.y = vec2<u32>(wrapi(i32(y0), i32(h)), wrapi(i32(y0) + 1, i32(h)));
+    return t;
+}
+
+fn tap_weight(t: Taps, k: u32) -> f32 {
+    let fx = select(1.0 - t.f.x, t.f.x, (k & 1u) == 1u);
+    let fy = select(1.0 - t.f.y, t.f.y, k >= 2u);
+    return fx * fy;
+}
+
+fn ycbcr_to_rgb(c: vec3<f32>) -> vec3<f32> {
+    let r = c.x + 1.402 * c.z;
+    let b = c.x + 1.772 * c.y;
+    return vec3<f32>(r, (c.x - 0.299 * r - 0.114 * b) / 0.587, b);
+}
+
+fn texel(pair: u32, x: u32, y: u32) -> vec3<f32> {
+    let w = P.mat.y;
+    let h = P.mat.z;
+    let t = y * w + x;
+    let plane = w * h;
+    if (P.mat.x == 0u) {
+        let base = pair * 3u * plane + t;
+        return vec3<f32>(material[base], material[base + plane], material[base + 2u * plane]);
+    }
+    var c = vec3<f32>(0.0);
+    for (var ch = 0u; ch < 3u; ch = ch + 1u) {
+        let o = P.offs.w + 2u * (pair * 3u + ch);
+        let blk = tables[o];
+        if (blk == NONE) {
+            continue;
+        }
+        let j = tables[o + 1u];
+        let r = P.offs2.x + 6u * blk;
+        let mean_off = tables[r];
+        let maps_off = tables[r + 1u];
+        let basis_off = tables[r + 2u];
+        let k = tables[r + 3u];
+        let n = tables[r + 4u];
+        var s = material[mean_off + j];
+        if (tables[r + 5u] == 1u) {
+            s = material[mean_off + t];
+        }
+        for (var kk = 0u; kk < k; kk = kk + 1u) {
+            s = s + material[maps_off + kk * plane + t] * material[basis_off + kk * n + j];
+        }
+        c[ch] = s;
+    }
+    if (P.mat.w == 1u) {
+        return ycbcr_to_rgb(c);
+    }
+    return c;
+}
+
+fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+    let nv = P.dirs.x;
+    let nl = P.dirs.y;
+    let bv = blend(0u, nv, wo);
+    let bl = blend(P.offs2.y, nl, wi);
+    var pairs = array<u32, 9>();
+    var weights = array<f32, 9>();
+    var total = 0.0;
+    var m = 0u;
+    for (var a = 0u; a < bv.count; a = a + 1u) {
+        for (var b = 0u; b < bl.count; b = b + 1u) {
+            let p = tables[P.offs2.w + bv.idx[a] * nl + bl.idx[b]];
+            if (p != NONE) {
+                pairs[m] = p;
+                weights[m] = bv.w[a] * bl.w[b];
+                total = total + weights[m];
+                m = m + 1u;
+            }
+        }
+    }
+    if (total <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    let tp = taps(uv, P.mat.y, P.mat.z);
+    var acc = vec3<f32>(0.0);
+    for (var i = 0u; i < m; i = i + 1u) {
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            let tw = tap_weight(tp, k);
+            if (tw == 0.0) {
+                continue;
+            }
+            acc = acc + texel(pairs[i], tp.x[k & 1u], tp.y[k >> 1u]) * (weights[i] * tw / total);
+        }
+    }
+    return acc;
+}
+
+// (world distance, texels)
+fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
+    if (P.mdf.w < 0.5 || P.mdf.z <= 0.0) {
+        return vec2<f32>(0.0, 0.0);
+    }
+    let mw = u32(P.mdf.x);
+    let mh = u32(P.mdf.y);
+    let tp = taps(s.uv, mw, mh);
+    let bv = blend(P.offs2.z, P.dirs.z, wo);
+    var sum = 0.0;
+    var weight = 0.0;
+    for (var a = 0u; a < bv.count; a = a + 1u) {
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            let tw = tap_weight(tp, k);
+            let d = mdf[(bv.idx[a] * mh + tp.y[k >> 1u]) * mw + tp.x[k & 1u]];
+            if (d < 3.0e38 && tw > 0.0) {
+                sum = sum + d * bv.w[a] * tw;
+                weight = weight + bv.w[a] * tw;
+            }
+        }
+    }
+    if (weight < 0.5) {
+        return vec2<f32>(inf(), inf());
+    }
+    let d = sum / weight;
+    return vec2<f32>(d * P.misc.y / P.mdf.z, d);
+}
+
+struct Hit {
+    found: bool,
+    t: f32,
+    s: Surface,
+    wo: vec3<f32>,
+    uv: vec2<f32>,
+};
+
+fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
+    var h: Hit;
+    h.found = false;
+    for (var k = 0u; k < P.dirs.w; k = k + 1u) {
+        let f = textureLoad(layers, vec2<i32>(i32(x), i32(y)), i32(2u * k), 0);
+        if (f.x < 0.0) {
+            break;
+        }
+        let s = surface(f);
+        let wo = local_up(local(s, -d));
+        let df = mdf_distance(s, wo);
+        var tb = inf();
+        let b = textureLoad(layers, vec2<i32>(i32(x), i32(y)), i32(2u * k + 1u), 0);
+        if (b.x >= 0.0) {
+            let sb = surface(b);
+            let outward = local_up(local(sb, d));
+            tb = b.x - mdf_distance(sb, outward).x;
+        }
+        if (df.x < 3.0e38 && f.x + df.x < tb) {
+            h.found = true;
+            h.t = f.x + df.x;
+            h.s = s;
+            h.wo = wo;
+            h.uv = vec2<f32>(s.uv.x - df.y * wo.x / select(1.0, P.mdf.x, P.mdf.w > 0.5),
+                             s.uv.y - df.y * wo.y / select(1.0, P.mdf.y, P.mdf.w > 0.5));
+            return h;
+        }
+    }
+    return h;
+}
+
+fn lit(p: vec3<f32>) -> bool {
+    let c = P.scam;
+    let rel = p - c.eye.xyz;
+    let z = dot(rel, c.fwd.xyz);
+    var sx = dot(rel, c.right.xyz) / c.fwd.w;
+    var sy = dot(rel, c.up.xyz) / c.fwd.w;
+    var t = z;
+    if (c.eye.w < 0.5) {
+        if (z <= 0.0) {
+            return true;
+        }
+        sx = sx / z;
+        sy = sy / z;
+        t = length(rel);
+    }
+    let px = (sx / c.right.w + 1.0) * 0.5 * c.size.x;
+    let py = (1.0 - sy) * 0.5 * c.size.y;
+    if (px < 0.0 || px >= c.size.x || py < 0.0 || py >= c.size.y) {
+        return true;
+    }
+    // The shadow pass wrote one vec4 per texel, depth in x.
+    let depth = shadow[4u * (u32(py) * u32(c.size.x) + u32(px))];
+    return t <= depth + P.misc.z;
+}
+
+@compute @workgroup_size(8, 8)
+fn main(@builtin(global_invocation_id) g: vec3<u32>) {
+    let w = u32(P.cam.size.x);
+    let h = u32(P.cam.size.y);
+    if (g.x >= w || g.y >= h) {
+        return;
+    }
+    let ray = cam_ray(P.cam, g.x, g.y);
+    let hit = find_hit(g.x, g.y, ray.d);
+    let px = g.y * w + g.x;
+    if (P.offs.y == 0u) {
+        out[px] = vec4<f32>(select(inf(), hit.t, hit.found), 0.0, 0.0, 0.0);
+        return;
+    }
+    if (!hit.found) {
+        out[px] = vec4<f32>(P.background.xyz, 0.0);
+        return;
+    }
+    let p = ray.o + ray.d * hit.t;
+    var to_light = P.light.xyz;
+    var falloff = 1.0;
+    if (P.light_pos.w > 0.5) {
+        let v = P.light_pos.xyz - p;
+        falloff = 1.0 / max(dot(v, v), 1e-12);
+        to_light = normalize(v);
+    }
+    let wi = local(hit.s, to_light);
+    if (wi.z <= 0.0 || (P.offs.z == 1u && !lit(p))) {
+        out[px] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
+        return;
+    }
+    let c = btf_eval(hit.uv, hit.wo, wi) * (P.light.w * falloff);
+    out[px] = vec4<f32>(c, 1.0);
+}
