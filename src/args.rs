@@ -131,6 +131,9 @@ pub struct SweepArgs {
     /// A scalar output to record: id.metric (repeat for several).
     #[arg(long = "measure", value_name = "ID.METRIC", required = true)]
     pub measure: Vec<String>,
+    /// Also chart every other measure against this one (repeatable), e.g. a frame time.
+    #[arg(long = "versus", value_name = "ID.METRIC")]
+    pub versus: Vec<String>,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,
     /// Output folder (default: out/<graph name>-sweep/).

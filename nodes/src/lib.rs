@@ -5,6 +5,7 @@
 pub mod btf;
 pub mod gpu;
 pub mod heightfield;
+pub mod image;
 pub mod io;
 pub mod mdf;
 pub mod memory;

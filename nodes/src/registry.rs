@@ -15,6 +15,8 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::procedural::Procedural);
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);
+    r.register(crate::image::compare::Compare);
+    r.register(crate::image::row::Row);
     r.register(crate::io::image_read::ImageRead);
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);

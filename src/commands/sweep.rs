@@ -106,6 +106,12 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         .map(|v| parse_vary(v))
         .collect::<anyhow::Result<_>>()?;
     let measures = parse_outputs(&args.measure)?;
+    let versus = parse_outputs(&args.versus)?;
+    if let Some(x) = versus.iter().find(|x| !measures.contains(x)) {
+        return Err(invalid(format!(
+            "--versus {x}: measure it too (--measure {x})"
+        )));
+    }
     // Each measured node once, in the order of first mention.
     let mut measured_nodes: Vec<String> = Vec::new();
     for m in &measures {
@@ -293,6 +299,18 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             chart_errors.push(e);
         }
     }
+    for x in &versus {
+        let xi = measures.iter().position(|m| m == x).unwrap_or(0);
+        for (mi, m) in measures.iter().enumerate().filter(|(_, m)| *m != x) {
+            let c = chart_versus(&varies, &rows, (xi, x), (mi, m));
+            if let Err(e) = chart::write(
+                &out_dir.join(format!("{}.{}_vs_{}.{}", m.node, m.port, x.node, x.port)),
+                &c,
+            ) {
+                chart_errors.push(e);
+            }
+        }
+    }
     if let Some(e) = chart_errors.first() {
         eprintln!("warning: charts not written: {e}");
     }
@@ -403,6 +421,42 @@ fn chart_against<'a>(
             .map(|(name, points)| Series { name, points })
             .collect(),
         x_names: (!numeric).then(|| varies[vi].values.iter().map(cell).collect()),
+    }
+}
+
+/// Measure `m` against measure `x`, one series per combination of the non-numeric varied values,
+/// each sorted by `x` so it traces that method's cost–error curve.
+fn chart_versus<'a>(
+    varies: &[Vary],
+    rows: &[Row],
+    (xi, x): (usize, &'a PortRef),
+    (mi, m): (usize, &'a PortRef),
+) -> Chart<'a> {
+    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    for r in rows {
+        let (Some(a), Some(b)) = (r.measures[xi], r.measures[mi]) else {
+            continue;
+        };
+        let name: Vec<String> = varies
+            .iter()
+            .zip(&r.values)
+            .filter(|(_, v)| !v.is_number())
+            .map(|(v, val)| format!("{}={}", v.name(), cell(val)))
+            .collect();
+        groups.entry(name.join(" ")).or_default().push((a, b));
+    }
+    Chart {
+        title: format!("{m} against {x}"),
+        x_label: &x.port,
+        y_label: &m.port,
+        series: groups
+            .into_iter()
+            .map(|(name, mut points)| {
+                points.sort_by(|p, q| p.0.total_cmp(&q.0));
+                Series { name, points }
+            })
+            .collect(),
+        x_names: None,
     }
 }
 

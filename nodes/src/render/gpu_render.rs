@@ -404,7 +404,15 @@ impl<'a> GpuRenderer<'a> {
             ]
             .map(|v| v as f32),
         );
-        u.extend([s.tiling, s.shell, shadow.map_or(0.0, |x| x.1), 0.0].map(|v| v as f32));
+        u.extend(
+            [
+                s.tiling[0],
+                s.shell,
+                shadow.map_or(0.0, |x| x.1),
+                s.tiling[1],
+            ]
+            .map(|v| v as f32),
+        );
         u.extend([s.background[0], s.background[1], s.background[2], 0.0].map(|v| v as f32));
         u.extend(match &s.mdf {
             Some(m) => [

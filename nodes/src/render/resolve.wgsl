@@ -14,7 +14,7 @@ struct Params {
     scam: Cam,
     light: vec4<f32>,      // direction towards the light, intensity
     light_pos: vec4<f32>,  // xyz, w = 1 for a point light
-    misc: vec4<f32>,       // tiling, shell, shadow bias, unused
+    misc: vec4<f32>,       // tiling u, shell, shadow bias, tiling v
     background: vec4<f32>,
     mdf: vec4<f32>,        // width, height, depth, present
     mat: vec4<u32>,        // kind (0 raw, 1 basis), width, height, ycbcr
@@ -84,7 +84,7 @@ fn surface(f: vec4<f32>) -> Surface {
     let uv0 = vec2<f32>(mesh[ub + 2u * i0], mesh[ub + 2u * i0 + 1u]);
     let uv1 = vec2<f32>(mesh[ub + 2u * i1], mesh[ub + 2u * i1 + 1u]);
     let uv2 = vec2<f32>(mesh[ub + 2u * i2], mesh[ub + 2u * i2 + 1u]);
-    s.uv = (uv0 * w.x + uv1 * w.y + uv2 * w.z) * P.misc.x;
+    s.uv = (uv0 * w.x + uv1 * w.y + uv2 * w.z) * vec2<f32>(P.misc.x, P.misc.w);
     let tb = 8u * n;
     let t0 = vec3<f32>(mesh[tb + 4u * i0], mesh[tb + 4u * i0 + 1u], mesh[tb + 4u * i0 + 2u]) * w.x
         + vec3<f32>(mesh[tb + 4u * i1], mesh[tb + 4u * i1 + 1u], mesh[tb + 4u * i1 + 2u]) * w.y
@@ -271,10 +271,10 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
     return acc;
 }
 
-// (world distance, texels)
-fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
+// World distance to the mesostructure, 0 without an MDF.
+fn mdf_distance(s: Surface, wo: vec3<f32>) -> f32 {
     if (P.mdf.w < 0.5 || P.mdf.z <= 0.0) {
-        return vec2<f32>(0.0, 0.0);
+        return 0.0;
     }
     let mw = u32(P.mdf.x);
     let mh = u32(P.mdf.y);
@@ -293,18 +293,17 @@ fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
         }
     }
     if (weight < 0.5) {
-        return vec2<f32>(inf(), inf());
+        return inf();
     }
-    let d = sum / weight;
-    return vec2<f32>(d * P.misc.y / P.mdf.z, d);
+    return sum / weight * P.misc.y / P.mdf.z;
 }
 
 struct Hit {
     found: bool,
     t: f32,
+    t_front: f32,
     s: Surface,
     wo: vec3<f32>,
-    uv: vec2<f32>,
 };
 
 fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
@@ -323,22 +322,21 @@ fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
         if (b.x >= 0.0) {
             let sb = surface(b);
             let outward = local_up(local(sb, d));
-            tb = b.x - mdf_distance(sb, outward).x;
+            tb = b.x - mdf_distance(sb, outward);
         }
-        if (df.x < 3.0e38 && f.x + df.x < tb) {
+        if (df < 3.0e38 && f.x + df < tb) {
             h.found = true;
-            h.t = f.x + df.x;
+            h.t = f.x + df;
+            h.t_front = f.x;
             h.s = s;
             h.wo = wo;
-            h.uv = vec2<f32>(s.uv.x - df.y * wo.x / select(1.0, P.mdf.x, P.mdf.w > 0.5),
-                             s.uv.y - df.y * wo.y / select(1.0, P.mdf.y, P.mdf.w > 0.5));
             return h;
         }
     }
     return h;
 }
 
-fn lit(p: vec3<f32>) -> bool {
+fn lit(p: vec3<f32>, cos_light: f32) -> bool {
     let c = P.scam;
     let rel = p - c.eye.xyz;
     let z = dot(rel, c.fwd.xyz);
@@ -360,7 +358,7 @@ fn lit(p: vec3<f32>) -> bool {
     }
     // The shadow pass wrote one vec4 per texel, depth in x.
     let depth = shadow[4u * (u32(py) * u32(c.size.x) + u32(px))];
-    return t <= depth + P.misc.z;
+    return t <= depth + P.misc.z / max(cos_light, 0.1);
 }
 
 @compute @workgroup_size(8, 8)
@@ -381,7 +379,8 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
         out[px] = vec4<f32>(P.background.xyz, 0.0);
         return;
     }
-    let p = ray.o + ray.d * hit.t;
+    // Shadows and point lights are evaluated at the receiver's reference surface (see shade.rs).
+    let p = ray.o + ray.d * hit.t_front;
     var to_light = P.light.xyz;
     var falloff = 1.0;
     if (P.light_pos.w > 0.5) {
@@ -390,10 +389,10 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
         to_light = normalize(v);
     }
     let wi = local(hit.s, to_light);
-    if (wi.z <= 0.0 || (P.offs.z == 1u && !lit(p))) {
+    if (wi.z <= 0.0 || (P.offs.z == 1u && !lit(p, wi.z))) {
         out[px] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
         return;
     }
-    let c = btf_eval(hit.uv, hit.wo, wi) * (P.light.w * falloff);
+    let c = btf_eval(hit.s.uv, hit.wo, wi) * (P.light.w * falloff);
     out[px] = vec4<f32>(c, 1.0);
 }

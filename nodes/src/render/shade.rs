@@ -6,12 +6,15 @@
 //! ch. 4; an open mesh has t_b = ∞). Otherwise the next layer is tried; a ray that passes all
 //! of them shows the background, which is what carves the silhouette.
 //!
-//! MDF distances are in MDF texels; one texel of depth is `shell / mdf.depth` world units, and
-//! laterally the hit moves d·(−ω_o.x, −ω_o.y) texels in texture space (the MDF lives in texture
-//! space, as in the thesis: the shell sets the vertical scale, the UV map the lateral one). The
-//! hit is shaded with the BTF at the displaced texture coordinate, in the front face's tangent
-//! frame, times the light's irradiance and the shadow map's visibility.
-
+//! MDF distances are in MDF texels; one texel of depth is `shell / mdf.depth` world units. A hit
+//! is shaded, as in the thesis, at (x, t_f + d_f): with the BTF at the entry texel x, whose
+//! measured images already contain the parallax and masking the MDF describes (displacing the
+//! lookup as well would apply that parallax twice), in the front face's tangent frame, times the
+//! light's irradiance and the shadow map's visibility. The shadow map holds the displaced depth
+//! of the casters (the first mesostructure hit along each light ray), and is tested at the
+//! receiver's reference surface point (x, t_f): a caster shadows it only if it lies in front of
+//! the receiver's shell, so shadows between parts of the mesh and from silhouette mesostructure
+//! appear, while the self-shadowing inside a tile, already in the BTF, is not applied twice.
 use super::camera::{add, cross, dot, mul, normalize, sub, Camera, V3};
 use super::layers::{Frag, Layers};
 use super::material::{Material, MdfLookup};
@@ -40,7 +43,8 @@ pub struct Scene<'a> {
     pub material: &'a Material<'a>,
     pub mdf: Option<MdfLookup<'a>>,
     pub light: Light,
-    pub tiling: f64,
+    /// Tiles per unit of texture coordinate, (u, v).
+    pub tiling: [f64; 2],
     pub shell: f64,
     pub background: [f64; 3],
 }
@@ -72,7 +76,7 @@ impl Scene<'_> {
         let hand = m.tangents[i0][3] as f64;
         let uv = [0, 1].map(|k| {
             (m.uvs[i0][k] as f64 * w[0] + m.uvs[i1][k] as f64 * w[1] + m.uvs[i2][k] as f64 * w[2])
-                * self.tiling
+                * self.tiling[k]
         });
         let n = normalize(n0).unwrap_or([0.0, 0.0, 1.0]);
         let t = normalize(sub(t0, mul(n, dot(n, t0))))
@@ -85,21 +89,18 @@ impl Scene<'_> {
         [dot(v, s.t), dot(v, s.b), dot(v, s.n)]
     }
 
-    /// MDF distance in world units and texels for a ray leaving the viewer along `wo` (local,
-    /// pointing to the viewer); 0 without an MDF.
-    fn mdf_distance(&self, s: &Surface, wo: V3) -> (f64, f64) {
+    /// MDF distance in world units for a ray arriving against `wo` (local, pointing to the
+    /// viewer); 0 without an MDF.
+    fn mdf_distance(&self, s: &Surface, wo: V3) -> f64 {
         match &self.mdf {
-            Some(m) if m.mdf.depth > 0.0 => {
-                let d = m.eval(s.uv[0], s.uv[1], wo);
-                (d * self.shell / m.mdf.depth, d)
-            }
-            _ => (0.0, 0.0),
+            Some(m) if m.mdf.depth > 0.0 => m.eval(s.uv[0], s.uv[1], wo) * self.shell / m.mdf.depth,
+            _ => 0.0,
         }
     }
 
-    /// Where the ray `(o, d)` first meets mesostructure, as (distance, surface frame at the
-    /// front face, local view, displaced uv); `None` if it passes every layer.
-    pub fn hit(&self, layers: &Layers, px: usize, d: V3) -> Option<(f64, Surface, V3, [f64; 2])> {
+    /// Where the ray `(o, d)` first meets mesostructure, as (distance, distance to the front
+    /// face, surface frame at the front face, local view); `None` if it passes every layer.
+    pub fn hit(&self, layers: &Layers, px: usize, d: V3) -> Option<(f64, f64, Surface, V3)> {
         let plane = layers.width * layers.height;
         for k in 0..layers.count {
             let Some(f) = layers.front[k * plane + px] else {
@@ -107,22 +108,17 @@ impl Scene<'_> {
             };
             let s = self.surface(&f);
             let wo = local_up(Self::local(&s, mul(d, -1.0)));
-            let (df, dtex) = self.mdf_distance(&s, wo);
+            let df = self.mdf_distance(&s, wo);
             let tb = match layers.back[k * plane + px] {
                 Some(b) => {
                     let sb = self.surface(&b);
                     let out = local_up(Self::local(&sb, d));
-                    b.t - self.mdf_distance(&sb, out).0
+                    b.t - self.mdf_distance(&sb, out)
                 }
                 None => f64::INFINITY,
             };
             if df.is_finite() && f.t + df < tb {
-                let (sx, sy) = match &self.mdf {
-                    Some(m) => (m.mdf.width as f64, m.mdf.height as f64),
-                    None => (1.0, 1.0),
-                };
-                let uv = [s.uv[0] - dtex * wo[0] / sx, s.uv[1] - dtex * wo[1] / sy];
-                return Some((f.t + df, s, wo, uv));
+                return Some((f.t + df, f.t, s, wo));
             }
         }
         None
@@ -137,10 +133,10 @@ impl Scene<'_> {
         d: V3,
         shadow: Option<&ShadowMap>,
     ) -> [f64; 3] {
-        let Some((t, s, wo, uv)) = self.hit(layers, px, d) else {
+        let Some((_, t_front, s, wo)) = self.hit(layers, px, d) else {
             return self.background;
         };
-        let p = add(o, mul(d, t));
+        let p = add(o, mul(d, t_front));
         let (to_light, falloff) = match self.light.position {
             Some(lp) => {
                 let v = sub(lp, p);
@@ -153,11 +149,11 @@ impl Scene<'_> {
         if wi[2] <= 0.0 {
             return [0.0; 3];
         }
-        let visible = shadow.is_none_or(|sm| sm.lit(p));
+        let visible = shadow.is_none_or(|sm| sm.lit(p, wi[2]));
         if !visible {
             return [0.0; 3];
         }
-        let f = self.material.eval(uv[0], uv[1], wo, wi);
+        let f = self.material.eval(s.uv[0], s.uv[1], wo, wi);
         f.map(|c| c * self.light.intensity * falloff)
     }
 }
@@ -185,7 +181,7 @@ impl ShadowMap {
             .into_par_iter()
             .map(|px| {
                 let (_, d) = camera.ray(px as u32 % w, px as u32 / w);
-                scene.hit(layers, px, d).map_or(f64::INFINITY, |(t, ..)| t)
+                scene.hit(layers, px, d).map_or(f64::INFINITY, |h| h.0)
             })
             .collect();
         ShadowMap {
@@ -195,8 +191,9 @@ impl ShadowMap {
         }
     }
 
-    /// Whether the light sees `p` (nearest shadow-map texel, biased comparison).
-    pub fn lit(&self, p: V3) -> bool {
+    /// Whether the light sees `p` (nearest shadow-map texel, biased comparison). The bias grows
+    /// as the light grazes the surface (`cos_light`, local), where one texel spans more depth.
+    pub fn lit(&self, p: V3, cos_light: f64) -> bool {
         let Some((x, y, t)) = self.camera.project(p) else {
             return true;
         };
@@ -205,6 +202,6 @@ impl ShadowMap {
             return true;
         }
         let i = y as usize * self.camera.width as usize + x as usize;
-        t <= self.depth[i] + self.bias
+        t <= self.depth[i] + self.bias / cos_light.max(0.1)
     }
 }
