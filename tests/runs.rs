@@ -755,3 +755,70 @@ fn ubo2003_files_written_by_one_graph_read_back_bit_exactly_in_another() {
     assert_eq!(compare["metrics"]["rmse"], 0.0);
     assert_eq!(compare["metrics"]["max_error"], 0.0);
 }
+
+#[test]
+fn mdf_render_graph_renders_with_and_without_silhouettes() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let dirs = r#"{"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#;
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        root.join("graphs/mdf_render.json").display().to_string(),
+        "--quiet".into(),
+        "--no-cache".into(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    let mut set = |kv: String| {
+        args.push("--set".into());
+        args.push(kv);
+    };
+    set("surface.size=16".into());
+    set("surface.count=2".into());
+    set(format!("capture.views={dirs}"));
+    set(format!("capture.lights={dirs}"));
+    set(format!("mdf.views={dirs}"));
+    for r in [
+        "sphere_plain",
+        "sphere_mdf",
+        "torus_plain",
+        "torus_mdf",
+        "torus_reference",
+    ] {
+        set(format!("{r}.camera.resolution=[48,36]"));
+        set(format!("{r}.shadow_resolution=128"));
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = mesoflow(&args, root);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out);
+    let metric = |id: &str, m: &str| {
+        rep["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["id"] == id)
+            .unwrap()["metrics"][m]
+            .as_f64()
+            .unwrap()
+    };
+    // The MDF carves the outline: fewer pixels show the torus than without it.
+    assert!(metric("torus_mdf", "coverage") < metric("torus_plain", "coverage"));
+    assert!(metric("torus_mdf", "frame_ms") > 0.0);
+    let rmse = metric("error", "rmse");
+    assert!(
+        rmse.is_finite() && rmse > 0.0,
+        "PCA rank 16 of 81 pairs is lossy: {rmse}"
+    );
+    let row = image::open(out.join("torus_plain_vs_mdf.png")).unwrap();
+    assert_eq!((row.width(), row.height()), (48 + 4 + 48, 36));
+    let mut f = std::fs::File::open(out.join("weave_mdf.npy")).unwrap();
+    let npy = npyz::NpyFile::new(&mut f).unwrap();
+    assert_eq!(npy.shape(), &[9, 16, 16]);
+    let side: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("weave_mdf.json")).unwrap())
+            .unwrap();
+    assert_eq!(side["views"].as_array().unwrap().len(), 9);
+    assert_eq!(side["views"][1], serde_json::json!([40.0, 0.0]));
+}

@@ -1,4 +1,5 @@
-//! Parameter overrides (`--set id.param=value`, sweeps): parsing them and applying them to a file.
+//! Parameter overrides (`--set id.param=value`, `--set id.param.field=value` inside an object
+//! parameter, sweeps): parsing them and applying them to a file.
 
 use crate::file::GraphFile;
 use serde_json::Value;
@@ -38,7 +39,28 @@ impl GraphFile {
         let ids: Vec<String> = self.nodes.iter().map(|(id, _)| id.clone()).collect();
         match self.node_mut(&o.node) {
             Some(decl) => {
-                decl.params.insert(o.param.clone(), o.value.clone());
+                // `camera.resolution` sets a field inside an object parameter, creating the
+                // object if the file left it to its defaults.
+                let mut keys = o.param.split('.');
+                let first = keys.next().unwrap_or_default();
+                let mut slot = decl
+                    .params
+                    .entry(first.to_string())
+                    .or_insert_with(|| Value::Object(Default::default()));
+                let mut path = first.to_string();
+                for key in keys {
+                    let Value::Object(map) = slot else {
+                        return Err(format!(
+                            "--set {}.{}: `{path}` is not an object",
+                            o.node, o.param
+                        ));
+                    };
+                    slot = map
+                        .entry(key.to_string())
+                        .or_insert_with(|| Value::Object(Default::default()));
+                    path = format!("{path}.{key}");
+                }
+                *slot = o.value.clone();
                 Ok(())
             }
             None => {
@@ -57,6 +79,26 @@ impl GraphFile {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dotted_params_set_fields_inside_objects() {
+        let mut f = GraphFile::parse(
+            r#"{"mesoflow": 1, "nodes": {"r": {"kind": "k", "params": {"camera": {"fov": 40}, "n": 1}}}}"#,
+        )
+        .unwrap();
+        f.apply(&parse_override("r.camera.resolution=[8,6]").unwrap())
+            .unwrap();
+        f.apply(&parse_override("r.light.intensity=2").unwrap())
+            .unwrap();
+        let p = &f.node_mut("r").unwrap().params;
+        assert_eq!(
+            p["camera"],
+            serde_json::json!({"fov": 40, "resolution": [8, 6]})
+        );
+        assert_eq!(p["light"], serde_json::json!({"intensity": 2}));
+        let e = f.apply(&parse_override("r.n.x=1").unwrap()).unwrap_err();
+        assert!(e.contains("`n` is not an object"), "{e}");
+    }
 
     #[test]
     fn values_are_json_or_strings() {

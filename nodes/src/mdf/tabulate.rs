@@ -32,6 +32,10 @@ pub struct Params {
     /// the tile's height range (the tightest shell). Must not be less than that range.
     #[schemars(range(min = 0.0))]
     pub depth: Option<f64>,
+    /// Compress the table to this rank (SVD over views × texels); the output is the
+    /// reconstruction, and `rmse` its error. Default: uncompressed.
+    #[schemars(range(min = 1, max = 4096))]
+    pub rank: Option<u32>,
 }
 
 impl Default for Params {
@@ -40,6 +44,7 @@ impl Default for Params {
             views: DirectionSet::Named(Named::Ubo81),
             resolution: None,
             depth: None,
+            rank: None,
         }
     }
 }
@@ -84,6 +89,8 @@ impl Node for Tabulate {
             outputs: vec![
                 Port::output("mdf", Mdf::TYPE, "distances in output texels, +inf for no hit"),
                 Port::output("miss_fraction", "Scalar", "fraction of entries with no hit"),
+                Port::output("rmse", "Scalar", "RMSE of the compressed table, texels (0 uncompressed)"),
+                Port::output("compression_ratio", "Scalar", "table size over stored size (1 uncompressed)"),
                 Port::output("seconds", "Scalar", "tabulation time, s"),
                 Port::output("rays_per_second", "Scalar", "entries per second"),
             ],
@@ -98,6 +105,19 @@ impl Node for Tabulate {
         let data = match ctx.gpu() {
             Some(gpu) => tabulate_gpu(gpu, hf, &setup)?,
             None => tabulate_cpu(ctx, hf, &setup)?,
+        };
+        let (data, rmse, ratio) = match p.rank {
+            None => (data, 0.0, 1.0),
+            Some(rank) => {
+                let c = super::compress::compress(
+                    &data,
+                    setup.views.len(),
+                    setup.width * setup.height,
+                    rank as usize,
+                )
+                .map_err(|e| NodeError::param("rank", e))?;
+                (c.data, c.rmse, c.ratio)
+            }
         };
         let seconds = start.elapsed().as_secs_f64();
         ctx.progress(1, 1);
@@ -116,6 +136,8 @@ impl Node for Tabulate {
         Ok(Outputs::new()
             .with("mdf", mdf)
             .with("miss_fraction", Scalar(misses as f64 / n))
+            .with("rmse", Scalar(rmse))
+            .with("compression_ratio", Scalar(ratio))
             .with("seconds", Scalar(seconds))
             .with("rays_per_second", Scalar(n / seconds.max(1e-9))))
     }
@@ -275,7 +297,7 @@ mod tests {
         let p = Params {
             views: DirectionSet::Named(Named::Ubo81),
             depth: Some(3.0),
-            resolution: None,
+            ..Default::default()
         };
         let m = run_cpu(&hf, &p);
         for (k, v) in m.views.iter().enumerate() {
@@ -331,7 +353,7 @@ mod tests {
         let p = Params {
             views: views(&[[0.0, 0.0], [45.0, 90.0]]),
             depth: Some(16.0),
-            resolution: None,
+            ..Default::default()
         };
         let m = run_cpu(&hf, &p);
         for x in 4..29 {
@@ -352,7 +374,7 @@ mod tests {
             &Params {
                 views: views(&[[0.0, 0.0]]),
                 depth: Some(r),
-                resolution: None,
+                ..Default::default()
             },
         );
         // Texel centres sit on samples (x + 0.5 − 0.5), so a vertical ray reads the sample.

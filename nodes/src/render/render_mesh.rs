@@ -484,7 +484,7 @@ mod tests {
                 phis: (0..8).map(|k| k as f64 * 45.0).collect(),
             },
             depth: Some(depth),
-            resolution: None,
+            ..Default::default()
         };
         let ctx = NodeContext::detached(None);
         let out = crate::mdf::tabulate::Tabulate
@@ -742,6 +742,11 @@ mod tests {
                 assert!((cpu_cov - gpu_cov).abs() < 0.01);
                 tested += 1;
             }
+            // Past the device's texture limit: a clear refusal naming the parameter.
+            let mut huge = p.clone();
+            huge.camera.resolution = [1 << 20, 8];
+            let e = scene_in(Some(&gpu), false, &huge).unwrap_err().to_string();
+            assert!(e.contains("camera") && e.contains("exceeds"), "{e}");
         }
         if tested == 0 {
             assert!(
