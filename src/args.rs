@@ -131,7 +131,8 @@ pub struct SweepArgs {
     /// A scalar output to record: id.metric (repeat for several).
     #[arg(long = "measure", value_name = "ID.METRIC", required = true)]
     pub measure: Vec<String>,
-    /// Also chart every other measure against this one (repeatable), e.g. a frame time.
+    /// Also chart every other measure against this one (repeatable), e.g. a frame time: one
+    /// line per combination of the other varied values, along the first --vary.
     #[arg(long = "versus", value_name = "ID.METRIC")]
     pub versus: Vec<String>,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]

@@ -424,8 +424,9 @@ fn chart_against<'a>(
     }
 }
 
-/// Measure `m` against measure `x`, one series per combination of the non-numeric varied values,
-/// each sorted by `x` so it traces that method's cost–error curve.
+/// Measure `m` against measure `x`: each series traces the first varied parameter (e.g. the
+/// rank) with the other varied values fixed (one series per combination), so a line is one
+/// configuration's cost–error trade-off.
 fn chart_versus<'a>(
     varies: &[Vary],
     rows: &[Row],
@@ -440,13 +441,16 @@ fn chart_versus<'a>(
         let name: Vec<String> = varies
             .iter()
             .zip(&r.values)
-            .filter(|(_, v)| !v.is_number())
+            .skip(1)
             .map(|(v, val)| format!("{}={}", v.name(), cell(val)))
             .collect();
         groups.entry(name.join(" ")).or_default().push((a, b));
     }
     Chart {
-        title: format!("{m} against {x}"),
+        title: format!(
+            "{m} against {x}, along {}",
+            varies.first().map_or(String::new(), |v| v.name())
+        ),
         x_label: &x.port,
         y_label: &m.port,
         series: groups
