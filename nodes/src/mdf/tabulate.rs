@@ -5,11 +5,12 @@
 //! texel-centre convention as `btf.capture`, so an MDF and a BTF of one tile line up.
 //!
 //! A GPU node (wgpu compute, exact cell traversal in f32) whose CPU path runs the f64 caster of
-//! `heightfield::raycast` on rayon; the two agree to 1e-3 texel (tested).
+//! `heightfield::raycast` on rayon; the two agree to 1e-3 texel (tested). A mesh tile (overhangs,
+//! holes) goes through `mesh_tile` instead, on the CPU.
 
 use crate::btf::directions::{DirectionSet, Named};
 use crate::heightfield::raycast::Caster;
-use crate::types::{Direction, HeightField, Mdf};
+use crate::types::{Direction, HeightField, Mdf, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{
     Gpu, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar,
@@ -25,11 +26,13 @@ use std::time::Instant;
 pub struct Params {
     /// View directions: "ubo81", {"thetas": [...], "phis": [...]} or [[θ, φ], ...], degrees.
     pub views: DirectionSet,
-    /// Output width in texels (height in proportion); default: the height field's width.
+    /// Output width in texels (height in proportion); default: the height field's width, or 64
+    /// for a mesh tile (square).
     #[schemars(range(min = 1, max = 8192))]
     pub resolution: Option<u32>,
-    /// Shell thickness in height-field texels, measured from the tile's lowest point; default:
-    /// the tile's height range (the tightest shell). Must not be less than that range.
+    /// Shell thickness in texels (of the height field, or of the output for a mesh tile),
+    /// measured from the tile's lowest point; default: the tile's height range (the tightest
+    /// shell). Must not be less than that range.
     #[schemars(range(min = 0.0))]
     pub depth: Option<f64>,
     /// Compress the table to this rank (SVD over views × texels); the output is the
@@ -83,9 +86,12 @@ impl Node for Tabulate {
         NodeSpec {
             kind: "mdf.tabulate",
             version: 1,
-            doc: "Mesostructure distance function of a height-field tile: distance from the shell top to the first hit per texel and view; GPU compute with a CPU path.",
+            doc: "Mesostructure distance function of a height-field tile (GPU compute with a CPU path) or a mesh tile (CPU): distance from the shell top to the first hit per texel and view.",
             device: DevicePreference::Gpu,
-            inputs: vec![Port::input("height", HeightField::TYPE, "periodic tile, heights in texels")],
+            inputs: vec![
+                Port::optional("height", HeightField::TYPE, "periodic tile, heights in texels"),
+                Port::optional("mesh", Mesh::TYPE, "or: a mesostructure mesh in the unit tile (x, y in [0, 1], z up, tile units)"),
+            ],
             outputs: vec![
                 Port::output("mdf", Mdf::TYPE, "distances in output texels, +inf for no hit"),
                 Port::output("miss_fraction", "Scalar", "fraction of entries with no hit"),
@@ -99,23 +105,55 @@ impl Node for Tabulate {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let hf = inputs.get::<HeightField>("height")?;
-        let setup = setup(hf, p)?;
         let start = Instant::now();
-        let data = match ctx.gpu() {
-            Some(gpu) => tabulate_gpu(gpu, hf, &setup)?,
-            None => tabulate_cpu(ctx, hf, &setup)?,
+        let (data, width, height, views, depth) = match (
+            inputs.opt::<HeightField>("height")?,
+            inputs.opt::<Mesh>("mesh")?,
+        ) {
+            (Some(hf), None) => {
+                let setup = setup(hf, p)?;
+                let data = match ctx.gpu() {
+                    Some(gpu) => tabulate_gpu(gpu, hf, &setup)?,
+                    None => tabulate_cpu(ctx, hf, &setup)?,
+                };
+                let depth = (setup.top - setup.lo) / setup.step.0;
+                (data, setup.width, setup.height, setup.views, depth)
+            }
+            (None, Some(mesh)) => {
+                p.views
+                    .validate()
+                    .map_err(|e| NodeError::param("views", e))?;
+                if ctx.gpu().is_some() {
+                    ctx.warn(
+                        "mesh tiles are tabulated on the CPU (the GPU path covers height fields)",
+                    );
+                }
+                let tile = super::mesh_tile::MeshTile::new(mesh)?;
+                let n = p.resolution.unwrap_or(64) as usize;
+                let views = p.views.directions();
+                let (data, depth) =
+                    super::mesh_tile::tabulate(ctx, &tile, &views, (n, n), p.depth)?;
+                (data, n, n, views, depth)
+            }
+            (Some(_), Some(_)) => {
+                return Err(NodeError::input(
+                    "mesh",
+                    "connect either `height` or `mesh`, not both",
+                ))
+            }
+            (None, None) => {
+                return Err(NodeError::input(
+                    "height",
+                    "connect a height field (`height`) or a mesostructure mesh (`mesh`)",
+                ))
+            }
         };
         let (data, rmse, ratio) = match p.rank {
             None => (data, 0.0, 1.0),
             Some(rank) => {
-                let c = super::compress::compress(
-                    &data,
-                    setup.views.len(),
-                    setup.width * setup.height,
-                    rank as usize,
-                )
-                .map_err(|e| NodeError::param("rank", e))?;
+                let c =
+                    super::compress::compress(&data, views.len(), width * height, rank as usize)
+                        .map_err(|e| NodeError::param("rank", e))?;
                 (c.data, c.rmse, c.ratio)
             }
         };
@@ -126,10 +164,10 @@ impl Node for Tabulate {
             return Err(NodeError::Failed(format!("entry {i} of the table is NaN")));
         }
         let mdf = Mdf {
-            width: setup.width,
-            height: setup.height,
-            views: setup.views.clone(),
-            depth: (setup.top - setup.lo) / setup.step.0,
+            width,
+            height,
+            views,
+            depth,
             data,
         };
         let n = mdf.data.len() as f64;
@@ -402,6 +440,44 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("depth"), "{e}");
+    }
+
+    #[test]
+    fn a_mesh_tile_goes_through_the_node_and_its_holes_miss() {
+        // A plate over the middle of the tile and nothing else: rays outside it fall through.
+        let plate = crate::types::Mesh {
+            positions: vec![
+                [0.25, 0.25, 0.0],
+                [0.75, 0.25, 0.0],
+                [0.75, 0.75, 0.0],
+                [0.25, 0.75, 0.0],
+            ],
+            uvs: vec![[0.0; 2]; 4],
+            normals: vec![[0.0, 0.0, 1.0]; 4],
+            tangents: vec![[1.0, 0.0, 0.0, 1.0]; 4],
+            indices: vec![0, 1, 2, 0, 2, 3],
+        };
+        let ctx = NodeContext::detached(None);
+        let p = Params {
+            views: views(&[[0.0, 0.0]]),
+            resolution: Some(8),
+            ..Default::default()
+        };
+        let plate = std::sync::Arc::new(plate);
+        let out = Tabulate
+            .run(&ctx, &p, &Inputs::new().with("mesh", plate.clone()))
+            .unwrap();
+        // 4×4 of the 8×8 texel centres lie on the plate.
+        assert_eq!(out.get("miss_fraction").unwrap().as_scalar(), Some(0.75));
+        let hf = std::sync::Arc::new(HeightField::from_fn(4, 4, |_, _| 0.0));
+        let both = Inputs::new().with("mesh", plate).with("height", hf);
+        let e = Tabulate.run(&ctx, &p, &both).unwrap_err().to_string();
+        assert!(e.contains("not both"), "{e}");
+        let e = Tabulate
+            .run(&ctx, &p, &Inputs::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("height") && e.contains("mesh"), "{e}");
     }
 
     #[test]
