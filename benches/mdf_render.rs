@@ -4,8 +4,8 @@
 //! MDF: a procedural weave at `--mdf-res`² texels × the 81 UBO2003 views, CPU (rayon, f64 exact
 //! traversal) and GPU (wgpu compute, f32), seconds and rays per second.
 //! Render: a 64² woven BTF (33 × 33 directions, the graph's capture) on a torus at 800×600:
-//! raw BTF, PCA rank 8/16/32, + MDF, + shadows; mean frame time over `--frames` after a warm-up
-//! frame (the node's own `frame_ms`), on each device asked for.
+//! raw BTF, PCA rank 8/16/32, + MDF, + shadows; mean wall time per frame over `--frames` after a
+//! warm-up frame (the node's `frame_ms`) and, on a GPU, the timestamp-query time (`gpu_ms`).
 
 use mesoflow_nodes::btf::{capture, pca};
 use mesoflow_nodes::heightfield::procedural;
@@ -192,7 +192,12 @@ fn main() {
                 .with("mdf", mdf.clone());
             let out = RenderMesh.run(&ctx, &p, &inputs).unwrap();
             let ms = scalar(&out, "frame_ms");
-            cells.push(format!("{ms:.1} ({:.2})", 1e3 / ms));
+            let gpu_ms = scalar(&out, "gpu_ms");
+            cells.push(if g.is_some() {
+                format!("{ms:.1} ({:.2}); GPU {gpu_ms:.1}", 1e3 / ms)
+            } else {
+                format!("{ms:.1} ({:.2})", 1e3 / ms)
+            });
         }
         println!("| {name} | {} |", cells.join(" | "));
     }

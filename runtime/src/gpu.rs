@@ -62,7 +62,8 @@ impl Gpu {
         let info = adapter.get_info();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("mesoflow"),
-            required_features: wgpu::Features::empty(),
+            // Timestamp queries where the adapter has them: nodes report GPU time per frame.
+            required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
             // The adapter's own limits: compute nodes want the largest storage buffers it allows.
             required_limits: adapter.limits(),
             experimental_features: wgpu::ExperimentalFeatures::disabled(),

@@ -59,6 +59,8 @@ pub struct GpuRenderer<'a> {
     triangles: u32,
     centre: [f64; 3],
     radius: f64,
+    /// Two timestamps (start of the first pass, end of the last) where the device has them.
+    stamps: Option<wgpu::QuerySet>,
 }
 
 impl<'a> GpuRenderer<'a> {
@@ -168,6 +170,16 @@ impl<'a> GpuRenderer<'a> {
             cache: None,
         });
         let (centre, radius) = bounding_sphere(m);
+        let stamps = device
+            .features()
+            .contains(wgpu::Features::TIMESTAMP_QUERY)
+            .then(|| {
+                device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("frame time"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2,
+                })
+            });
         Ok(GpuRenderer {
             gpu,
             scene,
@@ -191,6 +203,7 @@ impl<'a> GpuRenderer<'a> {
             triangles: m.triangles() as u32,
             centre,
             radius,
+            stamps,
         })
     }
 
@@ -240,6 +253,7 @@ impl<'a> GpuRenderer<'a> {
         enc: &mut wgpu::CommandEncoder,
         cam: &Camera,
         count: u32,
+        stamp_start: bool,
     ) -> wgpu::Texture {
         let device = &self.gpu.device;
         let (w, h) = (cam.width, cam.height);
@@ -333,7 +347,13 @@ impl<'a> GpuRenderer<'a> {
                     }),
                     stencil_ops: None,
                 }),
-                timestamp_writes: None,
+                timestamp_writes: self.stamps.as_ref().filter(|_| stamp_start && i == 0).map(
+                    |query_set| wgpu::RenderPassTimestampWrites {
+                        query_set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: None,
+                    },
+                ),
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
@@ -496,7 +516,13 @@ impl<'a> GpuRenderer<'a> {
         });
         let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("resolve"),
-            timestamp_writes: None,
+            timestamp_writes: self.stamps.as_ref().filter(|_| shade).map(|query_set| {
+                wgpu::ComputePassTimestampWrites {
+                    query_set,
+                    beginning_of_pass_write_index: None,
+                    end_of_pass_write_index: Some(1),
+                }
+            }),
         });
         pass.set_pipeline(&self.resolve);
         pass.set_bind_group(0, &bind, &[]);
@@ -505,25 +531,26 @@ impl<'a> GpuRenderer<'a> {
         out
     }
 
-    /// One frame: (RGBA per pixel, a = 1 where mesostructure was hit). `read` false skips the
-    /// readback (timing frames).
+    /// One frame: (RGBA per pixel, a = 1 where mesostructure was hit; empty when `read` is
+    /// false, for timing frames) and the GPU time from timestamp queries, ms, where the device
+    /// has them.
     pub fn frame(
         &self,
         cam: &Camera,
         shadow_cam: Option<(&Camera, f64)>,
         count: u32,
         read: bool,
-    ) -> Result<Vec<f32>, NodeError> {
+    ) -> Result<(Vec<f32>, Option<f64>), NodeError> {
         let device = &self.gpu.device;
         let mut enc = device.create_command_encoder(&Default::default());
         let shadow_buf = shadow_cam.map(|(sc, bias)| {
-            let layers = self.encode_layers(&mut enc, sc, count);
+            let layers = self.encode_layers(&mut enc, sc, count, true);
             (
                 self.encode_resolve(&mut enc, sc, None, &layers, count, false, None),
                 bias,
             )
         });
-        let layers = self.encode_layers(&mut enc, cam, count);
+        let layers = self.encode_layers(&mut enc, cam, count, shadow_cam.is_none());
         let out = self.encode_resolve(
             &mut enc,
             cam,
@@ -533,42 +560,73 @@ impl<'a> GpuRenderer<'a> {
             true,
             shadow_buf.as_ref().map(|(b, bias)| (b, *bias)),
         );
-        let size = out.size();
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
+        let readback = |size: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let image = read.then(|| {
+            let staging = readback(out.size());
+            enc.copy_buffer_to_buffer(&out, 0, &staging, 0, out.size());
+            staging
         });
-        if read {
-            enc.copy_buffer_to_buffer(&out, 0, &staging, 0, size);
-        }
+        let stamps = self.stamps.as_ref().map(|qs| {
+            let resolved = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            enc.resolve_query_set(qs, 0..2, &resolved, 0);
+            let staging = readback(16);
+            enc.copy_buffer_to_buffer(&resolved, 0, &staging, 0, 16);
+            staging
+        });
         self.gpu.queue.submit([enc.finish()]);
-        if !read {
-            device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .map_err(|e| gpu_err("wait")(e.to_string()))?;
-            return Ok(Vec::new());
-        }
-        let slice = staging.slice(..);
+        let data = match &image {
+            Some(b) => bytemuck::cast_slice::<u8, f32>(&self.read_buffer(b)?).to_vec(),
+            None => Vec::new(),
+        };
+        let gpu_ms = match &stamps {
+            Some(b) => {
+                let bytes = self.read_buffer(b)?;
+                let t: &[u64] = bytemuck::cast_slice(&bytes);
+                let ticks = t[1].saturating_sub(t[0]) as f64;
+                Some(ticks * self.gpu.queue.get_timestamp_period() as f64 * 1e-6)
+            }
+            None => {
+                device
+                    .poll(wgpu::PollType::wait_indefinitely())
+                    .map_err(|e| gpu_err("wait")(e.to_string()))?;
+                None
+            }
+        };
+        Ok((data, gpu_ms))
+    }
+
+    /// Maps a readback buffer after the queue finished and copies its bytes out.
+    fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, NodeError> {
+        let slice = buffer.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
             let _ = tx.send(r);
         });
-        device
+        self.gpu
+            .device
             .poll(wgpu::PollType::wait_indefinitely())
             .map_err(|e| gpu_err("wait")(e.to_string()))?;
         rx.recv()
             .map_err(|e| gpu_err("readback")(e.to_string()))?
             .map_err(|e| gpu_err("readback")(e.to_string()))?;
-        let data = {
-            let view = slice
-                .get_mapped_range()
-                .map_err(|e| gpu_err("map")(e.to_string()))?;
-            bytemuck::cast_slice::<u8, f32>(&view).to_vec()
-        };
-        staging.unmap();
-        Ok(data)
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|e| gpu_err("map")(e.to_string()))?
+            .to_vec();
+        buffer.unmap();
+        Ok(bytes)
     }
 }
 

@@ -2,9 +2,10 @@
 //! linear HDR image. The CPU path ray-casts the depth-peeled visibility layers and resolves them
 //! with the shell test (`shade`); it is the reference for tests and the fallback without a GPU.
 //! The GPU path (`gpu_render`) rasterises the same layers with depth peeling and resolves them
-//! in a compute pass. Frame time is wall time per frame (submit to completion, render targets
-//! included) averaged over `frames`; the readback of the final image is not counted when
-//! `frames` > 1.
+//! in a compute pass. `frame_ms` is wall time per frame (submit to completion, render targets
+//! included) averaged over `frames` after an untimed first frame that also provides the image;
+//! `gpu_ms` is the time between timestamps at the start of the first pass and the end of the
+//! last, where the adapter supports timestamp queries.
 
 use super::camera::{dot, normalize, sub, Camera, CameraParams};
 use super::layers;
@@ -106,7 +107,8 @@ impl Node for RenderMesh {
             outputs: vec![
                 Port::output("image", Image::TYPE, "linear HDR RGB"),
                 Port::output("coverage", "Scalar", "fraction of pixels showing mesostructure"),
-                Port::output("frame_ms", "Scalar", "mean time per frame, ms"),
+                Port::output("frame_ms", "Scalar", "mean wall time per frame, ms"),
+                Port::output("gpu_ms", "Scalar", "mean GPU time per frame from timestamp queries, ms (frame_ms where there are none, and on the CPU)"),
                 Port::output("fps", "Scalar", "frames per second"),
             ],
             disk_cache: true,
@@ -163,7 +165,7 @@ impl Node for RenderMesh {
             shell: p.shell,
             background: p.background,
         };
-        let (data, coverage, ms) = match ctx.gpu() {
+        let (data, coverage, ms, gpu_ms) = match ctx.gpu() {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
             None => {
                 let start = Instant::now();
@@ -174,7 +176,7 @@ impl Node for RenderMesh {
                     ctx.progress(k as u64 + 1, p.frames as u64);
                 }
                 let ms = start.elapsed().as_secs_f64() * 1e3 / p.frames as f64;
-                (frame.0, frame.1, ms)
+                (frame.0, frame.1, ms, None)
             }
         };
         if let Some(i) = data.iter().position(|v| !v.is_finite()) {
@@ -195,6 +197,7 @@ impl Node for RenderMesh {
             )
             .with("coverage", Scalar(coverage))
             .with("frame_ms", Scalar(ms))
+            .with("gpu_ms", Scalar(gpu_ms.unwrap_or(ms)))
             .with("fps", Scalar(1e3 / ms.max(1e-9))))
     }
 }
@@ -284,14 +287,15 @@ pub fn render_cpu(
     Ok((data, covered as f64 / (w * h) as f64))
 }
 
-/// `frames` frames on the GPU: (RGB data, coverage, ms per frame).
+/// `frames` frames on the GPU: (RGB data, coverage, wall ms per frame, GPU ms per frame from
+/// timestamp queries where the device has them).
 pub fn render_gpu(
     ctx: &NodeContext,
     gpu: &mesoflow_runtime::Gpu,
     scene: &Scene,
     camera: &Camera,
     p: &Params,
-) -> Result<(Vec<f32>, f64, f64), NodeError> {
+) -> Result<(Vec<f32>, f64, f64, Option<f64>), NodeError> {
     use super::gpu_render::GpuRenderer;
     GpuRenderer::check_size(gpu, "camera", camera.width, camera.height)?;
     let shadow = if p.shadows {
@@ -310,29 +314,29 @@ pub fn render_gpu(
     let r = GpuRenderer::new(gpu, scene)?;
     let count = p.layers.max(1);
     let sc = shadow.as_ref().map(|(c, b)| (c, *b));
-    // A first frame compiles pipelines and warms caches; it is not timed.
-    let mut rgba = r.frame(camera, sc, count, true)?;
+    // A first frame compiles pipelines, warms caches and provides the image; the timed frames
+    // render the same image without reading it back.
+    let (rgba, _) = r.frame(camera, sc, count, true)?;
     let timed = p.frames.max(1);
+    let (mut gpu_total, mut gpu_frames) = (0.0, 0);
     let start = Instant::now();
     for k in 0..timed {
         ctx.check_cancel()?;
-        let last = k + 1 == timed;
-        if last && timed == 1 {
-            rgba = r.frame(camera, sc, count, true)?;
-        } else if !last {
-            r.frame(camera, sc, count, false)?;
+        if let (_, Some(g)) = r.frame(camera, sc, count, false)? {
+            gpu_total += g;
+            gpu_frames += 1;
         }
         ctx.progress(k as u64 + 1, timed as u64);
     }
-    let runs = if timed == 1 { 1 } else { timed - 1 };
-    let ms = start.elapsed().as_secs_f64() * 1e3 / runs as f64;
+    let ms = start.elapsed().as_secs_f64() * 1e3 / timed as f64;
+    let gpu_ms = (gpu_frames > 0).then(|| gpu_total / gpu_frames as f64);
     let pixels = rgba.len() / 4;
     let covered = rgba.chunks_exact(4).filter(|c| c[3] > 0.5).count();
     let data = rgba
         .chunks_exact(4)
         .flat_map(|c| [c[0], c[1], c[2]])
         .collect();
-    Ok((data, covered as f64 / pixels.max(1) as f64, ms))
+    Ok((data, covered as f64 / pixels.max(1) as f64, ms, gpu_ms))
 }
 
 #[cfg(test)]
@@ -667,13 +671,13 @@ mod tests {
             let cam = Camera::new(&p.camera).unwrap();
             let ctx = NodeContext::detached(None);
             match gpu {
-                Some(g) => render_gpu(&ctx, g, &scene, &cam, p).map(|(d, c, _)| (d, c)),
-                None => render_cpu(&scene, &cam, p),
+                Some(g) => render_gpu(&ctx, g, &scene, &cam, p).map(|(d, c, _, t)| (d, c, t)),
+                None => render_cpu(&scene, &cam, p).map(|(d, c)| (d, c, None)),
             }
         };
         // The MDF must matter in this scene, or agreement with it would prove nothing.
-        let (plain, _) = scene_in(None, false, &p).unwrap();
-        let (meso, _) = scene_in(None, true, &p).unwrap();
+        let (plain, ..) = scene_in(None, false, &p).unwrap();
+        let (meso, ..) = scene_in(None, true, &p).unwrap();
         let changed = plain
             .iter()
             .zip(&meso)
@@ -690,7 +694,7 @@ mod tests {
         // (a thin crescent at this resolution, 90 values when written).
         let mut lit = p.clone();
         lit.shadows = false;
-        let (unshadowed, _) = scene_in(None, true, &lit).unwrap();
+        let (unshadowed, ..) = scene_in(None, true, &lit).unwrap();
         let darker = unshadowed
             .iter()
             .zip(&meso)
@@ -705,8 +709,8 @@ mod tests {
             };
             for (with_mdf, shadows) in [(false, false), (true, false), (true, true)] {
                 p.shadows = shadows;
-                let (cpu, cpu_cov) = scene_in(None, with_mdf, &p).unwrap();
-                let (gpu_img, gpu_cov) = match scene_in(Some(&gpu), with_mdf, &p) {
+                let (cpu, cpu_cov, _) = scene_in(None, with_mdf, &p).unwrap();
+                let (gpu_img, gpu_cov, gpu_ms) = match scene_in(Some(&gpu), with_mdf, &p) {
                     Ok(r) => r,
                     // Only a missing capability may skip a backend, and only with its message.
                     Err(e) if e.to_string().contains("cannot render") => {
@@ -728,7 +732,7 @@ mod tests {
                 let mean = sum / pixels as f64 / peak as f64;
                 let frac = differing as f64 / pixels as f64;
                 eprintln!(
-                    "{} mdf {with_mdf} shadows {shadows}: coverage CPU {cpu_cov:.4} GPU {gpu_cov:.4}, mean |diff| {mean:.2e} of peak, {frac:.4} of pixels differ by > 1%",
+                    "{} mdf {with_mdf} shadows {shadows}: coverage CPU {cpu_cov:.4} GPU {gpu_cov:.4}, mean |diff| {mean:.2e} of peak, {frac:.4} of pixels differ by > 1%, GPU time {gpu_ms:?} ms",
                     gpu.describe()
                 );
                 // Where they may differ: the rasteriser's edge rules vs the f64 ray–triangle test
@@ -740,6 +744,16 @@ mod tests {
                 assert!(frac < 0.02, "{}: {frac} of pixels differ", gpu.describe());
                 assert!(mean < 5e-3, "{}: mean difference {mean}", gpu.describe());
                 assert!((cpu_cov - gpu_cov).abs() < 0.01);
+                // Timestamps where the device has them, and a positive time.
+                let stamps = gpu
+                    .device
+                    .features()
+                    .contains(wgpu::Features::TIMESTAMP_QUERY);
+                assert_eq!(gpu_ms.is_some(), stamps);
+                assert!(
+                    gpu_ms.is_none_or(|t| t > 0.0 && t.is_finite()),
+                    "{gpu_ms:?}"
+                );
                 tested += 1;
             }
             // Past the device's texture limit: a clear refusal naming the parameter.
