@@ -108,6 +108,12 @@ pub fn build(p: &Params) -> Result<Mesh, NodeError> {
             format!("{su}×{sv} cells: each must be at least 1, and 16M cells at most"),
         ));
     }
+    if p.shape == Shape::Sphere && sv < 2 {
+        return Err(NodeError::param(
+            "segments",
+            "a sphere needs at least 2 cells from pole to pole",
+        ));
+    }
     if !(p.size > 0.0 && p.size.is_finite()) {
         return Err(NodeError::param("size", "must be positive and finite"));
     }
@@ -140,7 +146,16 @@ pub fn build(p: &Params) -> Result<Mesh, NodeError> {
             // (u, v, n) is right-handed on every shape, so this order is counter-clockwise seen
             // from outside.
             let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
-            mesh.indices.extend_from_slice(&[a, b, c, a, c, d]);
+            // The sphere's first and last rows meet at a pole: one triangle of each cell there
+            // has two corners on the pole, i.e. no area, and is left out.
+            let pole_south = p.shape == Shape::Sphere && j == 0;
+            let pole_north = p.shape == Shape::Sphere && j == sv - 1;
+            if !pole_south {
+                mesh.indices.extend_from_slice(&[a, b, c]);
+            }
+            if !pole_north {
+                mesh.indices.extend_from_slice(&[a, c, d]);
+            }
         }
     }
     mesh.compute_tangents();
@@ -177,9 +192,7 @@ mod tests {
                 let e2 = [r[0] - p[0], r[1] - p[1], r[2] - p[2]];
                 let f = cross(e1, e2);
                 let area = (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
-                if area < 1e-6 {
-                    continue; // pole triangles of the sphere
-                }
+                assert!(area > 1e-6, "{shape:?} triangle {t} has no area");
                 let n = m.normals[a];
                 assert!(
                     f[0] * n[0] + f[1] * n[1] + f[2] * n[2] > 0.0,
