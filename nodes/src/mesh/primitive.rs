@@ -56,7 +56,8 @@ impl Node for Primitive {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "mesh.primitive",
-            version: 1,
+            // 2: no zero-area triangles at the sphere's poles.
+            version: 2,
             doc: "Plane, sphere, cylinder or torus with texture coordinates and tangent frames.",
             device: DevicePreference::Cpu,
             inputs: vec![],
