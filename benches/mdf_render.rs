@@ -28,6 +28,26 @@ fn port(node: &dyn Fn() -> mesoflow_runtime::Outputs, name: &str) -> ValueRef {
     node().get(name).expect("port").clone()
 }
 
+/// The graph's woven tile at `size`² texels, `depth` texels deep.
+fn weave(size: u32, depth: f64) -> ValueRef {
+    let p = procedural::Params {
+        pattern: procedural::Pattern::Weave,
+        size,
+        depth,
+        count: 4,
+        ..Default::default()
+    };
+    let quiet = NodeContext::detached(None);
+    port(
+        &|| {
+            procedural::Procedural
+                .run(&quiet, &p, &Inputs::new())
+                .unwrap()
+        },
+        "height",
+    )
+}
+
 fn scalar(out: &mesoflow_runtime::Outputs, name: &str) -> f64 {
     out.get(name)
         .and_then(|v| v.as_scalar())
@@ -57,21 +77,7 @@ fn main() {
 
     // MDF tabulation.
     let mdf_res: u32 = arg("--mdf-res", 256);
-    let hp = procedural::Params {
-        pattern: procedural::Pattern::Weave,
-        size: mdf_res,
-        depth: 6.0 * mdf_res as f64 / 64.0,
-        count: 4,
-        ..Default::default()
-    };
-    let tile = port(
-        &|| {
-            procedural::Procedural
-                .run(&quiet, &hp, &Inputs::new())
-                .unwrap()
-        },
-        "height",
-    );
+    let tile = weave(mdf_res, 6.0 * mdf_res as f64 / 64.0);
     println!("| mdf.tabulate {mdf_res}² × 81 views | seconds | rays/s |\n|---|---|---|");
     for (name, g) in &devices {
         let ctx = NodeContext::detached(g.clone());
@@ -93,21 +99,7 @@ fn main() {
     let btf_res: u32 = arg("--btf-res", 64);
     let (w, h): (u32, u32) = (arg("--width", 800), arg("--height", 600));
     let frames: u32 = arg("--frames", 5);
-    let hp = procedural::Params {
-        pattern: procedural::Pattern::Weave,
-        size: btf_res,
-        depth: 6.0,
-        count: 4,
-        ..Default::default()
-    };
-    let tile = port(
-        &|| {
-            procedural::Procedural
-                .run(&quiet, &hp, &Inputs::new())
-                .unwrap()
-        },
-        "height",
-    );
+    let tile = weave(btf_res, 6.0);
     let dirs = r#"{"thetas": [0, 20, 40, 60, 80], "phis": [0, 45, 90, 135, 180, 225, 270, 315]}"#;
     let cp: capture::Params = serde_json::from_str(&format!(
         r#"{{"views": {dirs}, "lights": {dirs}, "brdf": "ward", "albedo": [0.62, 0.42, 0.22]}}"#

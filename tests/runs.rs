@@ -68,6 +68,18 @@ fn ids<'a>(st: &'a std::collections::BTreeMap<String, String>, status: &str) -> 
         .collect()
 }
 
+/// A node's metric from a run report.
+fn metric(rep: &serde_json::Value, id: &str, m: &str) -> f64 {
+    rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == id)
+        .unwrap()["metrics"][m]
+        .as_f64()
+        .unwrap()
+}
+
 #[test]
 fn incremental_reexecution_recomputes_exactly_what_changed() {
     let s = Scratch::new();
@@ -682,16 +694,7 @@ fn btf_pipeline_reports_the_error_it_measures() {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let rep = report(&out);
-    let metric = |id: &str, m: &str| {
-        rep["nodes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|n| n["id"] == id)
-            .unwrap()["metrics"][m]
-            .as_f64()
-            .unwrap()
-    };
+    let metric = |id: &str, m: &str| metric(&rep, id, m);
     let (reported, measured) = (metric("pca", "rmse"), metric("compare", "rmse"));
     assert!(
         reported > 0.0 && (reported - measured).abs() <= 1e-4 * reported,
@@ -793,16 +796,7 @@ fn mdf_render_graph_renders_with_and_without_silhouettes() {
     let r = mesoflow(&args, root);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let rep = report(&out);
-    let metric = |id: &str, m: &str| {
-        rep["nodes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|n| n["id"] == id)
-            .unwrap()["metrics"][m]
-            .as_f64()
-            .unwrap()
-    };
+    let metric = |id: &str, m: &str| metric(&rep, id, m);
     // The MDF carves the outline: fewer pixels show the torus than without it.
     assert!(metric("torus_mdf", "coverage") < metric("torus_plain", "coverage"));
     assert!(metric("torus_mdf", "frame_ms") > 0.0);
