@@ -6,7 +6,7 @@
 //!
 //! A GPU node (wgpu compute, exact cell traversal in f32) whose CPU path runs the f64 caster of
 //! `heightfield::raycast` on rayon; the two agree to 1e-3 texel (tested). A mesh tile (overhangs,
-//! holes) goes through `mesh_tile` instead, on the CPU.
+//! holes) goes through `mesh_tile` instead, also on either device.
 
 use crate::btf::directions::{DirectionSet, Named};
 use crate::heightfield::raycast::Caster;
@@ -86,7 +86,7 @@ impl Node for Tabulate {
         NodeSpec {
             kind: "mdf.tabulate",
             version: 1,
-            doc: "Mesostructure distance function of a height-field tile (GPU compute with a CPU path) or a mesh tile (CPU): distance from the shell top to the first hit per texel and view.",
+            doc: "Mesostructure distance function of a height-field or mesh tile: distance from the shell top to the first hit per texel and view; GPU compute with a CPU path.",
             device: DevicePreference::Gpu,
             inputs: vec![
                 Port::optional("height", HeightField::TYPE, "periodic tile, heights in texels"),
@@ -123,16 +123,15 @@ impl Node for Tabulate {
                 p.views
                     .validate()
                     .map_err(|e| NodeError::param("views", e))?;
-                if ctx.gpu().is_some() {
-                    ctx.warn(
-                        "mesh tiles are tabulated on the CPU (the GPU path covers height fields)",
-                    );
-                }
                 let tile = super::mesh_tile::MeshTile::new(mesh)?;
                 let n = p.resolution.unwrap_or(64) as usize;
                 let views = p.views.directions();
-                let (data, depth) =
-                    super::mesh_tile::tabulate(ctx, &tile, &views, (n, n), p.depth)?;
+                let (data, depth) = match ctx.gpu() {
+                    Some(gpu) => {
+                        super::mesh_tile::tabulate_gpu(gpu, &tile, &views, (n, n), p.depth)?
+                    }
+                    None => super::mesh_tile::tabulate(ctx, &tile, &views, (n, n), p.depth)?,
+                };
                 (data, n, n, views, depth)
             }
             (Some(_), Some(_)) => {
