@@ -433,7 +433,8 @@ impl<'a> GpuRenderer<'a> {
             ]
             .map(|v| v as f32),
         );
-        u.extend([s.background[0], s.background[1], s.background[2], 0.0].map(|v| v as f32));
+        let parallax = if s.parallax { 1.0 } else { 0.0 };
+        u.extend([s.background[0], s.background[1], s.background[2], parallax].map(|v| v as f32));
         u.extend(match &s.mdf {
             Some(m) => [
                 m.mdf.width as f32,

@@ -63,6 +63,10 @@ pub struct Params {
     pub background: [f64; 3],
     /// Use the `mdf` input when connected; false renders the plain mesh (for sweeps).
     pub use_mdf: bool,
+    /// Look the BTF up at the hit's texel (offset by the MDF distance) rather than the entry
+    /// texel. For BTFs rectified to the mesostructure; a BTF captured at the reference plane
+    /// (`btf.capture`, measured data) already contains the parallax, so leave it off there.
+    pub parallax: bool,
     /// Frames rendered for the timing metrics (the image is the last one).
     #[schemars(range(min = 1, max = 1000))]
     pub frames: u32,
@@ -80,6 +84,7 @@ impl Default for Params {
             layers: 2,
             background: [0.0; 3],
             use_mdf: true,
+            parallax: false,
             frames: 1,
         }
     }
@@ -164,6 +169,7 @@ impl Node for RenderMesh {
             tiling: p.tiling,
             shell: p.shell,
             background: p.background,
+            parallax: p.parallax,
         };
         let (data, coverage, ms, gpu_ms) = match ctx.gpu() {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
@@ -538,6 +544,46 @@ mod tests {
     }
 
     #[test]
+    fn parallax_moves_the_lookup_by_the_mdf_offset() {
+        // A 45° orthographic view (φ = 0) of the plane's centre over a flat MDF sunk 4 texels:
+        // d = 4/cos 45° along the ray, i.e. 4 texels towards −u; on an 8-texel tile that is
+        // Δu = −0.5. Without `parallax` the lookup stays at the entry texel.
+        let mdf = sunken_mdf(4.0);
+        let btf = test_btf(8, &[[0.0, 0.0]], &[[0.0, 0.0]]);
+        let material = Material::new(Source::Raw(&btf));
+        let mesh = plane();
+        let cam = Camera::new(&CameraParams {
+            eye: [3.0, 0.0, 3.0],
+            target: [0.0, 0.0, 0.0],
+            orthographic: Some(0.01),
+            resolution: [1, 1],
+            ..Default::default()
+        })
+        .unwrap();
+        let layers = super::layers::trace(&mesh, &cam, 1);
+        let (_, d) = cam.ray(0, 0);
+        for (parallax, want_u) in [(false, 0.5), (true, 0.0)] {
+            let scene = Scene {
+                mesh: &mesh,
+                material: &material,
+                mdf: Some(MdfLookup::new(&mdf)),
+                light: light(&LightParams::default()).unwrap(),
+                tiling: [1.0, 1.0],
+                shell: 0.1,
+                background: [0.0; 3],
+                parallax,
+            };
+            let (_, _, s, wo) = scene.hit(&layers, 0, d).unwrap();
+            assert!((wo[0] - 0.5f64.sqrt()).abs() < 1e-9 && wo[1].abs() < 1e-9);
+            assert!(
+                (s.uv[0] - want_u).abs() < 1e-6 && (s.uv[1] - 0.5).abs() < 1e-6,
+                "{:?}",
+                s.uv
+            );
+        }
+    }
+
+    #[test]
     fn missing_hits_grazing_views_and_few_directions_stay_finite() {
         let btf = test_btf(4, &[[0.0, 0.0]], &[[30.0, 0.0]]);
         let mut mdf = sunken_mdf(2.0);
@@ -667,6 +713,7 @@ mod tests {
                 tiling: p.tiling,
                 shell: p.shell,
                 background: p.background,
+                parallax: p.parallax,
             };
             let cam = Camera::new(&p.camera).unwrap();
             let ctx = NodeContext::detached(None);
@@ -707,8 +754,14 @@ mod tests {
             let Ok(gpu) = mesoflow_runtime::Gpu::with_backends(backends) else {
                 continue;
             };
-            for (with_mdf, shadows) in [(false, false), (true, false), (true, true)] {
+            for (with_mdf, shadows, parallax) in [
+                (false, false, false),
+                (true, false, false),
+                (true, true, false),
+                (true, false, true),
+            ] {
                 p.shadows = shadows;
+                p.parallax = parallax;
                 let (cpu, cpu_cov, _) = scene_in(None, with_mdf, &p).unwrap();
                 let (gpu_img, gpu_cov, gpu_ms) = match scene_in(Some(&gpu), with_mdf, &p) {
                     Ok(r) => r,
@@ -732,7 +785,7 @@ mod tests {
                 let mean = sum / pixels as f64 / peak as f64;
                 let frac = differing as f64 / pixels as f64;
                 eprintln!(
-                    "{} mdf {with_mdf} shadows {shadows}: coverage CPU {cpu_cov:.4} GPU {gpu_cov:.4}, mean |diff| {mean:.2e} of peak, {frac:.4} of pixels differ by > 1%, GPU time {gpu_ms:?} ms",
+                    "{} mdf {with_mdf} shadows {shadows} parallax {parallax}: coverage CPU {cpu_cov:.4} GPU {gpu_cov:.4}, mean |diff| {mean:.2e} of peak, {frac:.4} of pixels differ by > 1%, GPU time {gpu_ms:?} ms",
                     gpu.describe()
                 );
                 // Where they may differ: the rasteriser's edge rules vs the f64 ray–triangle test

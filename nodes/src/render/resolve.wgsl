@@ -15,7 +15,7 @@ struct Params {
     light: vec4<f32>,      // direction towards the light, intensity
     light_pos: vec4<f32>,  // xyz, w = 1 for a point light
     misc: vec4<f32>,       // tiling u, shell, shadow bias, tiling v
-    background: vec4<f32>,
+    background: vec4<f32>, // rgb, w = 1 for parallax (lookup at the hit's texel)
     mdf: vec4<f32>,        // width, height, depth, present
     mat: vec4<u32>,        // kind (0 raw, 1 basis), width, height, ycbcr
     dirs: vec4<u32>,       // btf views, btf lights, mdf views, layers
@@ -271,10 +271,10 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
     return acc;
 }
 
-// World distance to the mesostructure, 0 without an MDF.
-fn mdf_distance(s: Surface, wo: vec3<f32>) -> f32 {
+// (world distance, MDF texels) to the mesostructure, 0 without an MDF.
+fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
     if (P.mdf.w < 0.5 || P.mdf.z <= 0.0) {
-        return 0.0;
+        return vec2<f32>(0.0, 0.0);
     }
     let mw = u32(P.mdf.x);
     let mh = u32(P.mdf.y);
@@ -293,9 +293,10 @@ fn mdf_distance(s: Surface, wo: vec3<f32>) -> f32 {
         }
     }
     if (weight < 0.5) {
-        return inf();
+        return vec2<f32>(inf(), inf());
     }
-    return sum / weight * P.misc.y / P.mdf.z;
+    let d = sum / weight;
+    return vec2<f32>(d * P.misc.y / P.mdf.z, d);
 }
 
 struct Hit {
@@ -322,13 +323,16 @@ fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
         if (b.x >= 0.0) {
             let sb = surface(b);
             let outward = local_up(local(sb, d));
-            tb = b.x - mdf_distance(sb, outward);
+            tb = b.x - mdf_distance(sb, outward).x;
         }
-        if (df < 3.0e38 && f.x + df < tb) {
+        if (df.x < 3.0e38 && f.x + df.x < tb) {
             h.found = true;
-            h.t = f.x + df;
+            h.t = f.x + df.x;
             h.t_front = f.x;
             h.s = s;
+            if (P.background.w > 0.5) {
+                h.s.uv = s.uv - df.y * wo.xy / P.mdf.xy;
+            }
             h.wo = wo;
             return h;
         }

@@ -9,8 +9,10 @@
 //! MDF distances are in MDF texels; one texel of depth is `shell / mdf.depth` world units. A hit
 //! is shaded, as in the thesis, at (x, t_f + d_f): with the BTF at the entry texel x, whose
 //! measured images already contain the parallax and masking the MDF describes (displacing the
-//! lookup as well would apply that parallax twice), in the front face's tangent frame, times the
-//! light's irradiance and the shadow map's visibility. The shadow map holds the displaced depth
+//! lookup as well would apply that parallax twice), in the front face's tangent frame. With
+//! `parallax` on, the lookup moves to the hit's own texel, d·(−ω_o.x, −ω_o.y) texels away in
+//! texture space: right for a BTF rectified to the mesostructure (no parallax of its own). Light
+//! is the irradiance times the shadow map's visibility. The shadow map holds the displaced depth
 //! of the casters (the first mesostructure hit along each light ray), and is tested at the
 //! receiver's reference surface point (x, t_f): a caster shadows it only if it lies in front of
 //! the receiver's shell, so shadows between parts of the mesh and from silhouette mesostructure
@@ -47,6 +49,8 @@ pub struct Scene<'a> {
     pub tiling: [f64; 2],
     pub shell: f64,
     pub background: [f64; 3],
+    /// Shade at the hit's texel instead of the entry texel (for parallax-free BTFs).
+    pub parallax: bool,
 }
 
 /// Position, texture coordinate and tangent frame (t, b, n) at a visibility sample.
@@ -89,12 +93,15 @@ impl Scene<'_> {
         [dot(v, s.t), dot(v, s.b), dot(v, s.n)]
     }
 
-    /// MDF distance in world units for a ray arriving against `wo` (local, pointing to the
-    /// viewer); 0 without an MDF.
-    fn mdf_distance(&self, s: &Surface, wo: V3) -> f64 {
+    /// MDF distance in world units and in MDF texels for a ray arriving against `wo` (local,
+    /// pointing to the viewer); 0 without an MDF.
+    fn mdf_distance(&self, s: &Surface, wo: V3) -> (f64, f64) {
         match &self.mdf {
-            Some(m) if m.mdf.depth > 0.0 => m.eval(s.uv[0], s.uv[1], wo) * self.shell / m.mdf.depth,
-            _ => 0.0,
+            Some(m) if m.mdf.depth > 0.0 => {
+                let d = m.eval(s.uv[0], s.uv[1], wo);
+                (d * self.shell / m.mdf.depth, d)
+            }
+            _ => (0.0, 0.0),
         }
     }
 
@@ -108,16 +115,22 @@ impl Scene<'_> {
             };
             let s = self.surface(&f);
             let wo = local_up(Self::local(&s, mul(d, -1.0)));
-            let df = self.mdf_distance(&s, wo);
+            let (df, dtex) = self.mdf_distance(&s, wo);
             let tb = match layers.back[k * plane + px] {
                 Some(b) => {
                     let sb = self.surface(&b);
                     let out = local_up(Self::local(&sb, d));
-                    b.t - self.mdf_distance(&sb, out)
+                    b.t - self.mdf_distance(&sb, out).0
                 }
                 None => f64::INFINITY,
             };
             if df.is_finite() && f.t + df < tb {
+                let mut s = s;
+                if let (true, Some(m)) = (self.parallax, &self.mdf) {
+                    // The hit lies d·(−ω_o.x, −ω_o.y) texels from the entry point.
+                    s.uv[0] -= dtex * wo[0] / m.mdf.width as f64;
+                    s.uv[1] -= dtex * wo[1] / m.mdf.height as f64;
+                }
                 return Some((f.t + df, f.t, s, wo));
             }
         }
