@@ -13,6 +13,7 @@ pub mod mesh;
 mod registry;
 pub mod render;
 pub mod rng;
+pub mod sss;
 pub mod types;
 pub mod util;
 

@@ -24,6 +24,8 @@ pub fn registry() -> Registry {
     r.register(crate::render::render_mesh::RenderMesh);
     r.register(crate::io::image_write::ImageWrite);
     r.register(crate::io::npy_write::NpyWrite);
+    r.register(crate::sss::material::Material);
+    r.register(crate::sss::profile::Profile);
     r.register(crate::util::scalar::Constant);
     r.register(crate::util::scalar::Affine);
     r.register(crate::util::sleep::Sleep);

@@ -6,6 +6,7 @@ mod heightfield;
 mod image;
 mod mdf;
 mod mesh;
+mod scattering;
 pub use image::{linear_to_srgb, srgb_to_linear};
 mod normal_map;
 
@@ -16,6 +17,7 @@ pub use image::Image;
 pub use mdf::Mdf;
 pub use mesh::Mesh;
 pub use normal_map::NormalMap;
+pub use scattering::{DiffusionProfile, ScatteringMaterial};
 
 /// Every array-like type, i.e. what `npy.write` accepts.
 pub const ARRAY_TYPES: &[&str] = &[
@@ -35,4 +37,6 @@ pub fn register(r: &mut mesoflow_runtime::Registry) {
     r.register_type(NormalMap::TYPE, NormalMap::decode);
     r.register_type(Mdf::TYPE, Mdf::decode);
     r.register_type(Mesh::TYPE, Mesh::decode);
+    r.register_type(ScatteringMaterial::TYPE, ScatteringMaterial::decode);
+    r.register_type(DiffusionProfile::TYPE, DiffusionProfile::decode);
 }
