@@ -281,8 +281,8 @@ pub fn render_cpu(
         .into_par_iter()
         .map(|px| {
             let (o, d) = camera.ray((px % w) as u32, (px / w) as u32);
-            let hit = scene.hit(&l, px, d).is_some();
-            (scene.shade(&l, px, o, d, shadow.as_ref()), hit)
+            let colour = scene.shade(&l, px, o, d, shadow.as_ref());
+            (colour.unwrap_or(scene.background), colour.is_some())
         })
         .collect();
     let covered = pixels.iter().filter(|p| p.1).count();

@@ -137,7 +137,8 @@ impl Scene<'_> {
         None
     }
 
-    /// Linear RGB of pixel `px` whose ray is (o, d).
+    /// Linear RGB of pixel `px` whose ray is (o, d); `None` where the ray meets no
+    /// mesostructure (the background shows).
     pub fn shade(
         &self,
         layers: &Layers,
@@ -145,10 +146,8 @@ impl Scene<'_> {
         o: V3,
         d: V3,
         shadow: Option<&ShadowMap>,
-    ) -> [f64; 3] {
-        let Some((_, t_front, s, wo)) = self.hit(layers, px, d) else {
-            return self.background;
-        };
+    ) -> Option<[f64; 3]> {
+        let (_, t_front, s, wo) = self.hit(layers, px, d)?;
         let p = add(o, mul(d, t_front));
         let (to_light, falloff) = match self.light.position {
             Some(lp) => {
@@ -160,14 +159,14 @@ impl Scene<'_> {
         };
         let wi = Self::local(&s, to_light);
         if wi[2] <= 0.0 {
-            return [0.0; 3];
+            return Some([0.0; 3]);
         }
         let visible = shadow.is_none_or(|sm| sm.lit(p, wi[2]));
         if !visible {
-            return [0.0; 3];
+            return Some([0.0; 3]);
         }
         let f = self.material.eval(s.uv[0], s.uv[1], wo, wi);
-        f.map(|c| c * self.light.intensity * falloff)
+        Some(f.map(|c| c * self.light.intensity * falloff))
     }
 }
 
