@@ -37,15 +37,7 @@ fn weave(size: u32, depth: f64) -> ValueRef {
         count: 4,
         ..Default::default()
     };
-    let quiet = NodeContext::detached(None);
-    port(
-        &|| {
-            procedural::Procedural
-                .run(&quiet, &p, &Inputs::new())
-                .unwrap()
-        },
-        "height",
-    )
+    Arc::new(procedural::generate(&NodeContext::detached(None), &p).unwrap())
 }
 
 fn scalar(out: &mesoflow_runtime::Outputs, name: &str) -> f64 {

@@ -178,16 +178,7 @@ mod tests {
             ..Default::default()
         };
         let ctx = NodeContext::detached(None);
-        let out = crate::heightfield::procedural::Procedural
-            .run(&ctx, &p, &Inputs::new())
-            .unwrap();
-        let hf = out
-            .get("height")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<HeightField>()
-            .unwrap()
-            .clone();
+        let hf = crate::heightfield::procedural::generate(&ctx, &p).unwrap();
         let cpu = normals_cpu(&hf, 2.0);
         let mut tested = Vec::new();
         // Each backend separately: naga translates the shader differently for each, and a bug in

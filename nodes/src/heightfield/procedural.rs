@@ -92,39 +92,8 @@ impl Node for Procedural {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        if p.pattern == Pattern::Weave && !p.count.is_multiple_of(2) {
-            return Err(NodeError::param(
-                "count",
-                format!(
-                    "a plain weave tiles only with an even thread count, got {}",
-                    p.count
-                ),
-            ));
-        }
-        let n = p.size as usize;
-        let mut data = vec![0f32; n * n];
-        let rows_done = std::sync::atomic::AtomicU64::new(0);
-        data.par_chunks_mut(n)
-            .enumerate()
-            .try_for_each(|(y, row)| {
-                ctx.check_cancel()?;
-                for (x, h) in row.iter_mut().enumerate() {
-                    // Texel centres; v grows up the image (row 0 is the top).
-                    let u = (x as f64 + 0.5) / n as f64;
-                    let v = 1.0 - (y as f64 + 0.5) / n as f64;
-                    *h = (p.depth * unit_height(p, u, v)) as f32;
-                }
-                let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                if done.is_multiple_of(64) || done == n as u64 {
-                    ctx.progress(done, n as u64);
-                }
-                Ok::<(), NodeError>(())
-            })?;
-        let hf = HeightField {
-            width: n,
-            height: n,
-            data,
-        };
+        let hf = generate(ctx, p)?;
+        let n = hf.width;
         let (lo, hi) = hf.min_max();
         let span = if hi > lo { hi - lo } else { 1.0 };
         let preview = Image {
@@ -135,6 +104,43 @@ impl Node for Procedural {
         };
         Ok(Outputs::new().with("height", hf).with("preview", preview))
     }
+}
+
+/// The tile `run` outputs, for callers that want the `HeightField` itself (tests, benches).
+pub fn generate(ctx: &NodeContext, p: &Params) -> Result<HeightField, NodeError> {
+    if p.pattern == Pattern::Weave && !p.count.is_multiple_of(2) {
+        return Err(NodeError::param(
+            "count",
+            format!(
+                "a plain weave tiles only with an even thread count, got {}",
+                p.count
+            ),
+        ));
+    }
+    let n = p.size as usize;
+    let mut data = vec![0f32; n * n];
+    let rows_done = std::sync::atomic::AtomicU64::new(0);
+    data.par_chunks_mut(n)
+        .enumerate()
+        .try_for_each(|(y, row)| {
+            ctx.check_cancel()?;
+            for (x, h) in row.iter_mut().enumerate() {
+                // Texel centres; v grows up the image (row 0 is the top).
+                let u = (x as f64 + 0.5) / n as f64;
+                let v = 1.0 - (y as f64 + 0.5) / n as f64;
+                *h = (p.depth * unit_height(p, u, v)) as f32;
+            }
+            let done = rows_done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if done.is_multiple_of(64) || done == n as u64 {
+                ctx.progress(done, n as u64);
+            }
+            Ok::<(), NodeError>(())
+        })?;
+    Ok(HeightField {
+        width: n,
+        height: n,
+        data,
+    })
 }
 
 /// Height in [0, 1] at tile coordinates (u, v) ∈ [0, 1)².

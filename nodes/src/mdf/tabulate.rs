@@ -501,15 +501,7 @@ mod tests {
             ..Default::default()
         };
         let ctx = NodeContext::detached(None);
-        let hf = crate::heightfield::procedural::Procedural
-            .run(&ctx, &p, &Inputs::new())
-            .unwrap()
-            .get("height")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<HeightField>()
-            .unwrap()
-            .clone();
+        let hf = crate::heightfield::procedural::generate(&ctx, &p).unwrap();
         let params = Params::default();
         let s = setup(&hf, &params).unwrap();
         let cpu = tabulate_cpu(&ctx, &hf, &s).unwrap();

@@ -644,12 +644,8 @@ mod tests {
             count: 2,
             ..Default::default()
         };
-        let hf = crate::heightfield::procedural::Procedural
-            .run(&ctx, &hp, &Inputs::new())
-            .unwrap()
-            .get("height")
-            .unwrap()
-            .clone();
+        let hf: mesoflow_runtime::ValueRef =
+            Arc::new(crate::heightfield::procedural::generate(&ctx, &hp).unwrap());
         let dirs = r#"{"thetas": [0, 30, 60, 80], "phis": [0, 60, 120, 180, 240, 300]}"#;
         let cp: crate::btf::capture::Params =
             serde_json::from_str(&format!(r#"{{"views": {dirs}, "lights": {dirs}}}"#)).unwrap();
