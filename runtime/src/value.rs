@@ -27,6 +27,11 @@ pub trait Value: Any + Send + Sync + Debug {
     fn as_array(&self) -> Option<ArrayView<'_>> {
         None
     }
+    /// A dense row-major f64 array (shape, data), for values whose precision an f32 view would
+    /// lose (diffusion profiles span ten decades of radius); `npy.write` prefers it.
+    fn as_array_f64(&self) -> Option<(Vec<usize>, Vec<f64>)> {
+        None
+    }
     /// JSON that must travel with the array for it to be interpreted (the MDF's view directions);
     /// `npy.write` writes it beside the `.npy` as `<name>.json`.
     fn array_sidecar(&self) -> Option<String> {

@@ -280,7 +280,10 @@ pub fn encode_exr(img: &Image) -> Result<Vec<u8>, String> {
 }
 
 /// NPY bytes (little-endian f32, C order) of an array of the given shape.
-pub fn encode_npy(shape: &[usize], data: &[f32]) -> Result<Vec<u8>, String> {
+pub fn encode_npy<T: npyz::Serialize + npyz::AutoSerialize + Copy>(
+    shape: &[usize],
+    data: &[T],
+) -> Result<Vec<u8>, String> {
     use npyz::WriterBuilder;
     let shape: Vec<u64> = shape.iter().map(|&s| s as u64).collect();
     let mut out = Cursor::new(Vec::new());
@@ -343,7 +346,11 @@ mod tests {
     #[test]
     fn npy_is_what_numpy_writes() {
         // The NPY v1.0 header for a (2, 3) little-endian float32 C-order array, per numpy's spec.
-        let bytes = encode_npy(&[2, 3], &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        let bytes = encode_npy(&[2, 3], &[1.0f32, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        // And f64 (diffusion profiles): '<f8', eight bytes per value.
+        let wide = encode_npy(&[1, 2], &[0.5f64, 1e-300]).unwrap();
+        assert!(String::from_utf8_lossy(&wide[10..]).contains("'descr': '<f8'"));
+        assert_eq!(&wide[wide.len() - 8..], &1e-300f64.to_le_bytes());
         assert_eq!(&bytes[..6], b"\x93NUMPY");
         let header = String::from_utf8_lossy(&bytes[10..]).to_string();
         assert!(

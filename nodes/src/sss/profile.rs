@@ -1,13 +1,18 @@
 //! `sss.profile`: the radial diffuse reflectance Rd(r) of a homogeneous material, per channel,
 //! on a log-spaced radius grid adapted to the material: from a thousandth of the smallest
 //! transport length 1/σt′ out to the radius that holds 99.9% of every channel's reflected energy
-//! (found by doubling; no bound derived from 1/σtr, which is infinite without absorption). It
-//! carries the totals, the effective mean free paths and a cumulative table for sampling radii.
+//! (found on a fine cumulative table out to 10⁶ transport lengths; no bound derived from 1/σtr,
+//! which is infinite without absorption). It carries the totals, the effective mean free paths
+//! and a cumulative table for sampling radii.
 //!
-//! Models: `dipole` (Jensen et al. 2001). The better dipole, photon beam diffusion and the Monte
-//! Carlo reference are issue 5's next steps.
+//! Models: `dipole` (Jensen et al. 2001, the domain notes' formulas), `better_dipole` (d'Eon
+//! 2012), `pbd` (photon beam diffusion with single scattering, Habel et al. 2013) and
+//! `montecarlo` (the reference: photon tracing, see `montecarlo.rs`). Rd is per unit of flux
+//! transmitted into the medium, as the dipole defines it.
 
+use super::diffusion::Medium;
 use super::dipole::Dipole;
+use super::montecarlo;
 use crate::types::{DiffusionProfile, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -21,6 +26,23 @@ use std::time::Instant;
 pub enum Model {
     /// Jensen et al. 2001, as in the domain notes §5.
     Dipole,
+    /// d'Eon 2012: Grosjean's diffusion coefficient, Fresnel-moment boundary.
+    BetterDipole,
+    /// Photon beam diffusion (Habel et al. 2013), multiple plus single scattering.
+    Pbd,
+    /// Photon tracing in a semi-infinite medium: the reference.
+    Montecarlo,
+}
+
+impl Model {
+    pub fn name(self) -> &'static str {
+        match self {
+            Model::Dipole => "dipole",
+            Model::BetterDipole => "better_dipole",
+            Model::Pbd => "pbd",
+            Model::Montecarlo => "montecarlo",
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
@@ -30,6 +52,11 @@ pub struct Params {
     /// Radius samples.
     #[schemars(range(min = 8, max = 1000000))]
     pub points: u32,
+    /// Photons per channel (`montecarlo`).
+    #[schemars(range(min = 1000))]
+    pub photons: u64,
+    /// Seed of the photon paths (`montecarlo`).
+    pub seed: u64,
 }
 
 impl Default for Params {
@@ -37,12 +64,18 @@ impl Default for Params {
         Params {
             model: Model::Dipole,
             points: 256,
+            photons: 100_000,
+            seed: 1,
         }
     }
 }
 
 /// Share of the reflected energy the grid must hold.
 const ENERGY: f64 = 0.999;
+/// Fine cumulative table for totals and the energy radius: points per decade of radius, and its
+/// span in transport lengths either side of 1/σt′.
+const PER_DECADE: usize = 60;
+const SPAN_DECADES: i32 = 6;
 
 pub struct Profile;
 
@@ -52,8 +85,8 @@ impl Node for Profile {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.profile",
-            version: 1,
-            doc: "Radial diffuse reflectance Rd(r) per channel (dipole), on a grid out to 99.9% of the energy, with totals and a sampling table.",
+            version: 2,
+            doc: "Radial diffuse reflectance Rd(r) per channel (dipole, better_dipole, pbd or the montecarlo reference), on a grid out to 99.9% of the energy, with totals and a sampling table.",
             device: DevicePreference::Cpu,
             inputs: vec![Port::input("material", ScatteringMaterial::TYPE, "the medium")],
             outputs: vec![
@@ -61,6 +94,9 @@ impl Node for Profile {
                 Port::output("total_r", "Scalar", "total diffuse reflectance, red"),
                 Port::output("total_g", "Scalar", "total diffuse reflectance, green"),
                 Port::output("total_b", "Scalar", "total diffuse reflectance, blue"),
+                Port::output("stderr_r", "Scalar", "standard error of total_r (montecarlo; else 0)"),
+                Port::output("stderr_g", "Scalar", "standard error of total_g (montecarlo; else 0)"),
+                Port::output("stderr_b", "Scalar", "standard error of total_b (montecarlo; else 0)"),
                 Port::output("max_radius", "Scalar", "largest radius of the grid, mm"),
                 Port::output("seconds", "Scalar", "time to tabulate, s"),
             ],
@@ -68,102 +104,200 @@ impl Node for Profile {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let m = inputs.get::<ScatteringMaterial>("material")?;
         let start = Instant::now();
-        let profile = dipole_profile(m, p.points.max(8) as usize);
-        let seconds = start.elapsed().as_secs_f64();
-        if profile.rd.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(NodeError::Failed(
-                "the profile has a non-finite value: a bug, please report it with the material"
-                    .into(),
+        if p.model == Model::Montecarlo && p.photons < 1000 {
+            return Err(NodeError::param(
+                "photons",
+                "at least 1000 photons per channel",
             ));
         }
+        let tab = tabulate(m, p, &|_, done| ctx.progress(done, 3));
+        let seconds = start.elapsed().as_secs_f64();
+        let profile = tab.profile;
+        if profile.rd.iter().flatten().any(|v| !v.is_finite())
+            || profile.total.iter().any(|v| !v.is_finite())
+        {
+            return Err(NodeError::Failed(format!(
+                "the {} profile has a non-finite value: a bug, please report it with the material",
+                p.model.name()
+            )));
+        }
         let [r, g, b] = profile.total;
+        let [sr, sg, sb] = tab.stderr;
         let max_radius = profile.radii.last().copied().unwrap_or(0.0);
         Ok(Outputs::new()
             .with("profile", profile)
             .with("total_r", Scalar(r))
             .with("total_g", Scalar(g))
             .with("total_b", Scalar(b))
+            .with("stderr_r", Scalar(sr))
+            .with("stderr_g", Scalar(sg))
+            .with("stderr_b", Scalar(sb))
             .with("max_radius", Scalar(max_radius))
             .with("seconds", Scalar(seconds)))
     }
 }
 
-/// ∫_{lo}^{hi} Rd 2πr dr by the trapezoid rule in ln r (the integrand is smooth there).
-fn energy(d: &Dipole, lo: f64, hi: f64, n: usize) -> f64 {
-    let (a, b) = (lo.ln(), hi.ln());
-    let h = (b - a) / n as f64;
-    let f = |u: f64| {
-        let r = u.exp();
-        d.rd(r) * 2.0 * PI * r * r
+/// A profile and, for Monte Carlo, the standard errors of its totals.
+pub struct Tabulated {
+    pub profile: DiffusionProfile,
+    pub stderr: [f64; 3],
+    /// Monte Carlo only: scattering events simulated, all channels.
+    pub events: u64,
+}
+
+/// One channel's Rd(r) for the analytic models.
+fn analytic(
+    m: &ScatteringMaterial,
+    model: Model,
+    c: usize,
+) -> Box<dyn Fn(f64) -> f64 + Send + Sync> {
+    match model {
+        Model::Dipole | Model::Montecarlo => {
+            let d = Dipole::new(m.sigma_s_prime[c], m.sigma_a[c], m.eta);
+            Box::new(move |r| d.rd(r))
+        }
+        Model::BetterDipole => {
+            let md = Medium::new(m.sigma_s_prime[c], m.sigma_a[c], m.g, m.eta);
+            Box::new(move |r| md.better_dipole(r))
+        }
+        Model::Pbd => {
+            let md = Medium::new(m.sigma_s_prime[c], m.sigma_a[c], m.g, m.eta);
+            Box::new(move |r| md.pbd(r))
+        }
+    }
+}
+
+/// ∫ Rd 2πr dr on the fine log table around the transport length `zr`: the total, and the
+/// smallest table radius holding `ENERGY` of it. The disc inside the first radius holds
+/// ≈ Rd(r₀)·π r₀²; then the trapezoid rule in ln r, where the integrand is smooth.
+pub fn energy(rd: &dyn Fn(f64) -> f64, zr: f64) -> (f64, f64) {
+    let n = 2 * SPAN_DECADES as usize * PER_DECADE;
+    let lo = zr * 10f64.powi(-SPAN_DECADES);
+    let h = std::f64::consts::LN_10 / PER_DECADE as f64;
+    let radii: Vec<f64> = (0..=n).map(|i| lo * (i as f64 * h).exp()).collect();
+    let g: Vec<f64> = radii.iter().map(|&r| rd(r) * 2.0 * PI * r * r).collect();
+    let mut cum = vec![rd(lo) * PI * lo * lo];
+    for i in 1..=n {
+        cum.push(cum[i - 1] + 0.5 * (g[i - 1] + g[i]) * h);
+    }
+    let total = cum[n];
+    let i = cum.partition_point(|&e| e < ENERGY * total).min(n);
+    (total, radii[i].max(10.0 * zr))
+}
+
+/// The profile of `p.model` for material `m`; `progress(channel, done)` after each channel.
+pub fn tabulate(
+    m: &ScatteringMaterial,
+    p: &Params,
+    progress: &(dyn Fn(usize, u64) + Sync),
+) -> Tabulated {
+    let n = p.points.max(8) as usize;
+    let zr = [0, 1, 2].map(|c| 1.0 / (m.sigma_s_prime[c] + m.sigma_a[c]));
+    // Monte Carlo tallies on the dipole's grid: a material-adapted guide that needs no photons.
+    let guide = if p.model == Model::Montecarlo {
+        Model::Dipole
+    } else {
+        p.model
     };
-    (0..=n)
-        .map(|i| if i == 0 || i == n { 0.5 } else { 1.0 } * f(a + i as f64 * h))
-        .sum::<f64>()
-        * h
-}
-
-/// The radius holding `ENERGY` of the channel's total (doubling from 10 transport lengths).
-fn energy_radius(d: &Dipole) -> f64 {
-    let total = d.total();
-    let lo = 1e-6 * d.zr;
-    let mut r = 10.0 * d.zr;
-    if total <= 0.0 {
-        return r;
-    }
-    // Without absorption the tail falls as r⁻³ and needs ~500 (zr + zv); 1e7 zr bounds any case.
-    while r < 1e7 * d.zr && energy(d, lo, r, 4000) < ENERGY * total {
-        r *= 2.0;
-    }
-    r
-}
-
-pub fn dipole_profile(m: &ScatteringMaterial, n: usize) -> DiffusionProfile {
-    let dipoles: Vec<Dipole> = (0..3)
-        .map(|c| Dipole::new(m.sigma_s_prime[c], m.sigma_a[c], m.eta))
-        .collect();
-    let r_min = 1e-3 * dipoles.iter().map(|d| d.zr).fold(f64::INFINITY, f64::min);
-    let r_max = dipoles.iter().map(energy_radius).fold(0.0, f64::max);
+    let fns = [0, 1, 2].map(|c| analytic(m, guide, c));
+    let energies = [0, 1, 2].map(|c| energy(&fns[c], zr[c]));
+    let r_min = 1e-3 * zr.iter().copied().fold(f64::INFINITY, f64::min);
+    let r_max = energies.iter().map(|e| e.1).fold(0.0, f64::max);
     let (a, b) = (r_min.ln(), r_max.ln());
     let radii: Vec<f64> = (0..n)
         .map(|i| (a + (b - a) * i as f64 / (n - 1) as f64).exp())
         .collect();
-    let rd = [0, 1, 2].map(|c| {
-        radii
-            .iter()
-            .map(|&r| dipoles[c].rd(r))
-            .collect::<Vec<f64>>()
-    });
-    let cdf = [0, 1, 2].map(|c| {
-        // The disc inside r_min holds ≈ Rd(0)·π r_min²; then the trapezoid rule in ln r.
-        let mut acc = rd[c][0] * PI * r_min * r_min;
-        let mut out = vec![acc];
-        for i in 1..n {
-            let g = |j: usize| rd[c][j] * 2.0 * PI * radii[j] * radii[j];
-            acc += 0.5 * (g(i - 1) + g(i)) * (radii[i].ln() - radii[i - 1].ln());
-            out.push(acc);
+    let mut stderr = [0.0; 3];
+    let mut events = 0;
+    let (rd, total) = if p.model == Model::Montecarlo {
+        // Bins around each radius: edges at the geometric midpoints, the first from 0.
+        let mut edges = vec![0.0];
+        edges.extend(radii.windows(2).map(|w| (w[0] * w[1]).sqrt()));
+        edges.push(radii[n - 1] * (radii[n - 1] / radii[n - 2]).sqrt());
+        let mut rd: [Vec<f64>; 3] = Default::default();
+        let mut total = [0.0; 3];
+        for c in 0..3 {
+            let medium = montecarlo::Medium {
+                sigma_s: m.sigma_s_prime[c] / (1.0 - m.g),
+                sigma_a: m.sigma_a[c],
+                g: m.g,
+                eta: m.eta,
+            };
+            let t = montecarlo::trace(&medium, &edges, p.photons, p.seed, c as u64);
+            let photons = t.photons as f64;
+            rd[c] = t
+                .bins
+                .iter()
+                .enumerate()
+                .map(|(i, w)| w / (photons * PI * (edges[i + 1].powi(2) - edges[i].powi(2))))
+                .collect();
+            total[c] = t.total();
+            stderr[c] = t.stderr();
+            events += t.events;
+            progress(c, c as u64 + 1);
         }
-        if acc > 0.0 {
-            out.iter_mut().for_each(|v| *v /= acc);
-        }
-        out
-    });
-    DiffusionProfile {
-        model: "dipole".into(),
-        radii,
-        rd,
-        total: [0, 1, 2].map(|c| dipoles[c].total()),
-        mfp: [0, 1, 2].map(|c| {
-            if dipoles[c].sigma_tr > 0.0 {
-                1.0 / dipoles[c].sigma_tr
-            } else {
-                f64::INFINITY
+        (rd, total)
+    } else {
+        let rd = [0, 1, 2].map(|c| radii.iter().map(|&r| fns[c](r)).collect::<Vec<f64>>());
+        let total = [0, 1, 2].map(|c| match p.model {
+            Model::Dipole => Dipole::new(m.sigma_s_prime[c], m.sigma_a[c], m.eta).total(),
+            _ => energies[c].0,
+        });
+        (rd, total)
+    };
+    let cdf = [0, 1, 2].map(|c| cumulative(&radii, &rd[c]));
+    let mfp = [0, 1, 2].map(|c| {
+        let sigma_tr = match p.model {
+            Model::BetterDipole | Model::Pbd => {
+                Medium::new(m.sigma_s_prime[c], m.sigma_a[c], m.g, m.eta).sigma_tr()
             }
-        }),
-        cdf,
+            _ => Dipole::new(m.sigma_s_prime[c], m.sigma_a[c], m.eta).sigma_tr,
+        };
+        if sigma_tr > 0.0 {
+            1.0 / sigma_tr
+        } else {
+            f64::INFINITY
+        }
+    });
+    Tabulated {
+        profile: DiffusionProfile {
+            model: p.model.name().into(),
+            radii,
+            rd,
+            total,
+            mfp,
+            cdf,
+        },
+        stderr,
+        events,
     }
+}
+
+/// Normalised ∫₀^r Rd 2πr′ dr′ at each radius (a disc inside the first, then trapezoids in ln r).
+fn cumulative(radii: &[f64], rd: &[f64]) -> Vec<f64> {
+    let mut acc = rd[0] * PI * radii[0] * radii[0];
+    let mut out = vec![acc];
+    let g = |j: usize| rd[j] * 2.0 * PI * radii[j] * radii[j];
+    for i in 1..radii.len() {
+        acc += 0.5 * (g(i - 1) + g(i)) * (radii[i].ln() - radii[i - 1].ln());
+        out.push(acc);
+    }
+    if acc > 0.0 {
+        out.iter_mut().for_each(|v| *v /= acc);
+    }
+    out
+}
+
+/// The dipole profile (kept for callers that want the classical model directly).
+pub fn dipole_profile(m: &ScatteringMaterial, n: usize) -> DiffusionProfile {
+    let p = Params {
+        points: n as u32,
+        ..Default::default()
+    };
+    tabulate(m, &p, &|_, _| {}).profile
 }
 
 #[cfg(test)]
@@ -214,7 +348,7 @@ mod tests {
                 // The tabulated energy is ≥ 99.9% of the closed-form total (trapezoid on 512
                 // log-spaced points: within 1e-3 of the integral).
                 let d = Dipole::new(prof_material(p).0[c], prof_material(p).1[c], 1.3);
-                let held = energy(&d, 1e-6 * d.zr, *prof.radii.last().unwrap(), 20_000);
+                let held = trapezoid(&d, 1e-6 * d.zr, *prof.radii.last().unwrap(), 20_000);
                 assert!(
                     held >= 0.9985 * prof.total[c],
                     "{p:?} {c}: {held} of {}",
@@ -223,6 +357,20 @@ mod tests {
             }
             assert!(prof.rd.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
         }
+    }
+
+    /// ∫_{lo}^{hi} Rd 2πr dr by the trapezoid rule in ln r, independent of the node's table.
+    fn trapezoid(d: &Dipole, lo: f64, hi: f64, n: usize) -> f64 {
+        let (a, b) = (lo.ln(), hi.ln());
+        let h = (b - a) / n as f64;
+        let f = |u: f64| {
+            let r = u.exp();
+            d.rd(r) * 2.0 * PI * r * r
+        };
+        (0..=n)
+            .map(|i| if i == 0 || i == n { 0.5 } else { 1.0 } * f(a + i as f64 * h))
+            .sum::<f64>()
+            * h
     }
 
     fn prof_material(p: Preset) -> ([f64; 3], [f64; 3]) {
@@ -247,6 +395,7 @@ mod tests {
                 sigma_s_prime: [sp; 3],
                 sigma_a: [sa; 3],
                 eta,
+                g: 0.0,
             };
             let prof = dipole_profile(&m, 64);
             assert!(
@@ -259,5 +408,80 @@ mod tests {
             );
             assert!(prof.total.iter().all(|t| (0.0..=1.0).contains(t)));
         }
+    }
+
+    #[test]
+    fn every_model_against_monte_carlo_for_the_jensen_materials() {
+        use crate::sss::compare::compare;
+        let all = [
+            Preset::Apple,
+            Preset::Chicken1,
+            Preset::Chicken2,
+            Preset::Cream,
+            Preset::Ketchup,
+            Preset::Marble,
+            Preset::Potato,
+            Preset::Skimmilk,
+            Preset::Skin1,
+            Preset::Skin2,
+            Preset::Spectralon,
+            Preset::Wholemilk,
+        ];
+        let mut worst = [0.0f64; 3];
+        for p in all {
+            let m = preset(p);
+            let mc = tabulate(
+                &m,
+                &Params {
+                    model: Model::Montecarlo,
+                    photons: 20_000,
+                    points: 64,
+                    ..Default::default()
+                },
+                &|_, _| {},
+            );
+            let mut dipole_l1 = None;
+            if p == Preset::Ketchup {
+                // The domain notes: the dipole is ≈ 12% high for ketchup red (low albedo).
+                let d = dipole_profile(&m, 64).total[0];
+                let rel = (d - mc.profile.total[0]) / mc.profile.total[0];
+                assert!((0.05..0.2).contains(&rel), "ketchup red: {rel}");
+            }
+            for (k, model) in [Model::Dipole, Model::BetterDipole, Model::Pbd]
+                .into_iter()
+                .enumerate()
+            {
+                let t = tabulate(
+                    &m,
+                    &Params {
+                        model,
+                        points: 64,
+                        ..Default::default()
+                    },
+                    &|_, _| {},
+                );
+                let e = compare(&mc.profile, &t.profile).unwrap();
+                println!(
+                    "{p:?} {model:?}: total {:?} vs MC {:?} ± {:?}: rel {:?} l1 {:?}",
+                    t.profile.total, mc.profile.total, mc.stderr, e.total, e.l1
+                );
+                let dipole_l1 = dipole_l1.get_or_insert(e.l1);
+                worst[k] = e.total.iter().fold(worst[k], |w, v| w.max(v.abs()));
+                // PBD integrates the beam and adds single scattering: its profile shape is
+                // closer to the reference than the single-source dipole's everywhere.
+                if model == Model::Pbd {
+                    let closer = e.l1.iter().zip(dipole_l1.iter()).all(|(a, b)| a < b);
+                    assert!(closer, "{p:?}: pbd l1 {:?} vs dipole {dipole_l1:?}", e.l1);
+                }
+            }
+        }
+        println!("worst |relative total error|: dipole, better_dipole, pbd = {worst:?}");
+        // Bounds measured with 20 000 photons (MC standard error ≤ 0.0026 absolute; this test's
+        // own output): dipole 0.164 (ketchup blue), better dipole 0.111 (chicken1 green), PBD
+        // 0.097 (skin1 blue); the bounds leave room for the Monte Carlo noise only.
+        assert!(
+            worst[0] < 0.2 && worst[1] < 0.14 && worst[2] < 0.12,
+            "{worst:?}"
+        );
     }
 }

@@ -26,6 +26,7 @@ pub const ARRAY_TYPES: &[&str] = &[
     NormalMap::TYPE,
     Btf::TYPE,
     Mdf::TYPE,
+    DiffusionProfile::TYPE,
 ];
 
 /// Registers the decoders of every type in this module.

@@ -15,13 +15,16 @@ pub struct ScatteringMaterial {
     /// σa, mm⁻¹.
     pub sigma_a: [f64; 3],
     pub eta: f64,
+    /// Henyey–Greenstein asymmetry of the phase function (σs = σs′/(1 − g)); only the Monte
+    /// Carlo reference and single-scattering terms see it, diffusion depends on σs′ alone.
+    pub g: f64,
 }
 
 impl ScatteringMaterial {
     pub const TYPE: &'static str = "ScatteringMaterial";
 
     pub fn decode(d: &mut Decoder) -> Result<ValueRef, DecodeError> {
-        let mut v = [0.0; 7];
+        let mut v = [0.0; 8];
         for x in &mut v {
             *x = d.f64()?;
         }
@@ -29,6 +32,7 @@ impl ScatteringMaterial {
             sigma_s_prime: [v[0], v[1], v[2]],
             sigma_a: [v[3], v[4], v[5]],
             eta: v[6],
+            g: v[7],
         }))
     }
 }
@@ -38,13 +42,13 @@ impl Value for ScatteringMaterial {
         Self::TYPE
     }
     fn byte_size(&self) -> usize {
-        56
+        64
     }
     fn encode(&self, out: &mut Encoder) {
         for x in self.sigma_s_prime.iter().chain(&self.sigma_a) {
             out.f64(*x);
         }
-        out.f64(self.eta);
+        out.f64(self.eta).f64(self.g);
     }
     fn as_any(&self) -> &dyn Any {
         self
@@ -114,6 +118,16 @@ impl Value for DiffusionProfile {
         for x in self.total.iter().chain(&self.mfp) {
             out.f64(*x);
         }
+    }
+    /// (4, n): radii in mm, then Rd for R, G, B in mm⁻² (the NPY contract).
+    fn as_array_f64(&self) -> Option<(Vec<usize>, Vec<f64>)> {
+        let n = self.radii.len();
+        let mut data = Vec::with_capacity(4 * n);
+        data.extend_from_slice(&self.radii);
+        for c in &self.rd {
+            data.extend_from_slice(c);
+        }
+        Some((vec![4, n], data))
     }
     fn as_any(&self) -> &dyn Any {
         self
