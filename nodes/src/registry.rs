@@ -27,6 +27,7 @@ pub fn registry() -> Registry {
     r.register(crate::sss::material::Material);
     r.register(crate::sss::profile::Profile);
     r.register(crate::sss::compare::Compare);
+    r.register(crate::sss::render::Render);
     r.register(crate::util::scalar::Constant);
     r.register(crate::util::scalar::Affine);
     r.register(crate::util::sleep::Sleep);

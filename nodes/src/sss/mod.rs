@@ -6,4 +6,7 @@ pub mod dipole;
 pub mod fresnel;
 pub mod material;
 pub mod montecarlo;
+pub mod octree;
+pub mod points;
 pub mod profile;
+pub mod render;
