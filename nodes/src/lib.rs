@@ -10,6 +10,7 @@ pub mod io;
 pub mod mdf;
 pub mod memory;
 pub mod mesh;
+pub mod qh;
 mod registry;
 pub mod render;
 pub mod rng;

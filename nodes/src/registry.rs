@@ -28,6 +28,8 @@ pub fn registry() -> Registry {
     r.register(crate::sss::profile::Profile);
     r.register(crate::sss::compare::Compare);
     r.register(crate::sss::render::Render);
+    r.register(crate::qh::fit_dipole::FitDipole);
+    r.register(crate::qh::render::QhRender);
     r.register(crate::util::scalar::Constant);
     r.register(crate::util::scalar::Affine);
     r.register(crate::util::sleep::Sleep);

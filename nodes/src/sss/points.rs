@@ -15,6 +15,10 @@ pub struct SamplePoint {
     pub p: [f64; 3],
     /// Interpolated unit normal.
     pub n: [f64; 3],
+    /// Triangle and barycentric weights of its corners 1 and 2 (for texture lookups).
+    pub tri: u32,
+    pub b1: f64,
+    pub b2: f64,
 }
 
 pub struct Samples {
@@ -120,7 +124,13 @@ pub fn sample(mesh: &Mesh, spacing: f64, seed: u64) -> Samples {
             f.map(|v| v / length(f))
         };
         grid.entry(c).or_default().push(points.len());
-        points.push(SamplePoint { p, n });
+        points.push(SamplePoint {
+            p,
+            n,
+            tri: t as u32,
+            b1,
+            b2,
+        });
     }
     let count = points.len().max(1);
     Samples {

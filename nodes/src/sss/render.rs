@@ -143,6 +143,28 @@ pub struct Rendered {
     pub warnings: Vec<String>,
 }
 
+/// Spatially varying factors a caller may add to the homogeneous render (quasi-homogeneous
+/// materials): a multiplier of the irradiance entering at each sample (the mesostructure
+/// entrance function), and per pixel a multiplier of the diffuse exitance leaving (the exiting
+/// function) plus a local radiance to add (the local reflectance term). Directions are world
+/// unit vectors: towards the light at the sample, towards the viewer at the pixel.
+pub trait Weights: Sync {
+    fn entrance(&self, at: &Frag, to_light: V3) -> [f64; 3];
+    fn pixel(&self, px: usize, at: &Frag, to_viewer: V3) -> ([f64; 3], [f64; 3]);
+}
+
+/// No mesostructure: the homogeneous render.
+pub struct Homogeneous;
+
+impl Weights for Homogeneous {
+    fn entrance(&self, _: &Frag, _: V3) -> [f64; 3] {
+        [1.0; 3]
+    }
+    fn pixel(&self, _: usize, _: &Frag, _: V3) -> ([f64; 3], [f64; 3]) {
+        ([1.0; 3], [0.0; 3])
+    }
+}
+
 /// The render on the GPU when one is given, else on the CPU.
 pub fn render(
     gpu: Option<&mesoflow_runtime::Gpu>,
@@ -150,6 +172,18 @@ pub fn render(
     material: &ScatteringMaterial,
     profile: &DiffusionProfile,
     p: &Params,
+) -> Result<Rendered, NodeError> {
+    render_with(gpu, mesh, material, profile, p, &Homogeneous)
+}
+
+/// `render` with entrance, exiting and local terms.
+pub fn render_with(
+    gpu: Option<&mesoflow_runtime::Gpu>,
+    mesh: &Mesh,
+    material: &ScatteringMaterial,
+    profile: &DiffusionProfile,
+    p: &Params,
+    weights: &dyn Weights,
 ) -> Result<Rendered, NodeError> {
     mesh.check().map_err(|e| NodeError::input("mesh", e))?;
     if profile.radii.len() < 2 {
@@ -167,7 +201,7 @@ pub fn render(
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     let light = Light::new(&p.light)?;
     let mut warnings = Vec::new();
-    let setup = Setup::new(mesh, material, profile, p, &light, &mut warnings)?;
+    let setup = Setup::new(mesh, material, profile, p, &light, weights, &mut warnings)?;
     let view = View::new(mesh, &camera);
     let gather_start = Instant::now();
     let (sums, terms) = match gpu {
@@ -175,7 +209,7 @@ pub fn render(
         None => gather_cpu(&setup, &view, p.threshold),
     };
     let gather_seconds = gather_start.elapsed().as_secs_f64();
-    let (image, exitance) = finish(&setup, &view, &sums, p, material, &light);
+    let (image, exitance) = finish(&setup, &view, &sums, p, material, &light, weights);
     if image
         .data
         .iter()
@@ -205,7 +239,7 @@ pub struct Light {
 }
 
 impl Light {
-    fn new(p: &LightParams) -> Result<Light, NodeError> {
+    pub fn new(p: &LightParams) -> Result<Light, NodeError> {
         let direction = normalize(p.direction)
             .ok_or_else(|| NodeError::param("light", "direction has zero length"))?;
         if !(p.intensity >= 0.0 && p.intensity.is_finite()) {
@@ -320,6 +354,7 @@ impl Setup {
         profile: &DiffusionProfile,
         p: &Params,
         light: &Light,
+        weights: &dyn Weights,
         warnings: &mut Vec<String>,
     ) -> Result<Setup, NodeError> {
         let unit = p.mm_per_unit;
@@ -371,14 +406,25 @@ impl Setup {
             .par_iter()
             .map(|s| {
                 let e = irradiance(light, shadow.as_ref(), s.p, s.n, material.eta);
+                let f = if e > 0.0 {
+                    let at = Frag {
+                        t: 0.0,
+                        tri: s.tri,
+                        b1: s.b1,
+                        b2: s.b2,
+                    };
+                    weights.entrance(&at, light.at(s.p).0)
+                } else {
+                    [0.0; 3]
+                };
                 Source {
                     p: s.p.map(|v| v * unit),
-                    power: [e * area_each; 3],
+                    power: f.map(|f| f * e * area_each),
                 }
             })
             .collect();
         let octree = Octree::build(sources.clone(), area_each);
-        let near = area_each.sqrt();
+        let near = 2.0 * area_each.sqrt();
         Ok(Setup {
             table: Table::new(profile),
             sources,
@@ -409,7 +455,7 @@ fn irradiance(light: &Light, shadow: Option<&ShadowMap>, x: V3, n: V3, eta: f64)
 }
 
 /// Nearest-surface depth map from the light (one ray-cast layer).
-fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, NodeError> {
+pub fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, NodeError> {
     let (c, r) = bounding_sphere(mesh);
     let (dir, from) = match light.position {
         Some(lp) => (
@@ -439,7 +485,7 @@ fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, NodeEr
 struct View {
     width: usize,
     height: usize,
-    hits: Vec<Option<(V3, V3, V3)>>,
+    hits: Vec<Option<(V3, V3, V3, Frag)>>,
 }
 
 fn surface(mesh: &Mesh, f: &Frag) -> (V3, V3) {
@@ -465,7 +511,7 @@ impl View {
                 l.front[px].map(|f| {
                     let (p, n) = surface(mesh, &f);
                     let (_, d) = camera.ray((px % w) as u32, (px / w) as u32);
-                    (p, n, d)
+                    (p, n, d, f)
                 })
             })
             .collect();
@@ -484,7 +530,7 @@ fn gather_cpu(setup: &Setup, view: &View, threshold: f64) -> (Vec<[f64; 3]>, f64
         .hits
         .par_iter()
         .map(|h| match h {
-            Some((p, _, _)) => {
+            Some((p, ..)) => {
                 setup
                     .octree
                     .gather(p.map(|v| v * unit), setup.near, threshold, &|r| {
@@ -513,7 +559,7 @@ fn gather_gpu(
     let shade_offset = input.len();
     for h in &view.hits {
         match h {
-            Some((p, _, _)) => {
+            Some((p, ..)) => {
                 input.extend([p[0] * unit, p[1] * unit, p[2] * unit, 1.0].map(|v| v as f32))
             }
             None => input.extend([0.0f32; 4]),
@@ -575,20 +621,27 @@ fn finish(
     p: &Params,
     material: &ScatteringMaterial,
     light: &Light,
+    weights: &dyn Weights,
 ) -> (Image, Image) {
     let eta = setup.eta;
     let fdr_out = 2.0 * fresnel::moment(1, 1.0 / eta);
     let c_norm = 1.0 / (PI * (1.0 - fdr_out));
     let mut radiance = Vec::with_capacity(3 * sums.len());
     let mut exitance = Vec::with_capacity(3 * sums.len());
-    for (h, s) in view.hits.iter().zip(sums) {
-        let Some((x, n, d)) = h else {
+    for (px, (h, s)) in view.hits.iter().zip(sums).enumerate() {
+        let Some((x, n, d, frag)) = h else {
             radiance.extend(p.background.map(|v| v as f32));
             exitance.extend([0.0f32; 3]);
             continue;
         };
         let e0 = irradiance(light, setup.shadow.as_ref(), *x, *n, eta);
-        let m = [0, 1, 2].map(|c| s[c] + e0 * setup.near_energy[c]);
+        // The near disc's light enters through the same entrance function as the samples'.
+        let f0 = if e0 > 0.0 {
+            weights.entrance(frag, light.at(*x).0)
+        } else {
+            [0.0; 3]
+        };
+        let m = [0, 1, 2].map(|c| s[c] + e0 * f0[c] * setup.near_energy[c]);
         let v = d.map(|c| -c);
         let cos_o = dot(*n, v).clamp(0.0, 1.0);
         let ft_o = transmit_in(cos_o, eta);
@@ -597,7 +650,10 @@ fn finish(
         } else {
             [0.0; 3]
         };
-        radiance.extend([0, 1, 2].map(|c| (c_norm * ft_o * m[c] + single[c]) as f32));
+        let (exit, local) = weights.pixel(px, frag, v);
+        radiance.extend(
+            [0, 1, 2].map(|c| (c_norm * ft_o * m[c] * exit[c] + single[c] + local[c]) as f32),
+        );
         exitance.extend(m.map(|v| v as f32));
     }
     let image = |data| Image {
