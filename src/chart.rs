@@ -67,7 +67,44 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     (lo - pad, hi + pad)
 }
 
+/// A numeric, positive x spanning more than two decades (timings, counts) is drawn on a log
+/// scale: on a linear one the fast cases collapse onto the axis.
+fn wants_log_x(c: &Chart) -> bool {
+    let xs = || c.series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+    let (lo, hi) = xs()
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    c.x_names.is_none() && lo > 0.0 && hi / lo > 100.0
+}
+
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(), String> {
+    if wants_log_x(c) {
+        let logged = Chart {
+            title: c.title.clone(),
+            x_label: c.x_label,
+            y_label: c.y_label,
+            series: c
+                .series
+                .iter()
+                .map(|s| Series {
+                    name: s.name.clone(),
+                    points: s.points.iter().map(|p| (p.0.log10(), p.1)).collect(),
+                })
+                .collect(),
+            x_names: None,
+        };
+        return draw_axes(root, &logged, true);
+    }
+    draw_axes(root, c, false)
+}
+
+fn draw_axes<DB: DrawingBackend>(
+    root: DrawingArea<DB, Shift>,
+    c: &Chart,
+    log_x: bool,
+) -> Result<(), String> {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(e)?;
     let (x0, x1) = range(c.series.iter().flat_map(|s| s.points.iter().map(|p| p.0)));
@@ -85,11 +122,17 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(
             n.get(x.round() as usize).cloned().unwrap_or_default()
         }
         Some(_) => String::new(),
+        None if log_x => format!("{:.3e}", 10f64.powf(*x)),
         None => format!("{x:.3}"),
+    };
+    let x_desc = if log_x {
+        format!("{} (log scale)", c.x_label)
+    } else {
+        c.x_label.to_string()
     };
     chart
         .configure_mesh()
-        .x_desc(c.x_label)
+        .x_desc(x_desc)
         .y_desc(c.y_label)
         .x_label_formatter(&x_fmt)
         .y_label_formatter(&|y| format!("{y:.4}"))

@@ -816,3 +816,83 @@ fn mdf_render_graph_renders_with_and_without_silhouettes() {
     assert_eq!(side["views"].as_array().unwrap().len(), 9);
     assert_eq!(side["views"][1], serde_json::json!([40.0, 0.0]));
 }
+
+/// `mesoflow run GRAPH --quiet --no-cache --out-dir OUT` with `--set` pairs; the report.
+fn run_graph(root: &Path, graph: &str, out: &Path, sets: &[String]) -> serde_json::Value {
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        root.join(graph).display().to_string(),
+        "--quiet".into(),
+        "--no-cache".into(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    for kv in sets {
+        args.push("--set".into());
+        args.push(kv.clone());
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = mesoflow(&args, root);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    report(out)
+}
+
+#[test]
+fn sss_models_graph_compares_a_model_with_monte_carlo_and_writes_f64_profiles() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let rep = run_graph(
+        root,
+        "graphs/sss_models.json",
+        &out,
+        &["reference.photons=20000".into(), "profile.points=64".into()],
+    );
+    // Ketchup red: the dipole is ~10% high against Monte Carlo (domain notes: ≈12%).
+    let e = metric(&rep, "error", "total_error_r");
+    assert!((0.04..0.2).contains(&e), "{e}");
+    assert!(metric(&rep, "reference", "stderr_r") > 0.0);
+    // The NPY contract: (4, n) little-endian f64, radii first.
+    let bytes = std::fs::read(out.join("profile.npy")).unwrap();
+    let header = String::from_utf8_lossy(&bytes[10..128]).to_string();
+    assert!(
+        header.contains("'descr': '<f8'") && header.contains("'shape': (4, 64"),
+        "{header}"
+    );
+}
+
+#[test]
+fn sss_render_and_qh_render_graphs_render() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let small = |ids: &[&str]| -> Vec<String> {
+        ids.iter()
+            .flat_map(|id| {
+                [
+                    format!("{id}.camera.resolution=[32,24]"),
+                    format!("{id}.shadow_resolution=128"),
+                    format!("{id}.max_points=3000"),
+                ]
+            })
+            .collect()
+    };
+    let rep = run_graph(
+        root,
+        "graphs/sss_render.json",
+        &s.path("a"),
+        &small(&["marble", "skin", "marble_reference"]),
+    );
+    // The octree at 0.05 is close to brute force (the sss.render tests bound it).
+    assert!(metric(&rep, "marble_error", "rmse") < 0.01);
+    assert!(metric(&rep, "skin", "points") <= 3000.0);
+    assert!(s.path("a").join("marble_and_skin.png").exists());
+    let mut sets = small(&["homogeneous", "qh"]);
+    sets.extend([
+        "surface.size=16".into(),
+        "surface.count=2".into(),
+        r#"lrf.views={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#.into(),
+        r#"lrf.lights={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#.into(),
+    ]);
+    run_graph(root, "graphs/qh_render.json", &s.path("b"), &sets);
+    assert!(s.path("b").join("homogeneous_vs_qh.png").exists());
+}
