@@ -143,7 +143,9 @@ impl Octree {
             let node = &self.nodes[id];
             let inside = (0..3).all(|k| x[k] >= node.lo[k] && x[k] <= node.hi[k]);
             let d2 = dist2(x, node.centre);
-            if !inside && threshold > 0.0 && node.area < threshold * d2 {
+            // A node whose centre lies inside the near disc is opened, so that only its points
+            // inside the disc are left out, as brute force does.
+            if !inside && threshold > 0.0 && node.area < threshold * d2 && d2 >= near2 {
                 add(node.centre, node.power, &mut sum);
                 evaluated += 1;
             } else if node.children.is_empty() {

@@ -115,6 +115,13 @@ impl Node for Profile {
         }
         let tab = tabulate(m, p, &|_, done| ctx.progress(done, 3));
         let seconds = start.elapsed().as_secs_f64();
+        if let Some(c) = (0..3).find(|&c| tab.lost[c] > 1e-4) {
+            ctx.warn(format!(
+                "{:.2}% of channel {c}'s photon weight was still inside after {} scattering events and is missing from the total (little or no absorption: the walk back to the surface is heavy-tailed); the total is low by about that much",
+                100.0 * tab.lost[c],
+                montecarlo::MAX_EVENTS
+            ));
+        }
         let profile = tab.profile;
         if profile.rd.iter().flatten().any(|v| !v.is_finite())
             || profile.total.iter().any(|v| !v.is_finite())
@@ -146,6 +153,9 @@ pub struct Tabulated {
     pub stderr: [f64; 3],
     /// Monte Carlo only: scattering events simulated, all channels.
     pub events: u64,
+    /// Monte Carlo only: per channel, the share of photon weight given up after
+    /// `montecarlo::MAX_EVENTS` events (without absorption the walk home is heavy-tailed).
+    pub lost: [f64; 3],
 }
 
 /// One channel's Rd(r) for the analytic models.
@@ -212,6 +222,7 @@ pub fn tabulate(
         .collect();
     let mut stderr = [0.0; 3];
     let mut events = 0;
+    let mut lost = [0.0; 3];
     let (rd, total) = if p.model == Model::Montecarlo {
         // Bins around each radius: edges at the geometric midpoints, the first from 0.
         let mut edges = vec![0.0];
@@ -237,6 +248,7 @@ pub fn tabulate(
             total[c] = t.total();
             stderr[c] = t.stderr();
             events += t.events;
+            lost[c] = t.lost / photons;
             progress(c, c as u64 + 1);
         }
         (rd, total)
@@ -273,6 +285,7 @@ pub fn tabulate(
         },
         stderr,
         events,
+        lost,
     }
 }
 

@@ -394,7 +394,13 @@ impl Setup {
             ));
             spacing = floor;
         }
-        let samples = points::sample(mesh, spacing / unit, p.seed);
+        let mut samples = points::sample(mesh, spacing / unit, p.seed);
+        // Dart throwing lands near, not exactly at, the count the spacing implies.
+        let most = p.max_points.max(64) as usize;
+        if samples.points.len() > most {
+            samples.points.truncate(most);
+            samples.area = samples.total_area / most as f64;
+        }
         let area_each = samples.area * unit * unit;
         let shadow = if p.shadows {
             Some(shadow_map(mesh, light, p.shadow_resolution)?)
