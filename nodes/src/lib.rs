@@ -7,6 +7,7 @@ pub mod gpu;
 pub mod heightfield;
 pub mod image;
 pub mod io;
+pub mod manifold;
 pub mod mdf;
 pub mod memory;
 pub mod mesh;

@@ -30,6 +30,9 @@ pub fn registry() -> Registry {
     r.register(crate::sss::render::Render);
     r.register(crate::qh::fit_dipole::FitDipole);
     r.register(crate::qh::render::QhRender);
+    r.register(crate::manifold::points_read::PointsRead);
+    r.register(crate::manifold::knn::Knn);
+    r.register(crate::manifold::isomap::Isomap);
     r.register(crate::util::scalar::Constant);
     r.register(crate::util::scalar::Affine);
     r.register(crate::util::sleep::Sleep);

@@ -4,6 +4,7 @@ mod btf;
 mod btf_basis;
 mod heightfield;
 mod image;
+mod manifold;
 mod mdf;
 mod mesh;
 mod scattering;
@@ -14,6 +15,7 @@ pub use btf::{Btf, Direction, DirectionPair};
 pub use btf_basis::{BasisBlock, BtfBasis, Centring, ColorSpace};
 pub use heightfield::HeightField;
 pub use image::Image;
+pub use manifold::{Embedding, KnnGraph, PointSet};
 pub use mdf::Mdf;
 pub use mesh::Mesh;
 pub use normal_map::NormalMap;
@@ -27,6 +29,8 @@ pub const ARRAY_TYPES: &[&str] = &[
     Btf::TYPE,
     Mdf::TYPE,
     DiffusionProfile::TYPE,
+    PointSet::TYPE,
+    Embedding::TYPE,
 ];
 
 /// Registers the decoders of every type in this module.
@@ -40,4 +44,7 @@ pub fn register(r: &mut mesoflow_runtime::Registry) {
     r.register_type(Mesh::TYPE, Mesh::decode);
     r.register_type(ScatteringMaterial::TYPE, ScatteringMaterial::decode);
     r.register_type(DiffusionProfile::TYPE, DiffusionProfile::decode);
+    r.register_type(PointSet::TYPE, PointSet::decode);
+    r.register_type(KnnGraph::TYPE, KnnGraph::decode);
+    r.register_type(Embedding::TYPE, Embedding::decode);
 }

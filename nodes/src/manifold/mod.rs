@@ -1,0 +1,8 @@
+//! Appearance manifolds (thesis ch. 6; Wang et al. 2006): point sets, the kNN graph, geodesic
+//! distances and Isomap.
+
+pub mod eigen;
+pub mod graph;
+pub mod isomap;
+pub mod knn;
+pub mod points_read;
