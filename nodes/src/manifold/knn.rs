@@ -1,6 +1,7 @@
-//! `manifold.knn`: the exact k-nearest-neighbour graph of a point set (Euclidean), by brute
-//! force on rayon: each point's distances to all others, the k smallest selected with ties
-//! broken by index, so the graph is the same whatever the thread count.
+//! `manifold.knn`: the exact k-nearest-neighbour graph of a point set (Euclidean), with ties
+//! broken by index, so the graph is the same whatever the thread count or method: brute force on
+//! rayon for small sets, a k-d tree (built once, queried in parallel) from `TREE_FROM` points on,
+//! where brute force's n² distances dominate (BENCHMARKS.md has the crossover).
 //!
 //! Appearance vectors are compared as given: the caller weights and normalises them (per-pixel
 //! BRDF parameters are put on comparable scales by the node that builds them).
@@ -58,12 +59,49 @@ impl Node for Knn {
     }
 }
 
+/// From this many points on, the k-d tree.
+pub const TREE_FROM: usize = 2000;
+
 pub fn knn(points: &PointSet, k: usize) -> Result<KnnGraph, String> {
     let n = points.n;
     if k == 0 || k >= n {
         return Err(format!("{k} neighbours of {n} points: need 1 ≤ k < n"));
     }
-    let rows: Vec<(Vec<u32>, Vec<f64>)> = (0..n)
+    if n >= TREE_FROM {
+        let tree = super::kdtree::KdTree::build(points);
+        let rows: Vec<(Vec<u32>, Vec<f64>)> = (0..n)
+            .into_par_iter()
+            .map(|i| {
+                let found = tree.nearest(points, i, k);
+                (
+                    found.iter().map(|e| e.1).collect(),
+                    found.iter().map(|e| e.0.sqrt()).collect(),
+                )
+            })
+            .collect();
+        return Ok(assemble(n, k, rows));
+    }
+    Ok(assemble(n, k, brute(points, k)))
+}
+
+fn assemble(n: usize, k: usize, rows: Vec<(Vec<u32>, Vec<f64>)>) -> KnnGraph {
+    let mut graph = KnnGraph {
+        n,
+        k,
+        neighbors: Vec::with_capacity(n * k),
+        distances: Vec::with_capacity(n * k),
+    };
+    for (nb, dist) in rows {
+        graph.neighbors.extend(nb);
+        graph.distances.extend(dist);
+    }
+    graph
+}
+
+/// Each point's k nearest others by brute force: (indices, distances), nearest first.
+pub fn brute(points: &PointSet, k: usize) -> Vec<(Vec<u32>, Vec<f64>)> {
+    let n = points.n;
+    (0..n)
         .into_par_iter()
         .map(|i| {
             let a = points.point(i);
@@ -84,18 +122,7 @@ pub fn knn(points: &PointSet, k: usize) -> Result<KnnGraph, String> {
                 d.iter().map(|e| e.0.sqrt()).collect(),
             )
         })
-        .collect();
-    let mut graph = KnnGraph {
-        n,
-        k,
-        neighbors: Vec::with_capacity(n * k),
-        distances: Vec::with_capacity(n * k),
-    };
-    for (nb, dist) in rows {
-        graph.neighbors.extend(nb);
-        graph.distances.extend(dist);
-    }
-    Ok(graph)
+        .collect()
 }
 
 #[cfg(test)]
@@ -116,5 +143,27 @@ mod tests {
         assert_eq!(&g.distances[4..6], &[1.0, 2.0]);
         assert_eq!(&g.neighbors[2..4], &[0, 2]);
         assert!(knn(&points, 6).unwrap_err().contains("k < n"));
+    }
+
+    #[test]
+    fn the_tree_finds_exactly_what_brute_force_finds() {
+        // 3000 points in 5-D on a coarse lattice, so many distances tie: the tree must return
+        // the same neighbours in the same order as brute force (ties by index).
+        let n = 3000;
+        let data = (0..n * 5)
+            .map(|i| (crate::rng::unit(crate::rng::hash(9, &[i as u64])) * 4.0).floor())
+            .collect();
+        let points = PointSet { n, dims: 5, data };
+        let tree = super::super::kdtree::KdTree::build(&points);
+        let brute = brute(&points, 7);
+        for (i, (nb, d)) in brute.iter().enumerate() {
+            let found = tree.nearest(&points, i, 7);
+            let tn: Vec<u32> = found.iter().map(|e| e.1).collect();
+            assert_eq!(&tn, nb, "point {i}");
+            assert!(found
+                .iter()
+                .zip(d)
+                .all(|(a, b)| (a.0.sqrt() - b).abs() == 0.0));
+        }
     }
 }

@@ -4,5 +4,6 @@
 pub mod eigen;
 pub mod graph;
 pub mod isomap;
+pub mod kdtree;
 pub mod knn;
 pub mod points_read;
