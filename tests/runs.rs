@@ -896,3 +896,18 @@ fn sss_render_and_qh_render_graphs_render() {
     run_graph(root, "graphs/qh_render.json", &s.path("b"), &sets);
     assert!(s.path("b").join("homogeneous_vs_qh.png").exists());
 }
+
+#[test]
+fn isomap_graph_embeds_the_swiss_roll_as_f64_npy() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let rep = run_graph(root, "graphs/isomap.json", &out, &[]);
+    assert_eq!(metric(&rep, "isomap", "graph_components"), 1.0);
+    let rv = metric(&rep, "isomap", "residual_variance");
+    assert!((0.0..0.05).contains(&rv), "{rv}");
+    let mut f = std::fs::File::open(out.join("embedding.npy")).unwrap();
+    let npy = npyz::NpyFile::new(&mut f).unwrap();
+    assert_eq!(npy.shape(), &[2000, 2]);
+    assert!(npy.dtype().descr().contains("f8"));
+}

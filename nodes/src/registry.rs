@@ -31,6 +31,7 @@ pub fn registry() -> Registry {
     r.register(crate::qh::fit_dipole::FitDipole);
     r.register(crate::qh::render::QhRender);
     r.register(crate::manifold::points_read::PointsRead);
+    r.register(crate::manifold::points_synthetic::PointsSynthetic);
     r.register(crate::manifold::knn::Knn);
     r.register(crate::manifold::isomap::Isomap);
     r.register(crate::util::scalar::Constant);

@@ -7,3 +7,4 @@ pub mod isomap;
 pub mod kdtree;
 pub mod knn;
 pub mod points_read;
+pub mod points_synthetic;
