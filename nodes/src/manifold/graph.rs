@@ -4,8 +4,12 @@
 //! points), and Dijkstra from one source or from a set of sources.
 
 use crate::types::{KnnGraph, PointSet};
-use std::cmp::Ordering;
+use std::cmp::Reverse;
 use std::collections::BinaryHeap;
+
+/// The priority queue of [`Compact::dijkstra_with`]: smallest distance (as bits) first, ties
+/// by smaller vertex.
+pub type Heap = BinaryHeap<Reverse<(u64, u32)>>;
 
 pub struct Graph {
     /// Per vertex: (neighbour, edge length), sorted by neighbour, no duplicates.
@@ -106,44 +110,71 @@ impl Graph {
     /// Shortest-path lengths from `sources` (all at distance 0) to every vertex; +∞ where
     /// unreachable.
     pub fn dijkstra(&self, sources: &[usize]) -> Vec<f64> {
-        let mut dist = vec![f64::INFINITY; self.len()];
-        let mut heap = BinaryHeap::new();
+        self.compact().dijkstra(sources)
+    }
+
+    /// The same edges in flat arrays, for many shortest-path searches.
+    pub fn compact(&self) -> Compact {
+        let mut offsets = Vec::with_capacity(self.len() + 1);
+        let mut targets = Vec::new();
+        let mut lengths = Vec::new();
+        offsets.push(0);
+        for list in &self.adj {
+            for &(w, d) in list {
+                targets.push(w);
+                lengths.push(d);
+            }
+            offsets.push(targets.len());
+        }
+        Compact {
+            offsets,
+            targets,
+            lengths,
+        }
+    }
+}
+
+/// Compressed adjacency: vertex v's edges are `offsets[v]..offsets[v + 1]`.
+pub struct Compact {
+    offsets: Vec<usize>,
+    targets: Vec<u32>,
+    lengths: Vec<f64>,
+}
+
+impl Compact {
+    pub fn dijkstra(&self, sources: &[usize]) -> Vec<f64> {
+        self.dijkstra_with(sources, &mut Heap::new())
+    }
+
+    /// Dijkstra with a caller-owned heap, so many searches on one thread reuse its storage.
+    ///
+    /// Keys are the distances' bit patterns: for non-negative floats they order as the values
+    /// do and compare as plain integers. (A radix heap measured slower here: 2.08 s against
+    /// 1.54 s for the 5000-point bench's paths.)
+    pub fn dijkstra_with(&self, sources: &[usize], heap: &mut Heap) -> Vec<f64> {
+        let n = self.offsets.len() - 1;
+        let mut dist = vec![f64::INFINITY; n];
+        heap.clear();
         for &s in sources {
             dist[s] = 0.0;
-            heap.push(Entry(0.0, s as u32));
+            heap.push(Reverse((0.0f64.to_bits(), s as u32)));
         }
-        while let Some(Entry(d, v)) = heap.pop() {
+        while let Some(Reverse((d, v))) = heap.pop() {
             let v = v as usize;
+            let d = f64::from_bits(d);
             if d > dist[v] {
                 continue;
             }
-            for &(w, len) in &self.adj[v] {
-                let nd = d + len;
-                if nd < dist[w as usize] {
-                    dist[w as usize] = nd;
-                    heap.push(Entry(nd, w));
+            for e in self.offsets[v]..self.offsets[v + 1] {
+                let w = self.targets[e] as usize;
+                let nd = d + self.lengths[e];
+                if nd < dist[w] {
+                    dist[w] = nd;
+                    heap.push(Reverse((nd.to_bits(), w as u32)));
                 }
             }
         }
         dist
-    }
-}
-
-/// A heap entry ordered so the smallest distance pops first (ties: smaller vertex).
-#[derive(PartialEq)]
-struct Entry(f64, u32);
-
-impl Eq for Entry {}
-
-impl Ord for Entry {
-    fn cmp(&self, o: &Self) -> Ordering {
-        o.0.total_cmp(&self.0).then(o.1.cmp(&self.1))
-    }
-}
-
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, o: &Self) -> Option<Ordering> {
-        Some(self.cmp(o))
     }
 }
 

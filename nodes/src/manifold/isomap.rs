@@ -13,7 +13,7 @@ use super::eigen;
 use super::graph::Graph;
 use crate::rng;
 use crate::types::{Embedding, KnnGraph, PointSet};
-use faer::Mat;
+use faer::{Mat, MatRef};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use rayon::prelude::*;
@@ -63,6 +63,8 @@ impl Node for Isomap {
                 Port::output("reconstruction_error", "Scalar", "scikit-learn's reconstruction error"),
                 Port::output("residual_variance", "Scalar", "1 − R² of geodesic vs embedded distances"),
                 Port::output("graph_components", "Scalar", "connected components before joining"),
+                Port::output("paths_seconds", "Scalar", "time in shortest paths, s"),
+                Port::output("mds_seconds", "Scalar", "time in the MDS and placement, s"),
                 Port::output("seconds", "Scalar", "time, s"),
             ],
             disk_cache: true,
@@ -88,6 +90,8 @@ impl Node for Isomap {
             .with("reconstruction_error", Scalar(r.reconstruction_error))
             .with("residual_variance", Scalar(r.residual_variance))
             .with("graph_components", Scalar(r.graph_components as f64))
+            .with("paths_seconds", Scalar(r.paths_seconds))
+            .with("mds_seconds", Scalar(r.mds_seconds))
             .with("seconds", Scalar(start.elapsed().as_secs_f64())))
     }
 }
@@ -98,22 +102,50 @@ pub struct Isomapped {
     pub residual_variance: f64,
     pub graph_components: usize,
     pub warnings: Vec<String>,
+    /// Seconds in the shortest paths and in the MDS (kernel, eigenpairs, placement).
+    pub paths_seconds: f64,
+    pub mds_seconds: f64,
 }
 
 /// Shortest-path rows from each source, in parallel, in source order.
 fn geodesics(g: &Graph, sources: &[usize]) -> Vec<Vec<f64>> {
-    sources.par_iter().map(|&s| g.dijkstra(&[s])).collect()
+    let c = g.compact();
+    sources
+        .par_iter()
+        .map_init(crate::manifold::graph::Heap::new, |heap, &s| {
+            c.dijkstra_with(&[s], heap)
+        })
+        .collect()
 }
 
-/// Double centring of −½ D² for a symmetric m × m matrix of distances.
-fn kernel(d: &Mat<f64>) -> Mat<f64> {
-    let m = d.nrows();
-    let sq = Mat::<f64>::from_fn(m, m, |i, j| -0.5 * d[(i, j)] * d[(i, j)]);
-    let row: Vec<f64> = (0..m)
-        .map(|i| (0..m).map(|j| sq[(i, j)]).sum::<f64>() / m as f64)
+/// Double centring of −½ D² for the m × m landmark distances, column-major (column j is
+/// landmark j's own search, read contiguously). Columns run in parallel; each column's sum is
+/// its own, so the result does not depend on the thread count. The two directions of a path
+/// may round differently: the eigensolvers read the matrix as symmetric (faer's lower
+/// triangle; subspace iteration symmetrises its small projection), and column means stand for
+/// row means.
+fn kernel(rows: &[Vec<f64>], landmarks: &[usize]) -> Vec<f64> {
+    let m = landmarks.len();
+    let mut b = vec![0.0; m * m];
+    let mean: Vec<f64> = b
+        .par_chunks_mut(m)
+        .zip(rows)
+        .map(|(col, row)| {
+            let mut s = 0.0;
+            for (v, &l) in col.iter_mut().zip(landmarks) {
+                *v = -0.5 * row[l] * row[l];
+                s += *v;
+            }
+            s / m as f64
+        })
         .collect();
-    let all = row.iter().sum::<f64>() / m as f64;
-    Mat::<f64>::from_fn(m, m, |i, j| sq[(i, j)] - row[i] - row[j] + all)
+    let all = mean.iter().sum::<f64>() / m as f64;
+    b.par_chunks_mut(m).zip(&mean).for_each(|(col, mj)| {
+        for (v, mi) in col.iter_mut().zip(&mean) {
+            *v += all - mi - mj;
+        }
+    });
+    b
 }
 
 pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped, NodeError> {
@@ -157,13 +189,13 @@ pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped
         chosen.sort_unstable();
         chosen
     };
+    let t0 = Instant::now();
     let rows = geodesics(&g, &landmarks);
-    // Landmark × landmark distances, symmetrised (the two directions may round differently).
-    let dl = Mat::<f64>::from_fn(m, m, |i, j| {
-        0.5 * (rows[i][landmarks[j]] + rows[j][landmarks[i]])
-    });
-    let b = kernel(&dl);
-    let (vals, vecs) = eigen::top(b.as_ref(), k).map_err(NodeError::Failed)?;
+    let paths_seconds = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let b = kernel(&rows, &landmarks);
+    let (vals, vecs) =
+        eigen::top(MatRef::from_column_major_slice(&b, m, m), k).map_err(NodeError::Failed)?;
     if let Some(c) = vals
         .iter()
         .position(|v| *v <= 1e-12 * vals[0].abs().max(1e-300))
@@ -184,20 +216,36 @@ pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped
     } else {
         // Triangulation: y_i = −½ L♯ (δ_i − δ̄), L♯ rows v_c / √λ_c, δ squared distances to the
         // landmarks, δ̄ their mean over the landmarks.
-        let mean: Vec<f64> = (0..m)
-            .map(|j| (0..m).map(|i| dl[(i, j)] * dl[(i, j)]).sum::<f64>() / m as f64)
+        let mean: Vec<f64> = rows
+            .par_iter()
+            .map(|row| landmarks.iter().map(|&l| row[l] * row[l]).sum::<f64>() / m as f64)
             .collect();
-        for i in 0..n {
-            for c in 0..k {
-                if sqrt[c] <= 0.0 {
-                    continue;
+        let scale: Vec<f64> = sqrt
+            .iter()
+            .map(|s| if *s > 0.0 { -0.5 / s } else { 0.0 })
+            .collect();
+        // Chunks of points in parallel; inside, landmark by landmark so each search's row is
+        // read contiguously. The sum over landmarks runs in landmark order for every point.
+        data.par_chunks_mut(4096 * k)
+            .enumerate()
+            .for_each(|(chunk, out)| {
+                let first = chunk * 4096;
+                let count = out.len() / k;
+                for (j, row) in rows.iter().enumerate() {
+                    for t in 0..count {
+                        let r = row[first + t];
+                        let delta = r * r - mean[j];
+                        for c in 0..k {
+                            out[t * k + c] += vecs[(j, c)] * delta;
+                        }
+                    }
                 }
-                let s: f64 = (0..m)
-                    .map(|j| vecs[(j, c)] * (rows[j][i] * rows[j][i] - mean[j]))
-                    .sum();
-                data[i * k + c] = -0.5 * s / sqrt[c];
-            }
-        }
+                for t in 0..count {
+                    for c in 0..k {
+                        out[t * k + c] *= scale[c];
+                    }
+                }
+            });
     }
     // A sign per component, so the output does not depend on the eigensolver's: the entry of
     // largest magnitude is positive.
@@ -212,13 +260,17 @@ pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped
             }
         }
     }
-    let norm2: f64 = (0..m)
-        .flat_map(|i| (0..m).map(move |j| (i, j)))
-        .map(|(i, j)| b[(i, j)] * b[(i, j)])
+    let mds_seconds = t1.elapsed().as_secs_f64();
+    // Per-column sums in parallel, added in column order: the same bits for any thread count.
+    let norm2: f64 = b
+        .par_chunks(m)
+        .map(|col| col.iter().map(|v| v * v).sum::<f64>())
+        .collect::<Vec<f64>>()
+        .iter()
         .sum();
     let kept: f64 = vals.iter().map(|v| v * v).sum();
     let reconstruction_error = (norm2 - kept).max(0.0).sqrt() / m as f64;
-    let residual_variance = residual_variance(&dl, &landmarks, &data, k);
+    let residual_variance = residual_variance(&rows, &landmarks, &data, k);
     Ok(Isomapped {
         embedding: Embedding {
             n,
@@ -230,28 +282,41 @@ pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped
         residual_variance,
         graph_components,
         warnings,
+        paths_seconds,
+        mds_seconds,
     })
 }
 
 /// 1 − R² (Pearson, squared) between geodesic and embedded distances over landmark pairs.
-fn residual_variance(dl: &Mat<f64>, landmarks: &[usize], y: &[f64], k: usize) -> f64 {
-    let m = landmarks.len();
-    let (mut sx, mut sy, mut sxx, mut syy, mut sxy, mut count) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
-    for a in 0..m {
-        for b in a + 1..m {
-            let x = dl[(a, b)];
-            let (i, j) = (landmarks[a], landmarks[b]);
-            let yd = (0..k)
-                .map(|c| (y[i * k + c] - y[j * k + c]).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            sx += x;
-            sy += yd;
-            sxx += x * x;
-            syy += yd * yd;
-            sxy += x * yd;
-            count += 1.0;
+/// Sums per landmark in parallel, combined in landmark order (thread-count independent).
+fn residual_variance(rows: &[Vec<f64>], landmarks: &[usize], y: &[f64], k: usize) -> f64 {
+    let sums: Vec<[f64; 6]> = (0..landmarks.len())
+        .into_par_iter()
+        .map(|b| {
+            let mut s = [0.0; 6];
+            let j = landmarks[b];
+            for &i in &landmarks[..b] {
+                let x = rows[b][i];
+                let yd = (0..k)
+                    .map(|c| (y[i * k + c] - y[j * k + c]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                for (t, v) in s.iter_mut().zip([x, yd, x * x, yd * yd, x * yd, 1.0]) {
+                    *t += v;
+                }
+            }
+            s
+        })
+        .collect();
+    let mut t = [0.0; 6];
+    for s in &sums {
+        for (a, b) in t.iter_mut().zip(s) {
+            *a += b;
         }
+    }
+    let [sx, sy, sxx, syy, sxy, count] = t;
+    if count == 0.0 {
+        return 1.0;
     }
     let cov = sxy / count - sx / count * sy / count;
     let vx = sxx / count - (sx / count).powi(2);
@@ -327,7 +392,14 @@ mod tests {
                 assert!((a - b).abs() < 1e-9, "{i} {j}: {a} vs {b}");
             }
         }
-        assert!(r.reconstruction_error < 1e-9 && r.residual_variance < 1e-12);
+        // The error is √(‖B‖² − Σλ²)/n: a difference of two sums of ~10⁴ that rounds to
+        // ~1e-12 of them, so √(1e-12 · 10⁴)/25 ≈ 4e-6 is as close to 0 as it can show.
+        assert!(
+            r.reconstruction_error < 1e-5 && r.residual_variance < 1e-12,
+            "{} {}",
+            r.reconstruction_error,
+            r.residual_variance
+        );
     }
 
     /// Floyd–Warshall, independent of the Dijkstra under test.
@@ -367,9 +439,11 @@ mod tests {
         let r = isomap(&x, &knn(&x, k).unwrap(), &Params::default()).unwrap();
         let n = x.n;
         let g = floyd(&x, k);
+        // −½ H D² H with H = I − 11ᵀ/n, as products of dense matrices (not the node's code).
+        let h = Mat::<f64>::from_fn(n, n, |i, j| (i == j) as u8 as f64 - 1.0 / n as f64);
         let center = |f: &dyn Fn(usize, usize) -> f64| {
-            let m = Mat::<f64>::from_fn(n, n, f);
-            kernel(&m)
+            let d2 = Mat::<f64>::from_fn(n, n, |i, j| -0.5 * f(i, j) * f(i, j));
+            &h * &d2 * &h
         };
         let kg = center(&|i, j| g[i * n + j]);
         let ky = center(&|i, j| dist(&r.embedding.data, i, j, 2));
@@ -383,6 +457,31 @@ mod tests {
             "{} vs {want}",
             r.reconstruction_error
         );
+    }
+
+    #[test]
+    fn the_same_bits_whatever_the_thread_count() {
+        // Landmark Isomap on 900 points uses every parallel stage (paths, kernel, placement,
+        // the fixed-order sums).
+        let x = grid(30, 0.2);
+        let p = Params {
+            landmarks: 300,
+            ..Params::default()
+        };
+        let run = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| isomap(&x, &knn(&x, 8).unwrap(), &p).unwrap())
+        };
+        let (a, b) = (run(1), run(3));
+        assert_eq!(a.embedding.data, b.embedding.data);
+        assert_eq!(
+            a.reconstruction_error.to_bits(),
+            b.reconstruction_error.to_bits()
+        );
+        assert_eq!(a.residual_variance.to_bits(), b.residual_variance.to_bits());
     }
 
     #[test]
