@@ -911,3 +911,26 @@ fn isomap_graph_embeds_the_swiss_roll_as_f64_npy() {
     assert_eq!(npy.shape(), &[2000, 2]);
     assert!(npy.dtype().descr().contains("f8"));
 }
+
+#[test]
+fn weathering_graph_recovers_the_degree_of_the_built_in_sample() {
+    // The bound (Spearman ≥ 0.95 against the true degree), from the command line, on a
+    // 32² sample so the debug build stays quick; every pixel's fit converges.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let rep = run_graph(
+        root,
+        "graphs/weathering.json",
+        &out,
+        &["sample.size=32".to_string()],
+    );
+    let rho = metric(&rep, "degree", "spearman");
+    assert!(rho >= 0.95, "{rho}");
+    assert_eq!(metric(&rep, "fit", "not_converged"), 0.0);
+    assert!(out.join("degree_true_vs_recovered.png").exists());
+    let mut f = std::fs::File::open(out.join("ward_maps.npy")).unwrap();
+    let npy = npyz::NpyFile::new(&mut f).unwrap();
+    assert_eq!(npy.shape(), &[32, 32, 5]);
+    assert!(npy.dtype().descr().contains("f8"));
+}

@@ -2,6 +2,7 @@
 //! a graph can use. Nodes know nothing about scheduling or caching; each is a pure function of its
 //! parameters, inputs and declared files.
 
+pub mod brdf;
 pub mod btf;
 pub mod gpu;
 pub mod heightfield;
@@ -18,5 +19,6 @@ pub mod rng;
 pub mod sss;
 pub mod types;
 pub mod util;
+pub mod weathering;
 
 pub use registry::registry;

@@ -34,6 +34,9 @@ pub fn registry() -> Registry {
     r.register(crate::manifold::points_synthetic::PointsSynthetic);
     r.register(crate::manifold::knn::Knn);
     r.register(crate::manifold::isomap::Isomap);
+    r.register(crate::manifold::degree::Degree);
+    r.register(crate::weathering::sample::WeatheringSample);
+    r.register(crate::brdf::fit_ward::FitWard);
     r.register(crate::util::scalar::Constant);
     r.register(crate::util::scalar::Affine);
     r.register(crate::util::sleep::Sleep);

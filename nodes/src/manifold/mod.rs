@@ -1,6 +1,7 @@
 //! Appearance manifolds (thesis ch. 6; Wang et al. 2006): point sets, the kNN graph, geodesic
 //! distances and Isomap.
 
+pub mod degree;
 pub mod eigen;
 pub mod graph;
 pub mod isomap;
@@ -8,3 +9,4 @@ pub mod kdtree;
 pub mod knn;
 pub mod points_read;
 pub mod points_synthetic;
+pub mod rank;

@@ -106,24 +106,8 @@ pub fn generate(p: &Params) -> (PointSet, PointSet) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::manifold::rank::spearman;
     use crate::manifold::{isomap, knn};
-
-    /// Spearman rank correlation (no ties in continuous data).
-    fn spearman(a: &[f64], b: &[f64]) -> f64 {
-        let rank = |v: &[f64]| {
-            let mut idx: Vec<usize> = (0..v.len()).collect();
-            idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
-            let mut r = vec![0.0; v.len()];
-            for (k, &i) in idx.iter().enumerate() {
-                r[i] = k as f64;
-            }
-            r
-        };
-        let (ra, rb) = (rank(a), rank(b));
-        let n = a.len() as f64;
-        let d2: f64 = ra.iter().zip(&rb).map(|(x, y)| (x - y).powi(2)).sum();
-        1.0 - 6.0 * d2 / (n * (n * n - 1.0))
-    }
 
     #[test]
     fn isomap_unrolls_the_swiss_roll() {

@@ -1,5 +1,6 @@
 //! The domain value types that flow between nodes, each with its disk-cache encoding.
 
+mod brdf_map;
 mod btf;
 mod btf_basis;
 mod heightfield;
@@ -11,6 +12,7 @@ mod scattering;
 pub use image::{linear_to_srgb, srgb_to_linear};
 mod normal_map;
 
+pub use brdf_map::{BrdfMap, WARD_PARAMS};
 pub use btf::{Btf, Direction, DirectionPair};
 pub use btf_basis::{BasisBlock, BtfBasis, Centring, ColorSpace};
 pub use heightfield::HeightField;
@@ -31,6 +33,7 @@ pub const ARRAY_TYPES: &[&str] = &[
     DiffusionProfile::TYPE,
     PointSet::TYPE,
     Embedding::TYPE,
+    BrdfMap::TYPE,
 ];
 
 /// Registers the decoders of every type in this module.
@@ -47,4 +50,5 @@ pub fn register(r: &mut mesoflow_runtime::Registry) {
     r.register_type(PointSet::TYPE, PointSet::decode);
     r.register_type(KnnGraph::TYPE, KnnGraph::decode);
     r.register_type(Embedding::TYPE, Embedding::decode);
+    r.register_type(BrdfMap::TYPE, BrdfMap::decode);
 }

@@ -1,0 +1,3 @@
+//! Built-in weathered samples with ground truth, for the appearance-manifold pipeline.
+
+pub mod sample;
