@@ -35,6 +35,7 @@ pub fn registry() -> Registry {
     r.register(crate::manifold::knn::Knn);
     r.register(crate::manifold::isomap::Isomap);
     r.register(crate::manifold::degree::Degree);
+    r.register(crate::manifold::evolve::Evolve);
     r.register(crate::weathering::sample::WeatheringSample);
     r.register(crate::brdf::fit_ward::FitWard);
     r.register(crate::util::scalar::Constant);

@@ -66,10 +66,13 @@ impl Node for FitWard {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "brdf.fit_ward",
-            version: 1,
+            version: 2,
             doc: "Per-pixel isotropic Ward fit (ρd RGB, ρs, α) of a flat sample by Levenberg–Marquardt from K-means cluster fits; appearance vectors for the manifold.",
             device: DevicePreference::Cpu,
-            inputs: vec![Port::input("btf", Btf::TYPE, "a flat sample's capture")],
+            inputs: vec![
+                Port::input("btf", Btf::TYPE, "a flat sample's capture"),
+                Port::optional("truth", BrdfMap::TYPE, "true parameters, for the error metrics"),
+            ],
             outputs: vec![
                 Port::output("maps", BrdfMap::TYPE, "Ward parameters per pixel"),
                 Port::output("residual", Image::TYPE, "RMS residual per pixel (radiance)"),
@@ -77,6 +80,9 @@ impl Node for FitWard {
                 Port::output("not_converged", "Scalar", "pixels that did not converge"),
                 Port::output("rms_residual", "Scalar", "RMS residual over all pixels"),
                 Port::output("pixels_per_second", "Scalar", "fit speed"),
+                Port::output("error_rho_d", "Scalar", "median relative error of ρd vs `truth` (0 without)"),
+                Port::output("error_rho_s", "Scalar", "median relative error of ρs vs `truth` (0 without)"),
+                Port::output("error_alpha", "Scalar", "median relative error of α vs `truth` (0 without)"),
                 Port::output("seconds", "Scalar", "time, s"),
             ],
             disk_cache: true,
@@ -112,6 +118,21 @@ impl Node for FitWard {
             / n as f64)
             .sqrt();
         let appearance = appearance(&fit.maps, p.weights);
+        let errors = match inputs.opt::<BrdfMap>("truth")? {
+            None => [0.0; 3],
+            Some(t) if t.width == btf.width && t.height == btf.height => {
+                median_errors(&fit.maps, t)
+            }
+            Some(t) => {
+                return Err(NodeError::input(
+                    "truth",
+                    format!(
+                        "{} × {} maps for a {} × {} capture",
+                        t.width, t.height, btf.width, btf.height
+                    ),
+                ))
+            }
+        };
         Ok(Outputs::new()
             .with("maps", fit.maps)
             .with("residual", fit.residual)
@@ -119,6 +140,9 @@ impl Node for FitWard {
             .with("not_converged", Scalar(fit.not_converged as f64))
             .with("rms_residual", Scalar(rms))
             .with("pixels_per_second", Scalar(n as f64 / seconds.max(1e-12)))
+            .with("error_rho_d", Scalar(errors[0]))
+            .with("error_rho_s", Scalar(errors[1]))
+            .with("error_alpha", Scalar(errors[2]))
             .with("seconds", Scalar(seconds)))
     }
 }
@@ -404,6 +428,19 @@ pub fn fit(ctx: &NodeContext, btf: &Btf, p: &Params) -> Result<Fit, NodeError> {
             data: residual,
         },
         not_converged,
+    })
+}
+
+/// Median relative errors of (ρd over all channels, ρs, α) against true maps.
+pub fn median_errors(got: &BrdfMap, truth: &BrdfMap) -> [f64; 3] {
+    let mut groups: [Vec<f64>; 3] = [Vec::new(), Vec::new(), Vec::new()];
+    for (i, (g, t)) in got.data.iter().zip(&truth.data).enumerate() {
+        let e = (g - t).abs() / t.abs().max(1e-12);
+        groups[[0, 0, 0, 1, 2][i % WARD_PARAMS]].push(e);
+    }
+    groups.map(|mut v| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
     })
 }
 

@@ -3,6 +3,7 @@
 
 pub mod degree;
 pub mod eigen;
+pub mod evolve;
 pub mod graph;
 pub mod isomap;
 pub mod kdtree;
