@@ -929,6 +929,13 @@ fn weathering_graph_recovers_the_degree_of_the_built_in_sample() {
     assert!(rho >= 0.95, "{rho}");
     assert_eq!(metric(&rep, "fit", "not_converged"), 0.0);
     assert!(out.join("degree_true_vs_recovered.png").exists());
+    for dir in ["weathering", "deweathering"] {
+        assert!(out.join(dir).join("frame_007.png").exists());
+        let gif = std::fs::read(out.join(dir).join("frame.gif")).unwrap();
+        assert_eq!(&gif[..6], b"GIF89a");
+    }
+    assert!(metric(&rep, "evolve", "mean_degree") > metric(&rep, "deweather", "mean_degree"));
+    assert!(metric(&rep, "fit", "error_rho_d") < 1e-3);
     let mut f = std::fs::File::open(out.join("ward_maps.npy")).unwrap();
     let npy = npyz::NpyFile::new(&mut f).unwrap();
     assert_eq!(npy.shape(), &[32, 32, 5]);
