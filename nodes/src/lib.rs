@@ -17,6 +17,7 @@ mod registry;
 pub mod render;
 pub mod rng;
 pub mod sss;
+pub mod synthesis;
 pub mod types;
 pub mod util;
 pub mod weathering;

@@ -17,6 +17,8 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::normals::Normals);
     r.register(crate::image::compare::Compare);
     r.register(crate::image::row::Row);
+    r.register(crate::image::blur::Blur);
+    r.register(crate::image::ramp::Ramp);
     r.register(crate::io::image_read::ImageRead);
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);
@@ -36,8 +38,10 @@ pub fn registry() -> Registry {
     r.register(crate::manifold::isomap::Isomap);
     r.register(crate::manifold::degree::Degree);
     r.register(crate::manifold::evolve::Evolve);
+    r.register(crate::manifold::transfer::Transfer);
     r.register(crate::weathering::sample::WeatheringSample);
     r.register(crate::brdf::fit_ward::FitWard);
+    r.register(crate::synthesis::texture::Texture);
     r.register(crate::util::scalar::Constant);
     r.register(crate::util::scalar::Affine);
     r.register(crate::util::sleep::Sleep);

@@ -1,4 +1,6 @@
-//! Operations on images: error against a reference, side-by-side layout.
+//! Operations on images: error against a reference, side-by-side layout, blur, ramps.
 
+pub mod blur;
 pub mod compare;
+pub mod ramp;
 pub mod row;

@@ -14,9 +14,10 @@
 //!   `exposure`) from `view` and `light` and written as `<prefix>_NNN.png` (8-bit sRGB) and one
 //!   looping `<prefix>.gif`.
 
+use super::path::Path;
 use crate::brdf::ward::PairGeometry;
 use crate::io::formats;
-use crate::types::{BrdfMap, Direction, DirectionPair, Image, WARD_PARAMS};
+use crate::types::{BrdfMap, Direction, DirectionPair, Image};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
 use mesoflow_graph::DevicePreference;
@@ -225,79 +226,6 @@ impl Node for Evolve {
             )
             .with("mean_degree", Scalar(mean))
             .with("seconds", Scalar(start.elapsed().as_secs_f64())))
-    }
-}
-
-/// (ρd RGB, ρs, ln α): the space the path is averaged in.
-fn vector(q: &[f64]) -> [f64; 5] {
-    [q[0], q[1], q[2], q[3], q[4].max(1e-6).ln()]
-}
-
-/// The sample's pixels ordered by degree: the weathering path as the capture shows it.
-pub struct Path {
-    /// (degree, pixel), ascending.
-    order: Vec<(f64, usize)>,
-    vectors: Vec<[f64; 5]>,
-    neighbours: usize,
-}
-
-impl Path {
-    pub fn new(maps: &BrdfMap, omega: &[f64], neighbours: usize) -> Path {
-        let mut order: Vec<(f64, usize)> = omega.iter().copied().zip(0..).collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        let vectors = (0..omega.len()).map(|i| vector(maps.pixel(i))).collect();
-        Path {
-            order,
-            vectors,
-            neighbours: neighbours.min(omega.len()),
-        }
-    }
-
-    /// A(w): the mean vector of the `neighbours` pixels of degree nearest w.
-    pub fn at(&self, w: f64) -> [f64; 5] {
-        let n = self.order.len();
-        let m = self.neighbours;
-        // Grow a window from the insertion point towards the nearer side.
-        let mut hi = self.order.partition_point(|e| e.0 < w);
-        let mut lo = hi;
-        while hi - lo < m {
-            let take_low = lo > 0 && (hi == n || w - self.order[lo - 1].0 <= self.order[hi].0 - w);
-            if take_low {
-                lo -= 1;
-            } else {
-                hi += 1;
-            }
-        }
-        let mut sum = [0.0; 5];
-        for &(_, i) in &self.order[lo..hi] {
-            for (s, v) in sum.iter_mut().zip(&self.vectors[i]) {
-                *s += v;
-            }
-        }
-        sum.map(|s| s / m as f64)
-    }
-
-    /// Ward maps at the target degrees, each pixel keeping its offset from the path.
-    pub fn advance(&self, maps: &BrdfMap, omega: &[f64], target: &[f64]) -> BrdfMap {
-        let mut data = Vec::with_capacity(maps.data.len());
-        for (i, (w, t)) in omega.iter().zip(target).enumerate() {
-            let (here, there) = (self.at(*w), self.at(*t));
-            let v = &self.vectors[i];
-            let mut q = [0.0; WARD_PARAMS];
-            for d in 0..5 {
-                q[d] = there[d] + (v[d] - here[d]);
-            }
-            for rho in &mut q[..4] {
-                *rho = rho.max(0.0);
-            }
-            q[4] = q[4].exp();
-            data.extend(q);
-        }
-        BrdfMap {
-            width: maps.width,
-            height: maps.height,
-            data,
-        }
     }
 }
 

@@ -8,6 +8,8 @@ pub mod graph;
 pub mod isomap;
 pub mod kdtree;
 pub mod knn;
+pub mod path;
 pub mod points_read;
 pub mod points_synthetic;
 pub mod rank;
+pub mod transfer;
