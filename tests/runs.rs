@@ -941,3 +941,35 @@ fn weathering_graph_recovers_the_degree_of_the_built_in_sample() {
     assert_eq!(npy.shape(), &[32, 32, 5]);
     assert!(npy.dtype().descr().contains("f8"));
 }
+
+#[test]
+fn weathering_transfer_graph_lays_the_degree_onto_a_larger_guided_target() {
+    // The saved pipeline end to end: the synthesized degree map has the target's size, its
+    // energy fell during the finest stage, it follows the guide (rust gathers where the ramp is
+    // high: the bottom third's mean degree above the top third's), and the transferred maps and
+    // the weathering frames exist.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let rep = run_graph(root, "graphs/weathering_transfer.json", &out, &[]);
+    assert!(metric(&rep, "degree", "spearman") >= 0.95);
+    assert!(metric(&rep, "synth", "energy") < metric(&rep, "synth", "energy_start"));
+    let mut f = std::fs::File::open(out.join("target_degree.npy")).unwrap();
+    let npy = npyz::NpyFile::new(&mut f).unwrap();
+    assert_eq!(npy.shape(), &[128, 192, 1]);
+    let d: Vec<f32> = npy.into_vec().unwrap();
+    let third = |rows: std::ops::Range<usize>| {
+        let n = rows.len() * 192;
+        rows.map(|y| d[y * 192..(y + 1) * 192].iter().sum::<f32>())
+            .sum::<f32>()
+            / n as f32
+    };
+    let (top, bottom) = (third(0..42), third(86..128));
+    assert!(bottom > top + 0.3, "top {top}, bottom {bottom}");
+    let mut f = std::fs::File::open(out.join("target_ward_maps.npy")).unwrap();
+    assert_eq!(npyz::NpyFile::new(&mut f).unwrap().shape(), &[128, 192, 5]);
+    assert!(out.join("target_weathering").join("frame_005.png").exists());
+    assert!(out.join("target_guide_degree_appearance.png").exists());
+    let m = metric(&rep, "evolve", "mean_degree");
+    assert!(m > metric(&rep, "transfer", "mean_degree"), "{m}");
+}
