@@ -17,14 +17,26 @@ pub struct PairGeometry {
 impl PairGeometry {
     /// For the flat normal (0, 0, 1).
     pub fn flat(pair: &DirectionPair) -> PairGeometry {
+        PairGeometry::with_normal(pair, [0.0, 0.0, 1.0])
+    }
+
+    /// For a unit normal `n` in the frame of the direction vectors (a tilted pixel). Where
+    /// n · h ≤ 0 the lobe is empty (tan²δ = ∞).
+    pub fn with_normal(pair: &DirectionPair, n: [f64; 3]) -> PairGeometry {
         let (wi, wo) = (pair.light.vector(), pair.view.vector());
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
         let h = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
-        let len2 = h[0] * h[0] + h[1] * h[1] + h[2] * h[2];
-        let cd2 = h[2] * h[2] / len2;
+        let len2 = dot(h, h);
+        let nh = dot(n, h);
+        let cd2 = nh * nh / len2;
         PairGeometry {
-            cos_i: wi[2],
-            cos_o: wo[2],
-            tan2_delta: (1.0 - cd2).max(0.0) / cd2,
+            cos_i: dot(n, wi),
+            cos_o: dot(n, wo),
+            tan2_delta: if nh > 0.0 {
+                (1.0 - cd2).max(0.0) / cd2
+            } else {
+                f64::INFINITY
+            },
         }
     }
 
@@ -85,6 +97,53 @@ mod tests {
                 let d = g.lobe(alpha).1;
                 assert!((d - fd).abs() <= 1e-6 * fd.abs().max(1e-3), "{d} vs {fd}");
             }
+        }
+    }
+
+    #[test]
+    fn a_tilted_normal_agrees_with_the_capture_brdf() {
+        // btf::brdf::eval takes the normal itself (vector form, independent of this code):
+        // value = eval(n, wi, wo) · (n · wi) wherever both cosines are positive, 0 elsewhere.
+        let n = {
+            let v = [0.3f64, -0.2, 0.93];
+            let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            [v[0] / l, v[1] / l, v[2] / l]
+        };
+        for (view, light) in [
+            (Direction::degrees(0.0, 0.0), Direction::degrees(40.0, 30.0)),
+            (
+                Direction::degrees(20.0, 90.0),
+                Direction::degrees(65.0, 200.0),
+            ),
+            (
+                Direction::degrees(10.0, 0.0),
+                Direction::degrees(80.0, 160.0),
+            ),
+        ] {
+            let g = PairGeometry::with_normal(&DirectionPair { view, light }, n);
+            let ci = n
+                .iter()
+                .zip(light.vector())
+                .map(|(a, b)| a * b)
+                .sum::<f64>();
+            let want = if ci > 0.0 {
+                eval(
+                    Model::Ward,
+                    0.3,
+                    0.2,
+                    0.15,
+                    n,
+                    light.vector(),
+                    view.vector(),
+                ) * ci
+            } else {
+                0.0
+            };
+            let got = g.value(0.3, 0.2, 0.15);
+            assert!(
+                (got - want).abs() <= 1e-12 * want.abs().max(1e-12),
+                "{got} vs {want}"
+            );
         }
     }
 }

@@ -17,7 +17,7 @@
 use crate::brdf::ward::PairGeometry;
 use crate::btf::directions::DirectionSet;
 use crate::rng;
-use crate::types::{BrdfMap, Btf, DirectionPair, Image, WARD_PARAMS};
+use crate::types::{BrdfMap, Btf, DirectionPair, Image, NormalMap, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 use rayon::prelude::*;
@@ -43,6 +43,9 @@ pub struct Params {
     pub views: DirectionSet,
     /// Relative Gaussian noise on captured values (0 = exact).
     pub noise: f64,
+    /// Relief height in sample widths (0 = flat): smooth bumps whose normals tilt the Ward
+    /// lobe per pixel, for fits that need photometric-stereo normals.
+    pub bumps: f64,
     pub seed: u64,
 }
 
@@ -59,6 +62,7 @@ impl Default for Params {
             },
             views: DirectionSet::List(vec![[0.0, 0.0]]),
             noise: 0.0,
+            bumps: 0.0,
             seed: 1,
         }
     }
@@ -96,14 +100,15 @@ impl Node for WeatheringSample {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "weathering.sample",
-            version: 1,
-            doc: "A synthetic weathered flat sample (metal → orange rust → dark rust along a bent path in Ward space) captured under many lights, with the true degree and parameter maps.",
+            version: 2,
+            doc: "A synthetic weathered sample, flat or with bumps (metal → orange rust → dark rust along a bent path in Ward space) captured under many lights, with the true degree and parameter maps.",
             device: DevicePreference::Cpu,
             inputs: vec![],
             outputs: vec![
                 Port::output("btf", Btf::TYPE, "the capture"),
                 Port::output("degree", Image::TYPE, "true weathering degree, 1 channel"),
                 Port::output("maps", BrdfMap::TYPE, "true Ward parameters"),
+                Port::output("normals", NormalMap::TYPE, "true normals (x right, y up the image)"),
                 Port::output("least", Image::TYPE, "mask of the least weathered pixels (ω ≤ 0.02)"),
                 Port::output("most", Image::TYPE, "mask of the most weathered pixels (ω ≥ 0.98)"),
                 Port::output("photo", Image::TYPE, "the capture under the light nearest θ = 30°, first view"),
@@ -117,6 +122,7 @@ impl Node for WeatheringSample {
             ("radius", p.radius),
             ("roughness", p.roughness),
             ("noise", p.noise),
+            ("bumps", p.bumps),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(NodeError::param(name, "must be finite and not negative"));
@@ -136,6 +142,7 @@ impl Node for WeatheringSample {
             .with("btf", s.btf)
             .with("degree", s.degree)
             .with("maps", s.maps)
+            .with("normals", s.normals)
             .with("least", s.least)
             .with("most", s.most)
             .with("photo", s.photo))
@@ -146,6 +153,7 @@ pub struct Sample {
     pub btf: Btf,
     pub degree: Image,
     pub maps: BrdfMap,
+    pub normals: NormalMap,
     pub least: Image,
     pub most: Image,
     pub photo: Image,
@@ -181,6 +189,28 @@ fn gaussian(seed: u64, parts: &[u64]) -> f64 {
     let u1 = rng::unit(h).max(1e-300);
     let u2 = rng::unit(rng::mix(h ^ 0x9e37_79b9_7f4a_7c15));
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+/// Normals of the relief z = bumps · H(u, v), H the periodic value noise (u right, v down the
+/// image, in sample widths; y of the normal points up the image). None when flat.
+fn relief_normals(p: &Params, size: usize) -> Option<Vec<[f64; 3]>> {
+    if p.bumps <= 0.0 {
+        return None;
+    }
+    let e = 1e-4;
+    let h = |u: f64, v: f64| value_noise(p.seed ^ 0xb0b5, u.rem_euclid(1.0), v.rem_euclid(1.0));
+    Some(
+        (0..size * size)
+            .map(|i| {
+                let u = ((i % size) as f64 + 0.5) / size as f64;
+                let v = ((i / size) as f64 + 0.5) / size as f64;
+                let du = p.bumps * (h(u + e, v) - h(u - e, v)) / (2.0 * e);
+                let dv = p.bumps * (h(u, v + e) - h(u, v - e)) / (2.0 * e);
+                let len = (du * du + dv * dv + 1.0).sqrt();
+                [-du / len, dv / len, 1.0 / len]
+            })
+            .collect(),
+    )
 }
 
 pub fn generate(p: &Params) -> Sample {
@@ -231,13 +261,17 @@ pub fn generate(p: &Params) -> Sample {
             })
         })
         .collect();
+    let normals = relief_normals(p, size);
     let geo: Vec<PairGeometry> = pairs.iter().map(PairGeometry::flat).collect();
     let mut data = vec![0.0f32; pairs.len() * 3 * n];
     data.par_chunks_mut(n).enumerate().for_each(|(plane, out)| {
         let (pair, c) = (plane / 3, plane % 3);
-        let g = &geo[pair];
         for (i, o) in out.iter_mut().enumerate() {
             let q = &maps[i * WARD_PARAMS..(i + 1) * WARD_PARAMS];
+            let g = match &normals {
+                Some(nv) => PairGeometry::with_normal(&pairs[pair], nv[i]),
+                None => geo[pair],
+            };
             let mut v = g.value(q[c], q[3], q[4]);
             if p.noise > 0.0 {
                 v *= 1.0 + p.noise * gaussian(p.seed, &[3, plane as u64, i as u64]);
@@ -292,6 +326,14 @@ pub fn generate(p: &Params) -> Sample {
             width: size,
             height: size,
             data: maps,
+        },
+        normals: NormalMap {
+            width: size,
+            height: size,
+            data: match &normals {
+                Some(nv) => nv.iter().flat_map(|v| v.map(|c| c as f32)).collect(),
+                None => [0.0f32, 0.0, 1.0].repeat(n),
+            },
         },
         least,
         most,

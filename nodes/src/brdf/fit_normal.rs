@@ -1,0 +1,178 @@
+//! Ward parameters and the normal of one pixel refined together by Levenberg–Marquardt: seven
+//! unknowns (ρd RGB, ρs, α, and the normal as surface slopes (p, q), n ∝ (−p, −q, 1), which
+//! stays smooth for every normal facing the viewer). The Ward columns of the Jacobian are
+//! analytic (as in `fit_ward.rs`), the two slope columns central differences.
+
+use super::fit_ward::{ALPHA_MAX, ALPHA_MIN};
+use super::ward::PairGeometry;
+use crate::types::{DirectionPair, WARD_PARAMS};
+use std::f64::consts::PI;
+
+const N: usize = WARD_PARAMS + 2;
+/// Step of the slope differences: error O(h²) ≈ 1e-12, rounding ≈ 1e-16 / h ≈ 1e-10.
+const H: f64 = 1e-6;
+/// Slopes beyond this (tilt ≈ 84°) are clamped: the pixel would face away from most lights.
+const MAX_SLOPE: f64 = 10.0;
+
+fn normal(p: f64, q: f64) -> [f64; 3] {
+    let len = (p * p + q * q + 1.0).sqrt();
+    [-p / len, -q / len, 1.0 / len]
+}
+
+fn geometry(pairs: &[DirectionPair], p: f64, q: f64) -> Vec<PairGeometry> {
+    let n = normal(p, q);
+    pairs
+        .iter()
+        .map(|pair| PairGeometry::with_normal(pair, n))
+        .collect()
+}
+
+/// Model value of channel c under one pair's geometry.
+fn model(g: &PairGeometry, x: &[f64], c: usize) -> f64 {
+    g.cos_i.max(0.0) * (x[c] / PI + x[3] * g.lobe(x[4]).0)
+}
+
+fn cost(pairs: &[DirectionPair], obs: &[f32], z: &[f64; N]) -> f64 {
+    let geo = geometry(pairs, z[5], z[6]);
+    let mut sum = 0.0;
+    for (k, g) in geo.iter().enumerate() {
+        for c in 0..3 {
+            sum += (model(g, z, c) - obs[k * 3 + c] as f64).powi(2);
+        }
+    }
+    sum
+}
+
+/// From parameters `x` and normal `n0` (n0_z > 0); returns parameters, unit normal, converged.
+pub fn refine_with_normal(
+    pairs: &[DirectionPair],
+    obs: &[f32],
+    x: [f64; WARD_PARAMS],
+    n0: [f64; 3],
+    iterations: u32,
+    tol: f64,
+) -> ([f64; WARD_PARAMS], [f64; 3], bool) {
+    let mut z = [0.0; N];
+    z[..WARD_PARAMS].copy_from_slice(&x);
+    let nz = n0[2].max(1e-3);
+    z[5] = (-n0[0] / nz).clamp(-MAX_SLOPE, MAX_SLOPE);
+    z[6] = (-n0[1] / nz).clamp(-MAX_SLOPE, MAX_SLOPE);
+    let mut c = cost(pairs, obs, &z);
+    let scale: f64 = obs.iter().map(|v| (*v as f64).powi(2)).sum();
+    let mut lambda = 1e-3;
+    let finish = |z: &[f64; N], ok: bool| {
+        let mut x = [0.0; WARD_PARAMS];
+        x.copy_from_slice(&z[..WARD_PARAMS]);
+        (x, normal(z[5], z[6]), ok)
+    };
+    for _ in 0..iterations {
+        if c <= 1e-30 * scale.max(1e-300) {
+            return finish(&z, true);
+        }
+        let (a, g) = normal_equations(pairs, obs, &z);
+        let dmax = (0..N).map(|u| a[u][u]).fold(0.0f64, f64::max);
+        loop {
+            let mut m = a;
+            for (u, row) in m.iter_mut().enumerate() {
+                row[u] += lambda * (a[u][u] + 1e-12 * dmax);
+            }
+            let Some(step) = cholesky_solve(m, g) else {
+                lambda *= 10.0;
+                if lambda > 1e12 {
+                    return finish(&z, true);
+                }
+                continue;
+            };
+            let mut next = z;
+            for u in 0..N {
+                next[u] -= step[u];
+            }
+            for v in next.iter_mut().take(4) {
+                *v = v.max(0.0);
+            }
+            next[4] = next[4].clamp(ALPHA_MIN, ALPHA_MAX);
+            next[5] = next[5].clamp(-MAX_SLOPE, MAX_SLOPE);
+            next[6] = next[6].clamp(-MAX_SLOPE, MAX_SLOPE);
+            let cn = cost(pairs, obs, &next);
+            if cn.is_finite() && cn < c {
+                let done = c - cn <= tol * cn;
+                z = next;
+                c = cn;
+                lambda = (lambda / 3.0).max(1e-12);
+                if done {
+                    return finish(&z, true);
+                }
+                break;
+            }
+            lambda *= 4.0;
+            if lambda > 1e12 {
+                return finish(&z, true);
+            }
+        }
+    }
+    finish(&z, false)
+}
+
+/// JᵀJ and Jᵀr at z.
+fn normal_equations(
+    pairs: &[DirectionPair],
+    obs: &[f32],
+    z: &[f64; N],
+) -> ([[f64; N]; N], [f64; N]) {
+    let geo = geometry(pairs, z[5], z[6]);
+    let shifted = [
+        geometry(pairs, z[5] + H, z[6]),
+        geometry(pairs, z[5] - H, z[6]),
+        geometry(pairs, z[5], z[6] + H),
+        geometry(pairs, z[5], z[6] - H),
+    ];
+    let mut a = [[0.0; N]; N];
+    let mut g = [0.0; N];
+    for (k, geo_k) in geo.iter().enumerate() {
+        let ci = geo_k.cos_i.max(0.0);
+        let (s, ds) = geo_k.lobe(z[4]);
+        for c in 0..3 {
+            let r = model(geo_k, z, c) - obs[k * 3 + c] as f64;
+            let mut j = [0.0; N];
+            j[c] = ci / PI;
+            j[3] = ci * s;
+            j[4] = ci * z[3] * ds;
+            j[5] = (model(&shifted[0][k], z, c) - model(&shifted[1][k], z, c)) / (2.0 * H);
+            j[6] = (model(&shifted[2][k], z, c) - model(&shifted[3][k], z, c)) / (2.0 * H);
+            for u in 0..N {
+                g[u] += j[u] * r;
+                for v in 0..N {
+                    a[u][v] += j[u] * j[v];
+                }
+            }
+        }
+    }
+    (a, g)
+}
+
+/// Cholesky solve of a symmetric positive definite system; `None` if it is not.
+fn cholesky_solve(a: [[f64; N]; N], b: [f64; N]) -> Option<[f64; N]> {
+    let mut l = [[0.0; N]; N];
+    for i in 0..N {
+        for j in 0..=i {
+            let s = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
+            if i == j {
+                if s.is_nan() || s <= 0.0 {
+                    return None;
+                }
+                l[i][i] = s.sqrt();
+            } else {
+                l[i][j] = s / l[j][j];
+            }
+        }
+    }
+    let mut y = [0.0; N];
+    for i in 0..N {
+        y[i] = (b[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
+    }
+    let mut x = [0.0; N];
+    for i in (0..N).rev() {
+        x[i] = (y[i] - (i + 1..N).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
+    }
+    Some(x)
+}
