@@ -513,6 +513,60 @@ mod tests {
     }
 
     #[test]
+    fn too_large_a_k_short_circuits_and_the_metrics_show_it() {
+        // A swiss roll of 1500 points: with k = 10 the graph follows the sheet, the residual variance is small
+        // and the first component orders the roll by its angle; with k = 300 the graph
+        // jumps across the layers, the geodesics become straight-line distances through the
+        // roll, and both measures degrade. Bounds from the geometry, with margin: a faithful
+        // 2-D embedding of the unrolled sheet has residual variance near 0 (< 0.02) and
+        // |Spearman| ≈ 1 (> 0.99); short-circuited, the residual variance is at least 5× larger
+        // and |Spearman| drops below 0.95.
+        use crate::manifold::points_synthetic::{generate, Params as Synth};
+        use crate::manifold::rank::spearman;
+        let (x, truth) = generate(&Synth {
+            n: 1500,
+            ..Synth::default()
+        });
+        let angle: Vec<f64> = (0..1500).map(|i| truth.data[i * truth.dims]).collect();
+        let run = |k: usize| {
+            let r = isomap(&x, &knn(&x, k).unwrap(), &Params::default()).unwrap();
+            let first: Vec<f64> = (0..1500).map(|i| r.embedding.data[i * 2]).collect();
+            (r.residual_variance, spearman(&first, &angle).abs())
+        };
+        let (rv_good, rho_good) = run(10);
+        let (rv_short, rho_short) = run(300);
+        eprintln!("k = 10: {rv_good}, {rho_good}; k = 300: {rv_short}, {rho_short}");
+        assert!(
+            rv_good < 0.02 && rho_good > 0.99,
+            "k = 10: {rv_good}, {rho_good}"
+        );
+        assert!(
+            rv_short > 5.0 * rv_good && rho_short < 0.95,
+            "k = 300: {rv_short}, {rho_short}"
+        );
+    }
+
+    #[test]
+    fn a_degenerate_embedding_is_warned_about() {
+        // Points on a line with every pair joined: the distances are exactly one-dimensional,
+        // so a second component has eigenvalue 0 (to rounding) and the report must say so.
+        let x = PointSet {
+            n: 12,
+            dims: 1,
+            data: (0..12).map(|i| i as f64 * 0.5).collect(),
+        };
+        let r = isomap(&x, &knn(&x, 11).unwrap(), &Params::default()).unwrap();
+        assert!(
+            r.warnings
+                .iter()
+                .any(|w| w.contains("non-positive eigenvalue")),
+            "{:?}",
+            r.warnings
+        );
+        assert!(r.embedding.data.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
     fn landmark_isomap_agrees_with_isomap() {
         // 2000 points of a rolled sheet in 3-D; 200 landmarks against all 2000. The bound: the
         // triangulation is exact for points whose geodesics the landmark MDS reproduces, so the
