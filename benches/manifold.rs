@@ -6,6 +6,8 @@
 //!    file in the same session; the Procrustes disparity between the two embeddings and both
 //!    reconstruction errors.
 //! 2. Landmark Isomap on `--landmark-n` points with `--landmarks` landmarks: seconds per stage.
+//! 3. With `--crossover`: brute force against the k-d tree for kNN, 3-D and 5-D points (5-D:
+//!    appearance vectors), best of 3 each — where `knn::TREE_FROM` comes from.
 
 use mesoflow_nodes::manifold::{isomap, knn};
 use mesoflow_nodes::rng;
@@ -96,6 +98,9 @@ fn main() {
             Err(e) => println!("peer not run: {e}"),
         }
     }
+    if std::env::args().any(|a| a == "--crossover") {
+        crossover(k);
+    }
     let big: usize = arg("--landmark-n", 250_000);
     if big > 0 {
         let landmarks: u32 = arg("--landmarks", 1000);
@@ -120,5 +125,42 @@ fn main() {
             r.mds_seconds,
             r.residual_variance
         );
+    }
+}
+
+/// Brute force against the k-d tree at growing n, best of 3.
+fn crossover(k: usize) {
+    use mesoflow_nodes::manifold::kdtree::KdTree;
+    use rayon::prelude::*;
+    for dims in [3usize, 5] {
+        for n in [250usize, 500, 1000, 2000, 4000, 8000] {
+            let data: Vec<f64> = (0..(n * dims) as u64)
+                .map(|i| rng::unit(rng::hash(21, &[i])))
+                .collect();
+            let x = PointSet { n, dims, data };
+            let best = |f: &dyn Fn()| {
+                (0..3)
+                    .map(|_| {
+                        let t = Instant::now();
+                        f();
+                        t.elapsed().as_secs_f64()
+                    })
+                    .fold(f64::INFINITY, f64::min)
+            };
+            let brute = best(&|| {
+                std::hint::black_box(knn::brute(&x, k));
+            });
+            let tree = best(&|| {
+                let t = KdTree::build(&x);
+                let rows: Vec<_> = (0..n)
+                    .into_par_iter()
+                    .map(|i| t.nearest(&x, i, k))
+                    .collect();
+                std::hint::black_box(rows);
+            });
+            println!(
+                "kNN {dims}-D uniform, n = {n}, k = {k}: brute {brute:.5} s, k-d tree {tree:.5} s"
+            );
+        }
     }
 }
