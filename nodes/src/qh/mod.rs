@@ -3,3 +3,4 @@
 
 pub mod fit_dipole;
 pub mod render;
+pub mod white_table;
