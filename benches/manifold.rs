@@ -14,14 +14,9 @@ use mesoflow_nodes::rng;
 use mesoflow_nodes::types::PointSet;
 use std::time::Instant;
 
-fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
+#[path = "common/args.rs"]
+mod args;
+use args::arg;
 
 /// scikit-learn's `make_s_curve` shape, from our own seeded randomness.
 fn s_curve(n: usize) -> PointSet {

@@ -15,14 +15,9 @@ use mesoflow_nodes::render::render_mesh::{self, RenderMesh};
 use mesoflow_runtime::{Gpu, Inputs, Node, NodeContext, ValueRef};
 use std::sync::Arc;
 
-fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
+#[path = "common/args.rs"]
+mod args;
+use args::arg;
 
 fn port(node: &dyn Fn() -> mesoflow_runtime::Outputs, name: &str) -> ValueRef {
     node().get(name).expect("port").clone()

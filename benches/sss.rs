@@ -21,14 +21,9 @@ use mesoflow_nodes::types::ScatteringMaterial;
 use mesoflow_runtime::Gpu;
 use std::time::Instant;
 
-fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
+#[path = "common/args.rs"]
+mod args;
+use args::arg;
 
 fn flag(name: &str) -> bool {
     std::env::args().any(|a| a == name)

@@ -3,6 +3,7 @@
 //! stays smooth for every normal facing the viewer). The Ward columns of the Jacobian are
 //! analytic (as in `fit_ward.rs`), the two slope columns central differences.
 
+use super::cholesky;
 use super::fit_ward::{ALPHA_MAX, ALPHA_MIN};
 use super::ward::PairGeometry;
 use crate::types::{DirectionPair, WARD_PARAMS};
@@ -76,7 +77,7 @@ pub fn refine_with_normal(
             for (u, row) in m.iter_mut().enumerate() {
                 row[u] += lambda * (a[u][u] + 1e-12 * dmax);
             }
-            let Some(step) = cholesky_solve(m, g) else {
+            let Some(step) = cholesky::solve(m, g) else {
                 lambda *= 10.0;
                 if lambda > 1e12 {
                     return finish(&z, true);
@@ -148,31 +149,4 @@ fn normal_equations(
         }
     }
     (a, g)
-}
-
-/// Cholesky solve of a symmetric positive definite system; `None` if it is not.
-fn cholesky_solve(a: [[f64; N]; N], b: [f64; N]) -> Option<[f64; N]> {
-    let mut l = [[0.0; N]; N];
-    for i in 0..N {
-        for j in 0..=i {
-            let s = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            if i == j {
-                if s.is_nan() || s <= 0.0 {
-                    return None;
-                }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-    }
-    let mut y = [0.0; N];
-    for i in 0..N {
-        y[i] = (b[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
-    }
-    let mut x = [0.0; N];
-    for i in (0..N).rev() {
-        x[i] = (y[i] - (i + 1..N).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
-    }
-    Some(x)
 }

@@ -16,6 +16,7 @@
 //! standard deviation over the sample (the three ρd channels share one scale so colour ratios
 //! survive) and multiplied by `weights` — so no parameter dominates the distances by its units.
 
+use super::cholesky;
 use super::fit_normal::refine_with_normal;
 use super::kmeans::kmeans;
 use super::photometric::{angle_deg, photometric_normals, MIN_LIGHTS};
@@ -324,7 +325,7 @@ impl Problem<'_> {
                 for (u, row) in m.iter_mut().enumerate() {
                     row[u] += lambda * (a[u][u] + 1e-12 * dmax);
                 }
-                let Some(step) = solve5(m, g) else {
+                let Some(step) = cholesky::solve(m, g) else {
                     lambda *= 10.0;
                     if lambda > 1e12 {
                         return (x, true);
@@ -359,33 +360,6 @@ impl Problem<'_> {
         }
         (x, false)
     }
-}
-
-/// Cholesky solve of a symmetric positive definite 5 × 5 system; `None` if it is not.
-fn solve5(a: [[f64; 5]; 5], b: [f64; 5]) -> Option<[f64; 5]> {
-    let mut l = [[0.0; 5]; 5];
-    for i in 0..5 {
-        for j in 0..=i {
-            let s = a[i][j] - (0..j).map(|k| l[i][k] * l[j][k]).sum::<f64>();
-            if i == j {
-                if s.is_nan() || s <= 0.0 {
-                    return None;
-                }
-                l[i][i] = s.sqrt();
-            } else {
-                l[i][j] = s / l[j][j];
-            }
-        }
-    }
-    let mut y = [0.0; 5];
-    for i in 0..5 {
-        y[i] = (b[i] - (0..i).map(|k| l[i][k] * y[k]).sum::<f64>()) / l[i][i];
-    }
-    let mut x = [0.0; 5];
-    for i in (0..5).rev() {
-        x[i] = (y[i] - (i + 1..5).map(|k| l[k][i] * x[k]).sum::<f64>()) / l[i][i];
-    }
-    Some(x)
 }
 
 /// Best of a log grid over α with the closed-form ρd, ρs, then refined.

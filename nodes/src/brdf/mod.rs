@@ -1,6 +1,7 @@
 //! Per-pixel reflectance models fitted to captures: the isotropic Ward lobe with its gradient,
 //! K-means for starting points, and the `brdf.fit_ward` node.
 
+pub mod cholesky;
 pub mod fit_normal;
 pub mod fit_ward;
 pub mod kmeans;
