@@ -3,8 +3,8 @@
 //! stays smooth for every normal facing the viewer). The Ward columns of the Jacobian are
 //! analytic (as in `fit_ward.rs`), the two slope columns central differences.
 
-use super::cholesky;
 use super::fit_ward::{ALPHA_MAX, ALPHA_MIN};
+use super::lm;
 use super::ward::PairGeometry;
 use crate::types::{DirectionPair, WARD_PARAMS};
 use std::f64::consts::PI;
@@ -58,60 +58,26 @@ pub fn refine_with_normal(
     let nz = n0[2].max(1e-3);
     z[5] = (-n0[0] / nz).clamp(-MAX_SLOPE, MAX_SLOPE);
     z[6] = (-n0[1] / nz).clamp(-MAX_SLOPE, MAX_SLOPE);
-    let mut c = cost(pairs, obs, &z);
     let scale: f64 = obs.iter().map(|v| (*v as f64).powi(2)).sum();
-    let mut lambda = 1e-3;
-    let finish = |z: &[f64; N], ok: bool| {
-        let mut x = [0.0; WARD_PARAMS];
-        x.copy_from_slice(&z[..WARD_PARAMS]);
-        (x, normal(z[5], z[6]), ok)
-    };
-    for _ in 0..iterations {
-        if c <= 1e-30 * scale.max(1e-300) {
-            return finish(&z, true);
-        }
-        let (a, g) = normal_equations(pairs, obs, &z);
-        let dmax = (0..N).map(|u| a[u][u]).fold(0.0f64, f64::max);
-        loop {
-            let mut m = a;
-            for (u, row) in m.iter_mut().enumerate() {
-                row[u] += lambda * (a[u][u] + 1e-12 * dmax);
-            }
-            let Some(step) = cholesky::solve(m, g) else {
-                lambda *= 10.0;
-                if lambda > 1e12 {
-                    return finish(&z, true);
-                }
-                continue;
-            };
-            let mut next = z;
-            for u in 0..N {
-                next[u] -= step[u];
-            }
-            for v in next.iter_mut().take(4) {
+    let (z, ok) = lm::minimise(
+        z,
+        iterations,
+        tol,
+        scale,
+        |z| cost(pairs, obs, z),
+        |z| normal_equations(pairs, obs, z),
+        |z| {
+            for v in z.iter_mut().take(4) {
                 *v = v.max(0.0);
             }
-            next[4] = next[4].clamp(ALPHA_MIN, ALPHA_MAX);
-            next[5] = next[5].clamp(-MAX_SLOPE, MAX_SLOPE);
-            next[6] = next[6].clamp(-MAX_SLOPE, MAX_SLOPE);
-            let cn = cost(pairs, obs, &next);
-            if cn.is_finite() && cn < c {
-                let done = c - cn <= tol * cn;
-                z = next;
-                c = cn;
-                lambda = (lambda / 3.0).max(1e-12);
-                if done {
-                    return finish(&z, true);
-                }
-                break;
-            }
-            lambda *= 4.0;
-            if lambda > 1e12 {
-                return finish(&z, true);
-            }
-        }
-    }
-    finish(&z, false)
+            z[4] = z[4].clamp(ALPHA_MIN, ALPHA_MAX);
+            z[5] = z[5].clamp(-MAX_SLOPE, MAX_SLOPE);
+            z[6] = z[6].clamp(-MAX_SLOPE, MAX_SLOPE);
+        },
+    );
+    let mut x = [0.0; WARD_PARAMS];
+    x.copy_from_slice(&z[..WARD_PARAMS]);
+    (x, normal(z[5], z[6]), ok)
 }
 
 /// JᵀJ and Jᵀr at z.

@@ -16,9 +16,9 @@
 //! standard deviation over the sample (the three ρd channels share one scale so colour ratios
 //! survive) and multiplied by `weights` — so no parameter dominates the distances by its units.
 
-use super::cholesky;
 use super::fit_normal::refine_with_normal;
 use super::kmeans::kmeans;
+use super::lm;
 use super::photometric::{angle_deg, photometric_normals, MIN_LIGHTS};
 use super::ward::PairGeometry;
 use crate::types::{BrdfMap, Btf, Image, NormalMap, PointSet, WARD_PARAMS};
@@ -309,56 +309,24 @@ impl Problem<'_> {
         (x, self.cost(&x))
     }
 
-    /// Levenberg–Marquardt from `x`; returns the parameters and whether it converged.
-    fn refine(&self, mut x: [f64; WARD_PARAMS], iterations: u32, tol: f64) -> ([f64; 5], bool) {
-        let mut cost = self.cost(&x);
+    /// Levenberg–Marquardt from `x` (ρd, ρs ≥ 0, α in its range); returns the parameters and
+    /// whether it converged.
+    fn refine(&self, x: [f64; WARD_PARAMS], iterations: u32, tol: f64) -> ([f64; 5], bool) {
         let scale: f64 = self.obs.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
-        let mut lambda = 1e-3;
-        for _ in 0..iterations {
-            if cost <= 1e-30 * scale.max(1e-300) {
-                return (x, true);
-            }
-            let (a, g) = self.normal_equations(&x);
-            let dmax = (0..5).map(|u| a[u][u]).fold(0.0f64, f64::max);
-            loop {
-                let mut m = a;
-                for (u, row) in m.iter_mut().enumerate() {
-                    row[u] += lambda * (a[u][u] + 1e-12 * dmax);
-                }
-                let Some(step) = cholesky::solve(m, g) else {
-                    lambda *= 10.0;
-                    if lambda > 1e12 {
-                        return (x, true);
-                    }
-                    continue;
-                };
-                let mut next = x;
-                for u in 0..5 {
-                    next[u] -= step[u];
-                }
-                for v in next.iter_mut().take(4) {
+        lm::minimise(
+            x,
+            iterations,
+            tol,
+            scale,
+            |x| self.cost(x),
+            |x| self.normal_equations(x),
+            |x| {
+                for v in x.iter_mut().take(4) {
                     *v = v.max(0.0);
                 }
-                next[4] = next[4].clamp(ALPHA_MIN, ALPHA_MAX);
-                let c = self.cost(&next);
-                if c.is_finite() && c < cost {
-                    let done = cost - c <= tol * c;
-                    x = next;
-                    cost = c;
-                    lambda = (lambda / 3.0).max(1e-12);
-                    if done {
-                        return (x, true);
-                    }
-                    break;
-                }
-                lambda *= 4.0;
-                // No step lowers the error any more: a minimum to working precision.
-                if lambda > 1e12 {
-                    return (x, true);
-                }
-            }
-        }
-        (x, false)
+                x[4] = x[4].clamp(ALPHA_MIN, ALPHA_MAX);
+            },
+        )
     }
 }
 
