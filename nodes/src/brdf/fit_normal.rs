@@ -3,7 +3,7 @@
 //! stays smooth for every normal facing the viewer). The Ward columns of the Jacobian are
 //! analytic (as in `fit_ward.rs`), the two slope columns central differences.
 
-use super::fit_ward::{ALPHA_MAX, ALPHA_MIN};
+use super::fit_ward::clamp_ward;
 use super::lm;
 use super::ward::PairGeometry;
 use crate::types::{DirectionPair, WARD_PARAMS};
@@ -67,10 +67,7 @@ pub fn refine_with_normal(
         |z| cost(pairs, obs, z),
         |z| normal_equations(pairs, obs, z),
         |z| {
-            for v in z.iter_mut().take(4) {
-                *v = v.max(0.0);
-            }
-            z[4] = z[4].clamp(ALPHA_MIN, ALPHA_MAX);
+            clamp_ward(z);
             z[5] = z[5].clamp(-MAX_SLOPE, MAX_SLOPE);
             z[6] = z[6].clamp(-MAX_SLOPE, MAX_SLOPE);
         },

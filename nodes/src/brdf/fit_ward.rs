@@ -30,8 +30,17 @@ use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 use std::time::Instant;
 
-pub(super) const ALPHA_MIN: f64 = 0.005;
-pub(super) const ALPHA_MAX: f64 = 2.0;
+const ALPHA_MIN: f64 = 0.005;
+const ALPHA_MAX: f64 = 2.0;
+
+/// The bounds of a Ward parameter vector (ρd RGB, ρs, α, …): reflectances not negative, α in
+/// [ALPHA_MIN, ALPHA_MAX]; entries past α are left alone.
+pub(super) fn clamp_ward(x: &mut [f64]) {
+    for v in x.iter_mut().take(4) {
+        *v = v.max(0.0);
+    }
+    x[4] = x[4].clamp(ALPHA_MIN, ALPHA_MAX);
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
@@ -95,7 +104,7 @@ impl Node for FitWard {
             doc: "Per-pixel isotropic Ward fit (ρd RGB, ρs, α) by Levenberg–Marquardt from K-means cluster fits, about a flat normal or per-pixel normals from photometric stereo; appearance vectors for the manifold.",
             device: DevicePreference::Cpu,
             inputs: vec![
-                Port::input("btf", Btf::TYPE, "a flat sample's capture"),
+                Port::input("btf", Btf::TYPE, "the capture (a flat sample, or any with `normals: photometric`)"),
                 Port::optional("truth", BrdfMap::TYPE, "true parameters, for the error metrics"),
                 Port::optional("true_normals", NormalMap::TYPE, "true normals, for `error_normal_deg`"),
             ],
@@ -320,12 +329,7 @@ impl Problem<'_> {
             scale,
             |x| self.cost(x),
             |x| self.normal_equations(x),
-            |x| {
-                for v in x.iter_mut().take(4) {
-                    *v = v.max(0.0);
-                }
-                x[4] = x[4].clamp(ALPHA_MIN, ALPHA_MAX);
-            },
+            |x| clamp_ward(x),
         )
     }
 }

@@ -32,13 +32,15 @@ pub struct Settings {
     pub seed: u64,
 }
 
-/// One (level, patch size) stage and its energy, mean ‖x_p − z_p‖^r with ‖·‖ the RMS difference
-/// per channel, after each search (the last entry follows the last update).
+/// One (level, patch size) stage after each search (the last entry follows the last update):
+/// the objective, mean ‖x_p − z_p‖^r with ‖·‖ the RMS difference per channel, and the mean
+/// distance mean ‖x_p − z_p‖ that `Synthesis::energy` reports.
 #[derive(Clone, Debug)]
 pub struct Stage {
     pub level: usize,
     pub size: usize,
     pub energies: Vec<f64>,
+    pub distances: Vec<f64>,
 }
 
 pub struct Synthesis {
@@ -152,6 +154,7 @@ pub fn synthesize<E>(
                 }
             };
             let mut energies = Vec::with_capacity(s.iterations + 1);
+            let mut distances = Vec::with_capacity(s.iterations + 1);
             for it in 0..=s.iterations {
                 let feats = patches::gather(&img, &grid);
                 let rounds = if it == 0 { 2 * s.rounds } else { s.rounds };
@@ -169,6 +172,7 @@ pub fn synthesize<E>(
                     dists.iter().map(|d| d.powf(s.exponent)).sum::<f64>() / dists.len() as f64,
                 );
                 energy = dists.iter().sum::<f64>() / dists.len() as f64;
+                distances.push(energy);
                 if it == s.iterations {
                     break;
                 }
@@ -184,6 +188,7 @@ pub fn synthesize<E>(
                 level: *level,
                 size,
                 energies,
+                distances,
             });
             sources = Some(patches::source_map(&grid, &field));
             x = Some(img);

@@ -69,7 +69,7 @@ impl Node for Texture {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "synthesis.texture",
-            version: 1,
+            version: 2,
             doc: "Example-based texture synthesis by texture optimisation (Kwatra et al. 2005), multi-resolution, PatchMatch search, optional guide channels; outputs the image, its source map and its energy (mean nearest-patch RMS distance).",
             device: DevicePreference::Cpu,
             inputs: vec![
@@ -233,8 +233,8 @@ impl Node for Texture {
         let energy_start = out
             .stages
             .last()
-            .and_then(|s| s.energies.first())
-            .map_or(out.energy, |e| e.powf(1.0 / p.exponent));
+            .and_then(|s| s.distances.first())
+            .map_or(out.energy, |e| *e);
         let (sw, sh) = ((ex.width - 1).max(1) as f32, (ex.height - 1).max(1) as f32);
         let source = Image {
             width,
