@@ -6,6 +6,7 @@
 mod args;
 mod chart;
 mod commands;
+mod env;
 mod exit;
 mod load;
 mod progress;
@@ -19,8 +20,9 @@ fn main() {
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
         .init();
+    env::quiet_broken_pipes();
     let cli = args::Cli::parse();
-    let code = match commands::dispatch(cli) {
+    let code = match env::check().and_then(|()| commands::dispatch(cli)) {
         Ok(code) => code,
         Err(e) => {
             let code = exit::code_of(&e);

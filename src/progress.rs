@@ -54,7 +54,7 @@ impl RunObserver for Bars {
     }
 }
 
-fn human_bytes(b: u64) -> String {
+pub fn human_bytes(b: u64) -> String {
     const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
     let mut v = b as f64;
     let mut u = 0;
@@ -69,7 +69,7 @@ fn human_bytes(b: u64) -> String {
     }
 }
 
-fn status_text(s: NodeStatus) -> &'static str {
+pub fn status_text(s: NodeStatus) -> &'static str {
     match s {
         NodeStatus::Computed => "computed",
         NodeStatus::Memory => "memory",
@@ -89,7 +89,10 @@ pub fn summary(report: &RunReport) -> String {
             [
                 n.id.clone(),
                 n.kind.clone(),
-                n.device.clone(),
+                match (&report.adapter, n.device.as_str(), n.status) {
+                    (Some(a), "gpu", NodeStatus::Computed) => format!("gpu ({a})"),
+                    _ => n.device.clone(),
+                },
                 status_text(n.status).to_string(),
                 format!("{:.3}", n.seconds),
                 human_bytes(n.bytes),

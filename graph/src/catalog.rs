@@ -39,6 +39,9 @@ pub struct KindSignature {
     pub outputs: Vec<OutputSpec>,
     /// JSON Schema of the parameter object, with defaults.
     pub params: serde_json::Value,
+    /// Timings the kind reports in the run report (not outputs: they are not cached).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub timings: Vec<OutputSpec>,
 }
 
 impl KindSignature {
@@ -55,6 +58,16 @@ impl KindSignature {
 pub trait Catalog {
     fn signature(&self, kind: &str) -> Option<&KindSignature>;
     fn kinds(&self) -> Vec<&str>;
+    /// Checks parameters that passed the schema against what the kind will really accept (its
+    /// typed parameter struct), so that `validate` refuses everything `run` would. `Err` names
+    /// the problem; the checker finds the parameter. Catalogs of plain signatures accept all.
+    fn check_typed(
+        &self,
+        _kind: &str,
+        _params: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<(), String> {
+        Ok(())
+    }
 }
 
 impl Catalog for Vec<KindSignature> {

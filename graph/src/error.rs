@@ -63,6 +63,14 @@ pub enum GraphError {
         param: String,
         message: String,
     },
+    /// A value the schema allows but the parameter cannot hold, or an output path that would
+    /// leave the output folder.
+    #[error("node `{node}`: parameter `{param}`: {message}")]
+    ParamInvalid {
+        node: String,
+        param: String,
+        message: String,
+    },
     #[error("node `{node}`: required parameter `{param}` is missing")]
     MissingParam { node: String, param: String },
     #[error("node `{node}`: required input `{port}` ({ty}) is not connected")]
@@ -140,6 +148,7 @@ impl GraphError {
             | UnknownParam { node, .. }
             | ParamType { node, .. }
             | ParamRange { node, .. }
+            | ParamInvalid { node, .. }
             | MissingParam { node, .. }
             | MissingInput { node, .. }
             | UnknownInput { node, .. }
@@ -159,6 +168,7 @@ impl GraphError {
             UnknownParam { param, .. }
             | ParamType { param, .. }
             | ParamRange { param, .. }
+            | ParamInvalid { param, .. }
             | MissingParam { param, .. } => Some(param),
             MissingInput { port, .. }
             | UnknownInput { port, .. }

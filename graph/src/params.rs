@@ -164,7 +164,8 @@ fn enum_values(root: &Value, s: &Value) -> Option<Vec<Value>> {
 
 fn type_matches(t: &str, v: &Value) -> bool {
     match t {
-        "integer" => v.is_i64() || v.is_u64() || v.as_f64().is_some_and(|f| f.fract() == 0.0),
+        // Written as an integer: `3.0` and `-0.0` are floats, and the typed parameters refuse them.
+        "integer" => v.is_i64() || v.is_u64(),
         "number" => v.is_number(),
         "string" => v.is_string(),
         "boolean" => v.is_boolean(),
@@ -173,6 +174,62 @@ fn type_matches(t: &str, v: &Value) -> bool {
         "object" => v.is_object(),
         _ => true,
     }
+}
+
+/// The bounds that an integer `format` (as schemars writes for Rust integer types) implies, and
+/// output paths (`x-output-path`) that must stay inside the output folder.
+fn format_problem(s: &Value, v: &Value) -> Option<Problem> {
+    if s.get("x-output-path") == Some(&Value::Bool(true)) {
+        let path = v.as_str()?;
+        return output_path_problem(path).map(Problem::Range);
+    }
+    let (lo, hi): (i128, i128) = match s.get("format").and_then(Value::as_str)? {
+        "uint8" => (0, u8::MAX.into()),
+        "uint16" => (0, u16::MAX.into()),
+        "uint32" => (0, u32::MAX.into()),
+        "uint64" | "uint" => (0, u64::MAX.into()),
+        "int8" => (i8::MIN.into(), i8::MAX.into()),
+        "int16" => (i16::MIN.into(), i16::MAX.into()),
+        "int32" => (i32::MIN.into(), i32::MAX.into()),
+        "int64" | "int" => (i64::MIN.into(), i64::MAX.into()),
+        _ => return None,
+    };
+    let x: i128 = match (v.as_i64(), v.as_u64()) {
+        (Some(i), _) => i.into(),
+        (_, Some(u)) => u.into(),
+        // Beyond 64 bits serde_json keeps a float: out of every integer range.
+        _ if v.is_number() => {
+            return Some(Problem::Range(format!(
+                "{v} does not fit an integer from {lo} to {hi}"
+            )))
+        }
+        _ => return None,
+    };
+    (x < lo || x > hi).then(|| Problem::Range(format!("{x} is outside {lo}..={hi}")))
+}
+
+/// Why `path` may not be written under the output folder: empty, absolute, or climbing out.
+pub fn output_path_problem(path: &str) -> Option<String> {
+    let p = std::path::Path::new(path);
+    if path.trim().is_empty() {
+        return Some("an output path must not be empty".into());
+    }
+    if p.is_absolute() || path.starts_with('/') || path.starts_with('\\') {
+        return Some(format!(
+            "`{path}` is absolute; output paths are relative to the output folder"
+        ));
+    }
+    if p.components().any(|c| {
+        !matches!(
+            c,
+            std::path::Component::Normal(_) | std::path::Component::CurDir
+        )
+    }) {
+        return Some(format!(
+            "`{path}` leaves the output folder (`..`); output paths stay inside it"
+        ));
+    }
+    None
 }
 
 /// Checks one value against one schema.
@@ -221,6 +278,9 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
     };
     if !type_ok {
         return Err(type_error(None));
+    }
+    if let Some(problem) = format_problem(s, v) {
+        return Err(problem);
     }
     if let Some(x) = v.as_f64() {
         let bound = |k: &str| s.get(k).and_then(Value::as_f64);
@@ -334,6 +394,40 @@ mod tests {
         assert!(matches!(&e[2], GraphError::ParamType { suggestion: Some(s), .. } if s == "weave"));
         assert!(matches!(&e[3], GraphError::ParamType { param, .. } if param == "mode"));
         assert!(matches!(&e[4], GraphError::MissingParam { param, .. } if param == "depth"));
+    }
+
+    #[test]
+    fn integer_formats_bound_values_and_floats_are_not_integers() {
+        let schema = json!({"type": "object", "properties": {
+            "n": {"type": "integer", "format": "uint32", "minimum": 0},
+            "out": {"type": "string", "x-output-path": true}}});
+        let check = |v: Value| check_params("n", "k", &schema, v.as_object().unwrap());
+        assert!(check(json!({"n": 4294967295u64})).is_empty());
+        assert!(matches!(
+            &check(json!({"n": 4294967296u64}))[0],
+            GraphError::ParamRange { .. }
+        ));
+        assert!(matches!(
+            &check(json!({"n": 18446744073709551616.0}))[0],
+            GraphError::ParamType { .. }
+        ));
+        assert!(matches!(
+            &check(json!({"n": -0.0}))[0],
+            GraphError::ParamType { .. }
+        ));
+        assert!(matches!(
+            &check(json!({"n": 3.0}))[0],
+            GraphError::ParamType { .. }
+        ));
+        for bad in ["/etc/passwd", "../up.png", "a/../../b.png", ""] {
+            let e = check(json!({ "out": bad }));
+            assert!(
+                matches!(&e[0], GraphError::ParamRange { param, .. } if param == "out"),
+                "{bad}: {e:?}"
+            );
+        }
+        assert!(check(json!({"out": "frames/a.png"})).is_empty());
+        assert!(check(json!({"out": "./a.png"})).is_empty());
     }
 
     #[test]

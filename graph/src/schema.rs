@@ -118,6 +118,7 @@ mod tests {
             outputs: vec![],
             params: json!({"type": "object", "properties": {"p": {"$ref": "#/$defs/P", "default": "x"}},
                            "$defs": {"P": {"type": "string", "enum": ["x", "y"]}}}),
+            timings: vec![],
         };
         let s = graph_schema(&vec![sig]);
         let text = s.to_string();

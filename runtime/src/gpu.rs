@@ -10,9 +10,15 @@ pub struct Gpu {
 }
 
 impl Gpu {
-    /// "NVIDIA H100 (Vulkan)", "llvmpipe (LLVM 15.0.6, 256 bits) (Vulkan)".
+    /// "NVIDIA H100, Vulkan", "llvmpipe (LLVM 15.0.6, 256 bits), Vulkan, software".
     pub fn describe(&self) -> String {
-        format!("{} ({:?})", self.info.name, self.info.backend)
+        let software = if self.is_software() { ", software" } else { "" };
+        format!("{}, {}{software}", self.info.name, self.info.backend)
+    }
+
+    /// A rasteriser running on the CPU (lavapipe, llvmpipe, SwiftShader).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
     }
 
     /// An adapter from the native APIs (Vulkan, Metal, DX12) first; OpenGL only when none exists,

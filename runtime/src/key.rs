@@ -5,7 +5,7 @@ use serde_json::Value;
 use std::fmt;
 
 /// Bump when the way keys are computed changes; every old cache entry then misses.
-pub const KEY_SCHEME: u32 = 1;
+pub const KEY_SCHEME: u32 = 2;
 
 #[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Key(pub [u8; 32]);
@@ -98,8 +98,10 @@ pub struct KeyParts<'a> {
     pub params: &'a Value,
     /// (input port, upstream key, upstream output port), sorted by input port.
     pub inputs: Vec<(&'a str, Key, &'a str)>,
-    /// blake3 of each file's contents, in the order the node declared them.
-    pub files: Vec<[u8; 32]>,
+    /// Each file's name (its last path component) and the blake3 of its contents, in the order
+    /// the node declared them. The name enters because readers take meaning from it (UBO2003
+    /// angles are in the file names); the folder does not, so keys stay machine-independent.
+    pub files: Vec<(String, [u8; 32])>,
 }
 
 pub fn compute(parts: &KeyParts) -> Key {
@@ -121,16 +123,25 @@ pub fn compute(parts: &KeyParts) -> Key {
         field(from_port.as_bytes());
     }
     field(&(parts.files.len() as u64).to_le_bytes());
-    for f in &parts.files {
-        field(f);
+    for (name, hash) in &parts.files {
+        field(name.as_bytes());
+        field(hash);
     }
     Key(*h.finalize().as_bytes())
 }
 
-/// Content hash of a file, streamed so large inputs are not held in memory.
+/// Content hash of a file, streamed so large inputs are not held in memory. Only regular files:
+/// a device or a pipe (`/dev/zero`, a FIFO) would never end.
 pub fn hash_file(path: &std::path::Path) -> std::io::Result<[u8; 32]> {
+    let file = std::fs::File::open(path)?;
+    if !file.metadata()?.is_file() {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "not a regular file (a device, pipe or folder cannot be read as input)",
+        ));
+    }
     let mut h = blake3::Hasher::new();
-    h.update_reader(std::fs::File::open(path)?)?;
+    h.update_reader(file)?;
     Ok(*h.finalize().as_bytes())
 }
 
@@ -199,8 +210,23 @@ mod tests {
             inputs: vec![("x", k0, "other")],
             ..base
         });
-        let all = [k0, k1, k2, k3];
-        for i in 0..4 {
+        let content = [9u8; 32];
+        let named = |name: &str| {
+            compute(&KeyParts {
+                kind: "k",
+                version: 1,
+                params: &p,
+                inputs: vec![],
+                files: vec![(name.into(), content)],
+            })
+        };
+        // The same bytes under another name: another key (names carry meaning for readers).
+        let (k4, k5) = (
+            named("tl000_pl000_tv000_pv000.png"),
+            named("tl015_pl000_tv000_pv000.png"),
+        );
+        let all = [k0, k1, k2, k3, k4, k5];
+        for i in 0..all.len() {
             for j in 0..i {
                 assert_ne!(all[i], all[j]);
             }

@@ -93,6 +93,16 @@ impl Port {
             doc,
         }
     }
+    /// An output that is sometimes absent: a metric that needs a truth input which is not
+    /// connected is left out (never reported as 0).
+    pub fn optional_output(name: &'static str, ty: &str, doc: &'static str) -> Port {
+        Port {
+            name,
+            ty: TypeSet::one(ty),
+            required: false,
+            doc,
+        }
+    }
 }
 
 /// A kind's static description.
@@ -115,6 +125,20 @@ pub trait Node: Send + Sync + 'static {
     type Params: Serialize + DeserializeOwned + JsonSchema + Send + Sync + 'static;
 
     fn spec(&self) -> NodeSpec;
+
+    /// Checks of parameter values that the JSON Schema cannot express (relations between
+    /// parameters, sizes that must fit memory). It runs when the graph is validated, before any
+    /// upstream work, and again before `run`.
+    fn check(&self, _params: &Self::Params) -> Result<(), NodeError> {
+        Ok(())
+    }
+
+    /// Timings the node reports through [`NodeContext::timing`], as (name, doc): they go into the
+    /// run report beside the node's wall time, never into its cached outputs, because the same
+    /// inputs give the same value but not the same time.
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[]
+    }
 
     /// Files the node will read, resolved against `base` (the graph's folder); their contents enter
     /// the cache key. Called before `run`.
@@ -143,6 +167,7 @@ pub struct NodeContext {
     pub(crate) cancel: Arc<AtomicBool>,
     pub(crate) gpu: Option<Arc<Gpu>>,
     pub(crate) sink: Arc<dyn ProgressSink>,
+    pub(crate) timings: std::sync::Mutex<BTreeMap<String, f64>>,
 }
 
 impl NodeContext {
@@ -159,6 +184,7 @@ impl NodeContext {
             cancel: Arc::new(AtomicBool::new(false)),
             gpu,
             sink: Arc::new(Quiet),
+            timings: Default::default(),
         }
     }
 
@@ -178,6 +204,23 @@ impl NodeContext {
     /// A documented, non-fatal problem; it appears in the run report's warnings.
     pub fn warn(&self, message: impl Into<String>) {
         self.sink.warn(&self.node, message.into());
+    }
+    /// Records a timing of this computation (declared in [`Node::timings`]) for the run report.
+    /// A value that is not finite is dropped: an unknown time is absent, never 0 or NaN.
+    pub fn timing(&self, name: &str, value: f64) {
+        if value.is_finite() {
+            self.timings
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .insert(name.to_string(), value);
+        }
+    }
+    /// The timings recorded so far (tests and benchmarks that call nodes directly read them).
+    pub fn timings(&self) -> BTreeMap<String, f64> {
+        self.timings
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
     pub fn is_cancelled(&self) -> bool {
         self.cancel.load(Ordering::Relaxed)
@@ -279,6 +322,7 @@ pub trait DynNode: Send + Sync {
         params: &serde_json::Map<String, serde_json::Value>,
     ) -> Result<Prepared, NodeError>;
     fn files(&self, p: &Prepared, base: &Path) -> Result<Vec<PathBuf>, NodeError>;
+    fn timings(&self) -> &'static [(&'static str, &'static str)];
     fn run(&self, ctx: &NodeContext, p: &Prepared, inputs: &Inputs) -> Result<Outputs, NodeError>;
 }
 
@@ -317,6 +361,15 @@ impl<N: Node> Erased<N> {
                 })
                 .collect(),
             params: schema.into(),
+            timings: node
+                .timings()
+                .iter()
+                .map(|(name, doc)| OutputSpec {
+                    name: (*name).into(),
+                    ty: "Scalar".into(),
+                    doc: (*doc).into(),
+                })
+                .collect(),
         };
         Erased {
             node,
@@ -345,6 +398,7 @@ impl<N: Node> DynNode for Erased<N> {
     ) -> Result<Prepared, NodeError> {
         let typed: N::Params = serde_json::from_value(serde_json::Value::Object(params.clone()))
             .map_err(|e| NodeError::param("params", e.to_string()))?;
+        self.node.check(&typed)?;
         // The canonical form includes every default, so omitting a parameter and writing its
         // default give the same cache key.
         let canonical =
@@ -356,6 +410,9 @@ impl<N: Node> DynNode for Erased<N> {
     }
     fn files(&self, p: &Prepared, base: &Path) -> Result<Vec<PathBuf>, NodeError> {
         self.node.files(self.typed(p)?, base)
+    }
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        self.node.timings()
     }
     fn run(&self, ctx: &NodeContext, p: &Prepared, inputs: &Inputs) -> Result<Outputs, NodeError> {
         self.node.run(ctx, self.typed(p)?, inputs)

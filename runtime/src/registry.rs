@@ -62,4 +62,17 @@ impl Catalog for Registry {
     fn kinds(&self) -> Vec<&str> {
         self.nodes.keys().map(String::as_str).collect()
     }
+    fn check_typed(
+        &self,
+        kind: &str,
+        params: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<(), String> {
+        match self.nodes.get(kind) {
+            Some(node) => node.prepare(params).map(|_| ()).map_err(|e| match e {
+                crate::NodeError::Param { param, message } if param == "params" => message,
+                other => other.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
 }

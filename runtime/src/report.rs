@@ -23,6 +23,14 @@ pub struct NodeReport {
     pub bytes: u64,
     pub key: String,
     pub metrics: BTreeMap<String, f64>,
+    /// The cost of the value: `seconds` (its compute wall time) and the kind's own timings
+    /// (`gpu_ms`, `frame_ms`, …). For a cache hit, those measured when it was computed.
+    /// Absent where nothing was measured; never cached as outputs.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty", default)]
+    pub timings: BTreeMap<String, f64>,
+    /// The kind's version (part of the key): which implementation produced the value.
+    #[serde(default)]
+    pub kind_version: u32,
     #[serde(skip_serializing_if = "Option::is_none", default)]
     pub error: Option<String>,
     /// With `--verify-cache`: the cached value was recomputed and matched.
@@ -39,7 +47,14 @@ pub struct Warning {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunReport {
     pub mesoflow: u32,
+    /// The mesoflow release that ran the graph.
+    #[serde(default)]
+    pub version: String,
     pub graph: String,
+    /// The GPU adapter GPU nodes ran on, e.g. "llvmpipe (LLVM 15.0.6), Vulkan, software";
+    /// absent when no node ran on a GPU.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub adapter: Option<String>,
     pub ok: bool,
     pub seconds: f64,
     /// Nodes that ran or were read from a cache, in topological order.

@@ -103,6 +103,38 @@ pub fn require_gpu() -> bool {
     std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
 
+/// `--output` targets checked against the graph, with a did-you-mean for a node or port.
+pub fn check_outputs(
+    outputs: &[PortRef],
+    graph: &CheckedGraph,
+    engine: &Engine,
+) -> anyhow::Result<()> {
+    for o in outputs {
+        let Some(i) = graph.index(&o.node) else {
+            let hint = mesoflow_graph::nearest(&o.node, graph.nodes.iter().map(|n| n.id.as_str()))
+                .map(|s| format!(" (did you mean `{s}`?)"))
+                .unwrap_or_default();
+            return Err(invalid(format!("--output {o}: no node `{}`{hint}", o.node)));
+        };
+        let kind = &graph.nodes[i].kind;
+        if let Some(sig) = engine.registry().node(kind).map(|n| n.signature()) {
+            if sig.output(&o.port).is_none() {
+                let names: Vec<&str> = sig.outputs.iter().map(|p| p.name.as_str()).collect();
+                let hint = mesoflow_graph::nearest(&o.port, names.iter().copied())
+                    .map(|s| format!(" (did you mean `{s}`?)"))
+                    .unwrap_or_default();
+                return Err(invalid(format!(
+                    "--output {o}: `{}` ({kind}) has no output `{}`{hint}; it has {}",
+                    o.node,
+                    o.port,
+                    names.join(", ")
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
 pub fn parse_outputs(outputs: &[String]) -> anyhow::Result<Vec<PortRef>> {
     outputs
         .iter()
@@ -168,7 +200,31 @@ impl Runner {
         write_report(&report, out_dir)?;
         if !self.quiet {
             print!("{}", summary(&report));
-        } else {
+        }
+        // The values asked for with --output, one per line (scalars by value).
+        for o in &opts.outputs {
+            let Some(n) = report.node(&o.node) else {
+                continue;
+            };
+            match n.metrics.get(&o.port) {
+                Some(v) => println!("{o} = {v}"),
+                None if n.error.is_none() => {
+                    let ty = self
+                        .engine
+                        .registry()
+                        .node(&n.kind)
+                        .and_then(|k| k.signature().output(&o.port).map(|p| p.ty.clone()))
+                        .unwrap_or_default();
+                    println!(
+                        "{o}: a {ty} ({}, {})",
+                        crate::progress::human_bytes(n.bytes),
+                        crate::progress::status_text(n.status)
+                    );
+                }
+                None => {}
+            }
+        }
+        if self.quiet {
             for n in report.nodes.iter().filter_map(|n| {
                 n.error
                     .as_ref()
@@ -202,6 +258,7 @@ pub fn exit_code(report: &RunReport) -> i32 {
 pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
     let runner = Runner::new(args)?;
     let graph = load::load(&args.graph, &args.set, runner.engine.registry())?;
+    check_outputs(&runner.base.outputs, &graph, &runner.engine)?;
     let report = runner.run_once(&graph, &runner.base.out_dir)?;
     Ok(exit_code(&report))
 }

@@ -144,11 +144,13 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
                 m.node
             )));
         };
-        let ty = engine
-            .registry()
-            .node(&node.kind)
-            .and_then(|n| n.signature().output(&m.port).map(|o| o.ty.clone()));
+        let sig = engine.registry().node(&node.kind).map(|n| n.signature());
+        let ty = sig.and_then(|s| s.output(&m.port).map(|o| o.ty.clone()));
+        // A timing (the node's `seconds`, or one the kind declares) is read from the report.
+        let timing =
+            m.port == "seconds" || sig.is_some_and(|s| s.timings.iter().any(|t| t.name == m.port));
         match ty.as_deref() {
+            _ if timing => {}
             Some("Scalar") => {}
             Some(other) => {
                 return Err(invalid(format!(
@@ -157,16 +159,57 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
                 )))
             }
             None => {
+                let names: Vec<&str> = sig
+                    .into_iter()
+                    .flat_map(|s| {
+                        s.outputs
+                            .iter()
+                            .filter(|o| o.ty == "Scalar")
+                            .chain(&s.timings)
+                            .map(|o| o.name.as_str())
+                    })
+                    .chain(["seconds"])
+                    .collect();
+                let hint = mesoflow_graph::nearest(&m.port, names.iter().copied())
+                    .map(|s| format!(" (did you mean `{s}`?)"))
+                    .unwrap_or_default();
                 return Err(invalid(format!(
-                    "--measure {m}: `{}` ({}) has no output `{}`",
-                    m.node, node.kind, m.port
-                )))
+                    "--measure {m}: `{}` ({}) has no scalar output or timing `{}`{hint}; it has {}",
+                    m.node,
+                    node.kind,
+                    m.port,
+                    names.join(", ")
+                )));
             }
         }
     }
     // Ask for the measured outputs as well as the sinks, so a measure is reported even when a
     // sink's cached result would otherwise make its node unnecessary.
-    let mut outputs = measures.clone();
+    // A timing is not an output: its node is asked for through its first output.
+    let first_output = |node: &str| {
+        let kind = &graphs[0].nodes[graphs[0].index(node)?].kind;
+        engine
+            .registry()
+            .node(kind)
+            .and_then(|n| n.signature().outputs.first().map(|o| o.name.clone()))
+    };
+    let mut outputs: Vec<PortRef> = measures
+        .iter()
+        .filter_map(|m| {
+            let is_output = graphs[0]
+                .index(&m.node)
+                .and_then(|i| engine.registry().node(&graphs[0].nodes[i].kind))
+                .is_some_and(|n| n.signature().output(&m.port).is_some());
+            if is_output {
+                Some(m.clone())
+            } else {
+                first_output(&m.node).map(|port| PortRef {
+                    node: m.node.clone(),
+                    port,
+                })
+            }
+        })
+        .collect();
     for sink in graphs[0].sinks() {
         let kind = &graphs[0].nodes[graphs[0].index(sink).unwrap_or(0)].kind;
         if let Some(port) = engine
@@ -208,14 +251,35 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             .zip(combo)
             .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
             .collect();
+        let measured: Vec<Option<f64>> = measures
+            .iter()
+            .map(|m| {
+                report.node(&m.node).and_then(|n| {
+                    n.metrics
+                        .get(&m.port)
+                        .or_else(|| n.timings.get(&m.port))
+                        .copied()
+                })
+            })
+            .collect();
         if !args.quiet {
+            let shown: Vec<String> = measures
+                .iter()
+                .zip(&measured)
+                .map(|(m, v)| match v {
+                    Some(v) => format!("{m}={v:.4e}"),
+                    None => format!("{m}=—"),
+                })
+                .collect();
             println!(
-                "[{}/{}] {}: {} in {:.2} s",
+                "[{}/{}] {}: {} in {:.2} s{}{}",
                 i + 1,
                 combos.len(),
                 label.join(" "),
                 if report.ok { "ok" } else { "FAILED" },
-                report.seconds
+                report.seconds,
+                if shown.is_empty() { "" } else { "; " },
+                shown.join(" ")
             );
         }
         if !report.ok && !args.quiet {
@@ -223,17 +287,15 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         }
         rows.push(Row {
             values: combo.clone(),
-            measures: measures
-                .iter()
-                .map(|m| {
-                    report
-                        .node(&m.node)
-                        .and_then(|n| n.metrics.get(&m.port).copied())
-                })
-                .collect(),
+            measures: measured,
+            // The compute time of the value (for a cache hit, as measured when it was computed).
             node_seconds: measured_nodes
                 .iter()
-                .map(|n| report.node(n).map(|r| r.seconds))
+                .map(|n| {
+                    report
+                        .node(n)
+                        .and_then(|r| r.timings.get("seconds").copied())
+                })
                 .collect(),
             run_seconds: report.seconds,
             ok: report.ok,
@@ -253,6 +315,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
     let mut chart_errors = Vec::new();
     for (mi, m) in measures.iter().enumerate() {
         let measure_name = m.to_string();
+        let is_time = m.port == "seconds";
         for (vi, v) in varies.iter().enumerate() {
             let c = chart_against(&varies, vi, &rows, mi, &measure_name);
             if let Err(e) = chart::write(
@@ -292,6 +355,9 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
                 .collect(),
             x_names: None,
         };
+        if is_time {
+            continue; // its own time against itself says nothing
+        }
         if let Err(e) = chart::write(
             &out_dir.join(format!("{}.{}_vs_seconds", m.node, m.port)),
             &c,
@@ -357,7 +423,18 @@ fn write_csv(
     let mut out = String::new();
     let mut header: Vec<String> = varies.iter().map(Vary::name).collect();
     header.extend(measures.iter().map(|m| m.to_string()));
-    header.extend(nodes.iter().map(|n| format!("{n}.seconds")));
+    // One column per measure: a node's seconds column only where it was not measured already.
+    let extra: Vec<bool> = nodes
+        .iter()
+        .map(|n| !measures.iter().any(|m| m.node == *n && m.port == "seconds"))
+        .collect();
+    header.extend(
+        nodes
+            .iter()
+            .zip(&extra)
+            .filter(|(_, e)| **e)
+            .map(|(n, _)| format!("{n}.seconds")),
+    );
     header.extend(["run_seconds".to_string(), "ok".to_string()]);
     writeln!(
         out,
@@ -372,7 +449,13 @@ fn write_csv(
     for r in rows {
         let mut cells: Vec<String> = r.values.iter().map(|v| csv_field(&cell(v))).collect();
         cells.extend(r.measures.iter().map(num));
-        cells.extend(r.node_seconds.iter().map(num));
+        cells.extend(
+            r.node_seconds
+                .iter()
+                .zip(&extra)
+                .filter(|(_, e)| **e)
+                .map(|(s, _)| num(s)),
+        );
         cells.push(format!("{}", r.run_seconds));
         cells.push(r.ok.to_string());
         writeln!(out, "{}", cells.join(","))?;

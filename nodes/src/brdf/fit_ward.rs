@@ -100,7 +100,7 @@ impl Node for FitWard {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "brdf.fit_ward",
-            version: 3,
+            version: 4,
             doc: "Per-pixel isotropic Ward fit (ρd RGB, ρs, α) by Levenberg–Marquardt from K-means cluster fits, about a flat normal or per-pixel normals from photometric stereo; appearance vectors for the manifold.",
             device: DevicePreference::Cpu,
             inputs: vec![
@@ -114,19 +114,20 @@ impl Node for FitWard {
                 Port::output("appearance", PointSet::TYPE, "normalised appearance vectors, n × 5"),
                 Port::output("normals", NormalMap::TYPE, "the normals the fit used"),
                 Port::output("normal_fallbacks", "Scalar", "pixels whose photometric normal could not be determined (flat used)"),
-                Port::output("error_normal_deg", "Scalar", "median angle to `true_normals`, degrees (0 without)"),
+                Port::optional_output("error_normal_deg", "Scalar", "median angle to `true_normals`, degrees (absent without)"),
                 Port::output("not_converged", "Scalar", "pixels that did not converge"),
                 Port::output("rms_residual", "Scalar", "RMS residual over all pixels"),
-                Port::output("pixels_per_second", "Scalar", "fit speed"),
-                Port::output("error_rho_d", "Scalar", "median relative error of ρd vs `truth` (0 without)"),
-                Port::output("error_rho_s", "Scalar", "median relative error of ρs vs `truth` (0 without)"),
-                Port::output("error_alpha", "Scalar", "median relative error of α vs `truth` (0 without)"),
-                Port::output("seconds", "Scalar", "time, s"),
+                Port::optional_output("error_rho_d", "Scalar", "median relative error of ρd vs `truth` (absent without)"),
+                Port::optional_output("error_rho_s", "Scalar", "median relative error of ρs vs `truth` (absent without)"),
+                Port::optional_output("error_alpha", "Scalar", "median relative error of α vs `truth` (absent without)"),
             ],
             disk_cache: true,
         }
     }
 
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[("pixels_per_second", "fit speed")]
+    }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let btf = inputs.get::<Btf>("btf")?;
         if p.weights.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
@@ -169,9 +170,9 @@ impl Node for FitWard {
             .sqrt();
         let appearance = appearance(&fit.maps, p.weights);
         let errors = match inputs.opt::<BrdfMap>("truth")? {
-            None => [0.0; 3],
+            None => None,
             Some(t) if t.width == btf.width && t.height == btf.height => {
-                median_errors(&fit.maps, t)
+                Some(median_errors(&fit.maps, t))
             }
             Some(t) => {
                 return Err(NodeError::input(
@@ -184,7 +185,7 @@ impl Node for FitWard {
             }
         };
         let normal_error = match inputs.opt::<NormalMap>("true_normals")? {
-            None => 0.0,
+            None => None,
             Some(t) if t.width == btf.width && t.height == btf.height => {
                 let mut e: Vec<f64> = fit
                     .normals
@@ -196,7 +197,7 @@ impl Node for FitWard {
                     })
                     .collect();
                 e.sort_by(f64::total_cmp);
-                e[e.len() / 2]
+                e.get(e.len() / 2).copied()
             }
             Some(t) => {
                 return Err(NodeError::input(
@@ -217,20 +218,25 @@ impl Node for FitWard {
                 .flat_map(|v| v.map(|c| c as f32))
                 .collect(),
         };
-        Ok(Outputs::new()
+        ctx.timing("pixels_per_second", n as f64 / seconds.max(1e-12));
+        let mut out = Outputs::new()
             .with("normals", normals)
             .with("normal_fallbacks", Scalar(fit.normal_fallbacks as f64))
-            .with("error_normal_deg", Scalar(normal_error))
             .with("maps", fit.maps)
             .with("residual", fit.residual)
             .with("appearance", appearance)
             .with("not_converged", Scalar(fit.not_converged as f64))
-            .with("rms_residual", Scalar(rms))
-            .with("pixels_per_second", Scalar(n as f64 / seconds.max(1e-12)))
-            .with("error_rho_d", Scalar(errors[0]))
-            .with("error_rho_s", Scalar(errors[1]))
-            .with("error_alpha", Scalar(errors[2]))
-            .with("seconds", Scalar(seconds)))
+            .with("rms_residual", Scalar(rms));
+        if let Some(e) = normal_error {
+            out = out.with("error_normal_deg", Scalar(e));
+        }
+        if let Some(e) = errors {
+            out = out
+                .with("error_rho_d", Scalar(e[0]))
+                .with("error_rho_s", Scalar(e[1]))
+                .with("error_alpha", Scalar(e[2]));
+        }
+        Ok(out)
     }
 }
 

@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
     /// File for the per-pair table (CSV), relative to the output folder.
+    #[schemars(extend("x-output-path" = true))]
     pub table: String,
 }
 

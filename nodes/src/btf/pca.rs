@@ -29,7 +29,6 @@ use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, 
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
@@ -161,14 +160,12 @@ impl Node for Pca {
                 Port::output("psnr", "Scalar", "20·log10(max / rmse) dB, capped at 300"),
                 Port::output("compression_ratio", "Scalar", "f32 BTF bytes / f32 basis bytes"),
                 Port::output("compression_ratio_8bit", "Scalar", "8-bit BTF bytes / f32 basis bytes"),
-                Port::output("seconds", "Scalar", "wall time of the factorization"),
             ],
             disk_cache: true,
         }
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let started = Instant::now();
         let btf = inputs.get::<Btf>("btf")?;
         let t = btf.width * btf.height;
         if let Some(bad) = btf.first_non_finite() {
@@ -287,8 +284,7 @@ impl Node for Pca {
             .with("rmse", Scalar(rmse))
             .with("psnr", Scalar(psnr(btf.peak(), rmse)))
             .with("compression_ratio", Scalar(samples * 4.0 / stored))
-            .with("compression_ratio_8bit", Scalar(samples / stored))
-            .with("seconds", Scalar(started.elapsed().as_secs_f64())))
+            .with("compression_ratio_8bit", Scalar(samples / stored)))
     }
 }
 

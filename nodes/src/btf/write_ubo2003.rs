@@ -28,6 +28,7 @@ pub enum Format {
 #[serde(deny_unknown_fields)]
 pub struct Params {
     /// Folder, relative to the output folder.
+    #[schemars(extend("x-output-path" = true))]
     pub path: String,
     #[serde(default = "exr")]
     pub format: Format,

@@ -21,6 +21,7 @@ pub enum Format {
 #[serde(deny_unknown_fields)]
 pub struct Params {
     /// Output file, relative to the output folder.
+    #[schemars(extend("x-output-path" = true))]
     pub path: String,
     /// File format.
     #[serde(default = "auto")]

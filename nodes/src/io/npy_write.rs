@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields)]
 pub struct Params {
     /// Output file, relative to the output folder.
+    #[schemars(extend("x-output-path" = true))]
     pub path: String,
 }
 

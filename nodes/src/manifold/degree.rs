@@ -14,7 +14,6 @@ use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Debug, Default, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -48,8 +47,7 @@ impl Node for Degree {
             outputs: vec![
                 Port::output("degree", Image::TYPE, "ω per pixel, 1 channel"),
                 Port::output("graph_components", "Scalar", "connected components before joining"),
-                Port::output("spearman", "Scalar", "rank correlation with `truth` (0 without it)"),
-                Port::output("seconds", "Scalar", "time, s"),
+                Port::optional_output("spearman", "Scalar", "rank correlation with `truth` (absent without it)"),
             ],
             disk_cache: true,
         }
@@ -85,7 +83,6 @@ impl Node for Degree {
             ));
         }
         let height = points.n / width;
-        let start = Instant::now();
         let mut sets = Vec::new();
         for (s, (list, mask)) in [(&p.x0, masks[0]), (&p.x1, masks[1])]
             .into_iter()
@@ -142,12 +139,12 @@ impl Node for Degree {
             ));
         }
         let spearman = match inputs.opt::<Image>("truth")? {
-            None => 0.0,
+            None => None,
             Some(t) if t.width == width && t.height == height => {
                 let truth: Vec<f64> = (0..points.n)
                     .map(|i| t.data[i * t.channels] as f64)
                     .collect();
-                super::rank::spearman(&omega, &truth)
+                Some(super::rank::spearman(&omega, &truth))
             }
             Some(t) => {
                 return Err(NodeError::input(
@@ -159,7 +156,12 @@ impl Node for Degree {
                 ))
             }
         };
-        Ok(Outputs::new()
+        let out = Outputs::new();
+        let out = match spearman {
+            Some(rho) => out.with("spearman", Scalar(rho)),
+            None => out,
+        };
+        Ok(out
             .with(
                 "degree",
                 Image {
@@ -169,9 +171,7 @@ impl Node for Degree {
                     data: omega.iter().map(|v| *v as f32).collect(),
                 },
             )
-            .with("graph_components", Scalar(components as f64))
-            .with("spearman", Scalar(spearman))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64())))
+            .with("graph_components", Scalar(components as f64)))
     }
 }
 

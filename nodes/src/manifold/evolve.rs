@@ -26,7 +26,6 @@ use mesoflow_runtime::{
 };
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
@@ -55,6 +54,7 @@ pub struct Params {
     /// Milliseconds per GIF frame.
     pub frame_ms: u32,
     /// Path prefix of the written frames, relative to the output folder.
+    #[schemars(extend("x-output-path" = true))]
     pub prefix: String,
 }
 
@@ -96,7 +96,6 @@ impl Node for Evolve {
                 Port::output("last_frame", Image::TYPE, "the last relit frame, linear"),
                 Port::output("strip", Image::TYPE, "every frame side by side (2 px white gaps), linear"),
                 Port::output("mean_degree", "Scalar", "mean degree of the last frame"),
-                Port::output("seconds", "Scalar", "time, s"),
             ],
             disk_cache: true,
         }
@@ -142,7 +141,6 @@ impl Node for Evolve {
                 return Err(NodeError::param(name, "θ must be in [0°, 90°)"));
             }
         }
-        let start = Instant::now();
         let omega: Vec<f64> = (0..n)
             .map(|i| (degree.data[i * degree.channels] as f64).clamp(0.0, 1.0))
             .collect();
@@ -224,8 +222,7 @@ impl Node for Evolve {
                     data: strip,
                 },
             )
-            .with("mean_degree", Scalar(mean))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64())))
+            .with("mean_degree", Scalar(mean)))
     }
 }
 

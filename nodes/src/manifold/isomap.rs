@@ -63,14 +63,17 @@ impl Node for Isomap {
                 Port::output("reconstruction_error", "Scalar", "scikit-learn's reconstruction error"),
                 Port::output("residual_variance", "Scalar", "1 − R² of geodesic vs embedded distances"),
                 Port::output("graph_components", "Scalar", "connected components before joining"),
-                Port::output("paths_seconds", "Scalar", "time in shortest paths, s"),
-                Port::output("mds_seconds", "Scalar", "time in the MDS and placement, s"),
-                Port::output("seconds", "Scalar", "time, s"),
             ],
             disk_cache: true,
         }
     }
 
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[
+            ("paths_seconds", "time in shortest paths, s"),
+            ("mds_seconds", "time in the MDS and placement, s"),
+        ]
+    }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let points = inputs.get::<PointSet>("points")?;
         let graph = inputs.get::<KnnGraph>("graph")?;
@@ -80,19 +83,17 @@ impl Node for Isomap {
                 format!("{} vertices for {} points", graph.n, points.n),
             ));
         }
-        let start = Instant::now();
         let r = isomap(points, graph, p)?;
         for w in &r.warnings {
             ctx.warn(w.clone());
         }
+        ctx.timing("paths_seconds", r.paths_seconds);
+        ctx.timing("mds_seconds", r.mds_seconds);
         Ok(Outputs::new()
             .with("embedding", r.embedding)
             .with("reconstruction_error", Scalar(r.reconstruction_error))
             .with("residual_variance", Scalar(r.residual_variance))
-            .with("graph_components", Scalar(r.graph_components as f64))
-            .with("paths_seconds", Scalar(r.paths_seconds))
-            .with("mds_seconds", Scalar(r.mds_seconds))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64())))
+            .with("graph_components", Scalar(r.graph_components as f64)))
     }
 }
 

@@ -8,11 +8,10 @@
 
 use crate::types::{KnnGraph, PointSet};
 use mesoflow_graph::DevicePreference;
-use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
+use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -41,21 +40,19 @@ impl Node for Knn {
                 "Exact k-nearest-neighbour graph (Euclidean, ties by index), brute force on rayon.",
             device: DevicePreference::Cpu,
             inputs: vec![Port::input("points", PointSet::TYPE, "the points")],
-            outputs: vec![
-                Port::output("graph", KnnGraph::TYPE, "each point's k nearest others"),
-                Port::output("seconds", "Scalar", "time to build, s"),
-            ],
+            outputs: vec![Port::output(
+                "graph",
+                KnnGraph::TYPE,
+                "each point's k nearest others",
+            )],
             disk_cache: true,
         }
     }
 
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let points = inputs.get::<PointSet>("points")?;
-        let start = Instant::now();
         let graph = knn(points, p.k as usize).map_err(|m| NodeError::param("k", m))?;
-        Ok(Outputs::new()
-            .with("graph", graph)
-            .with("seconds", Scalar(start.elapsed().as_secs_f64())))
+        Ok(Outputs::new().with("graph", graph))
     }
 }
 

@@ -22,7 +22,6 @@ use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -72,7 +71,6 @@ impl Node for Transfer {
                 Port::output("maps", BrdfMap::TYPE, "Ward parameters over the target"),
                 Port::output("preview", Image::TYPE, "the target relit under `light`, linear"),
                 Port::output("mean_degree", "Scalar", "mean target degree"),
-                Port::output("seconds", "Scalar", "time, s"),
             ],
             disk_cache: true,
         }
@@ -128,7 +126,6 @@ impl Node for Transfer {
                 return Err(NodeError::param(name, "θ must be in [0°, 90°)"));
             }
         }
-        let start = Instant::now();
         let omega: Vec<f64> = (0..n)
             .map(|i| (degree.data[i * degree.channels] as f64).clamp(0.0, 1.0))
             .collect();
@@ -176,8 +173,7 @@ impl Node for Transfer {
         Ok(Outputs::new()
             .with("maps", out)
             .with("preview", preview)
-            .with("mean_degree", Scalar(sum / tn.max(1) as f64))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64())))
+            .with("mean_degree", Scalar(sum / tn.max(1) as f64)))
     }
 }
 

@@ -97,13 +97,14 @@ impl Node for Tabulate {
                 Port::output("miss_fraction", "Scalar", "fraction of entries with no hit"),
                 Port::output("rmse", "Scalar", "RMSE of the compressed table, texels (0 uncompressed)"),
                 Port::output("compression_ratio", "Scalar", "table size over stored size (1 uncompressed)"),
-                Port::output("seconds", "Scalar", "tabulation time, s"),
-                Port::output("rays_per_second", "Scalar", "entries per second"),
             ],
             disk_cache: true,
         }
     }
 
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[("rays_per_second", "table entries per second")]
+    }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let start = Instant::now();
         let (data, width, height, views, depth) = match (
@@ -170,13 +171,12 @@ impl Node for Tabulate {
             data,
         };
         let n = mdf.data.len() as f64;
+        ctx.timing("rays_per_second", n / seconds.max(1e-9));
         Ok(Outputs::new()
             .with("mdf", mdf)
             .with("miss_fraction", Scalar(misses as f64 / n))
             .with("rmse", Scalar(rmse))
-            .with("compression_ratio", Scalar(ratio))
-            .with("seconds", Scalar(seconds))
-            .with("rays_per_second", Scalar(n / seconds.max(1e-9))))
+            .with("compression_ratio", Scalar(ratio)))
     }
 }
 

@@ -85,9 +85,8 @@ impl Node for FitDipole {
                 Port::output("residual_g", "Scalar", "RMS of ln Rd residuals, green"),
                 Port::output("residual_b", "Scalar", "RMS of ln Rd residuals, blue"),
                 Port::output("residual", "Scalar", "largest of the three"),
-                Port::output("error_sigma_s_prime", "Scalar", "largest relative error of σs′ over the channels vs `truth` (0 without)"),
-                Port::output("error_sigma_a", "Scalar", "largest relative error of σa over the channels vs `truth` (0 without)"),
-                Port::output("seconds", "Scalar", "time, s (the Monte Carlo table included)"),
+                Port::optional_output("error_sigma_s_prime", "Scalar", "largest relative error of σs′ over the channels vs `truth` (absent without)"),
+                Port::optional_output("error_sigma_a", "Scalar", "largest relative error of σa over the channels vs `truth` (absent without)"),
             ],
             disk_cache: false,
         }
@@ -115,7 +114,6 @@ impl Node for FitDipole {
                 "expected a DiffusionProfile or an Image",
             ));
         };
-        let start = std::time::Instant::now();
         let mut windows = Vec::with_capacity(3);
         for c in 0..3 {
             let (r, rd) = measured.window(c);
@@ -171,14 +169,17 @@ impl Node for FitDipole {
                         .map(|c| (got[c] / want[c] - 1.0).abs())
                         .fold(0.0f64, f64::max)
                 };
-                [worst(s, t.sigma_s_prime), worst(a, t.sigma_a)]
+                Some([worst(s, t.sigma_s_prime), worst(a, t.sigma_a)])
             }
-            None => [0.0; 2],
+            None => None,
         };
-        Ok(Outputs::new()
-            .with("error_sigma_s_prime", Scalar(errors[0]))
-            .with("error_sigma_a", Scalar(errors[1]))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64()))
+        let mut out = Outputs::new();
+        if let Some(e) = errors {
+            out = out
+                .with("error_sigma_s_prime", Scalar(e[0]))
+                .with("error_sigma_a", Scalar(e[1]));
+        }
+        Ok(out
             .with(
                 "material",
                 ScatteringMaterial {

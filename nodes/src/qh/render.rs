@@ -30,7 +30,6 @@ use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -121,14 +120,12 @@ impl Node for QhRender {
                 Port::output("image", Image::TYPE, "linear HDR radiance, local + global"),
                 Port::output("global", Image::TYPE, "the global term's diffuse exitance before fv"),
                 Port::output("points", "Scalar", "irradiance samples"),
-                Port::output("seconds", "Scalar", "wall time, s"),
             ],
             disk_cache: true,
         }
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let start = Instant::now();
         let mesh = inputs.get::<Mesh>("mesh")?;
         let value = inputs.value("lrf")?;
         let source = if let Some(b) = value.as_any().downcast_ref::<Btf>() {
@@ -163,8 +160,7 @@ impl Node for QhRender {
         Ok(Outputs::new()
             .with("image", r.image)
             .with("global", r.exitance)
-            .with("points", Scalar(r.points as f64))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64())))
+            .with("points", Scalar(r.points as f64)))
     }
 }
 

@@ -112,14 +112,18 @@ impl Node for RenderMesh {
             outputs: vec![
                 Port::output("image", Image::TYPE, "linear HDR RGB"),
                 Port::output("coverage", "Scalar", "fraction of pixels showing mesostructure"),
-                Port::output("frame_ms", "Scalar", "mean wall time per frame, ms"),
-                Port::output("gpu_ms", "Scalar", "mean GPU time per frame from timestamp queries, ms (frame_ms where there are none, and on the CPU)"),
-                Port::output("fps", "Scalar", "frames per second"),
             ],
             disk_cache: true,
         }
     }
 
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[
+            ("frame_ms", "mean wall time per frame, ms"),
+            ("gpu_ms", "mean GPU time per frame from timestamp queries, ms; absent where the adapter has none, and on the CPU"),
+            ("fps", "frames per second (from frame_ms)"),
+        ]
+    }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let mesh = inputs.get::<Mesh>("mesh")?;
         mesh.check().map_err(|e| NodeError::input("mesh", e))?;
@@ -191,6 +195,11 @@ impl Node for RenderMesh {
                 i / 3
             )));
         }
+        ctx.timing("frame_ms", ms);
+        ctx.timing("fps", 1e3 / ms.max(1e-9));
+        if let Some(gpu_ms) = gpu_ms {
+            ctx.timing("gpu_ms", gpu_ms);
+        }
         Ok(Outputs::new()
             .with(
                 "image",
@@ -201,10 +210,7 @@ impl Node for RenderMesh {
                     data,
                 },
             )
-            .with("coverage", Scalar(coverage))
-            .with("frame_ms", Scalar(ms))
-            .with("gpu_ms", Scalar(gpu_ms.unwrap_or(ms)))
-            .with("fps", Scalar(1e3 / ms.max(1e-9))))
+            .with("coverage", Scalar(coverage)))
     }
 }
 

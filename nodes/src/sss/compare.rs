@@ -25,18 +25,18 @@ impl Node for Compare {
         let total = "(total − reference total)/reference total";
         let l1 = "r-weighted L1 error of Rd(r), relative to the reference's total";
         let outputs = vec![
-            Port::output("total_error_r", "Scalar", total),
-            Port::output("total_error_g", "Scalar", total),
-            Port::output("total_error_b", "Scalar", total),
-            Port::output("l1_r", "Scalar", l1),
-            Port::output("l1_g", "Scalar", l1),
-            Port::output("l1_b", "Scalar", l1),
-            Port::output(
+            Port::optional_output("total_error_r", "Scalar", total),
+            Port::optional_output("total_error_g", "Scalar", total),
+            Port::optional_output("total_error_b", "Scalar", total),
+            Port::optional_output("l1_r", "Scalar", l1),
+            Port::optional_output("l1_g", "Scalar", l1),
+            Port::optional_output("l1_b", "Scalar", l1),
+            Port::optional_output(
                 "total_error",
                 "Scalar",
                 "largest |total_error_c| over the channels",
             ),
-            Port::output("l1", "Scalar", "mean of l1_r, l1_g, l1_b"),
+            Port::optional_output("l1", "Scalar", "mean of l1_r, l1_g, l1_b"),
         ];
         NodeSpec {
             kind: "sss.compare",
@@ -52,26 +52,42 @@ impl Node for Compare {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, _p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+    fn run(&self, ctx: &NodeContext, _p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let reference = inputs.get::<DiffusionProfile>("reference")?;
         let profile = inputs.get::<DiffusionProfile>("profile")?;
         let e = compare(reference, profile).map_err(|m| NodeError::input("reference", m))?;
+        // A channel whose reference carries no energy has no relative error: those metrics are
+        // absent (with a warning), never 0 or infinite.
         let mut out = Outputs::new();
         for (c, name) in CHANNELS.iter().enumerate() {
-            out = out
-                .with(&format!("total_error_{name}"), Scalar(e.total[c]))
-                .with(&format!("l1_{name}"), Scalar(e.l1[c]));
+            match (e.total[c], e.l1[c]) {
+                (Some(t), Some(l)) => {
+                    out = out
+                        .with(&format!("total_error_{name}"), Scalar(t))
+                        .with(&format!("l1_{name}"), Scalar(l));
+                }
+                _ => ctx.warn(format!(
+                    "the reference's channel {name} carries no energy: no relative error for it"
+                )),
+            }
         }
-        let worst = e.total.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        Ok(out
-            .with("total_error", Scalar(worst))
-            .with("l1", Scalar(e.l1.iter().sum::<f64>() / 3.0)))
+        if let (Some(t), Some(l)) = (
+            e.total.iter().copied().collect::<Option<Vec<f64>>>(),
+            e.l1.iter().copied().collect::<Option<Vec<f64>>>(),
+        ) {
+            let worst = t.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            out = out
+                .with("total_error", Scalar(worst))
+                .with("l1", Scalar(l.iter().sum::<f64>() / 3.0));
+        }
+        Ok(out)
     }
 }
 
+/// Per channel; `None` where the reference's channel is zero (a relative error is undefined).
 pub struct Errors {
-    pub total: [f64; 3],
-    pub l1: [f64; 3],
+    pub total: [Option<f64>; 3],
+    pub l1: [Option<f64>; 3],
 }
 
 /// Rd of `p` at radius r: linear in ln r between grid points, the first value inside the grid,
@@ -93,17 +109,11 @@ pub fn compare(reference: &DiffusionProfile, p: &DiffusionProfile) -> Result<Err
     if reference.radii.len() < 2 {
         return Err("the reference profile has fewer than two radii".into());
     }
-    let mut total = [0.0; 3];
-    let mut l1 = [0.0; 3];
+    let mut total = [None; 3];
+    let mut l1 = [None; 3];
     for c in 0..3 {
         let t = reference.total[c];
-        total[c] = if t > 0.0 {
-            (p.total[c] - t) / t
-        } else if p.total[c] == 0.0 {
-            0.0
-        } else {
-            f64::INFINITY
-        };
+        total[c] = (t > 0.0).then(|| (p.total[c] - t) / t);
         // Trapezoids in ln r on the reference's grid.
         let radii = &reference.radii;
         let f = |i: usize| {
@@ -117,7 +127,7 @@ pub fn compare(reference: &DiffusionProfile, p: &DiffusionProfile) -> Result<Err
             num += 0.5 * (f(i - 1) + f(i)) * h;
             den += 0.5 * (g(i - 1) + g(i)) * h;
         }
-        l1[c] = if den > 0.0 { num / den } else { 0.0 };
+        l1[c] = (den > 0.0).then(|| num / den);
     }
     Ok(Errors { total, l1 })
 }
@@ -143,13 +153,22 @@ mod tests {
     fn identical_profiles_have_no_error_and_a_scaled_one_has_the_scale() {
         let a = profile(|r| (-r).exp(), 1.0);
         let e = compare(&a, &a).unwrap();
-        assert!(e.total.iter().chain(&e.l1).all(|v| *v == 0.0));
+        assert!(e.total.iter().chain(&e.l1).all(|v| *v == Some(0.0)));
         // 1.1 × Rd: the L1 error is exactly 0.1 of the reference energy (interpolation is exact
         // on the shared grid), the total error is what the totals say.
         let b = profile(|r| 1.1 * (-r).exp(), 1.1);
         let e = compare(&a, &b).unwrap();
-        assert!(e.l1.iter().all(|v| (v - 0.1).abs() < 1e-12), "{:?}", e.l1);
-        assert!(e.total.iter().all(|v| (v - 0.1).abs() < 1e-12));
+        let near = |v: &Option<f64>| v.is_some_and(|v| (v - 0.1).abs() < 1e-12);
+        assert!(e.l1.iter().all(near), "{:?}", e.l1);
+        assert!(e.total.iter().all(near));
+    }
+
+    #[test]
+    fn a_zero_reference_has_no_relative_error() {
+        let zero = profile(|_| 0.0, 0.0);
+        let b = profile(|r| (-r).exp(), 1.0);
+        let e = compare(&zero, &b).unwrap();
+        assert!(e.total.iter().chain(&e.l1).all(Option::is_none));
     }
 
     #[test]

@@ -104,15 +104,15 @@ impl Node for Render {
                 Port::output("points", "Scalar", "irradiance samples used"),
                 Port::output("spacing", "Scalar", "their spacing, mm"),
                 Port::output("terms", "Scalar", "mean profile evaluations per pixel"),
-                Port::output("seconds", "Scalar", "wall time of the whole render, s"),
-                Port::output("gather_seconds", "Scalar", "wall time of the per-pixel sums, s"),
             ],
             disk_cache: true,
         }
     }
 
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[("gather_seconds", "wall time of the per-pixel sums, s")]
+    }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let start = Instant::now();
         let mesh = inputs.get::<Mesh>("mesh")?;
         let material = inputs.get::<ScatteringMaterial>("material")?;
         let profile = inputs.get::<DiffusionProfile>("profile")?;
@@ -120,14 +120,13 @@ impl Node for Render {
         for w in r.warnings {
             ctx.warn(w);
         }
+        ctx.timing("gather_seconds", r.gather_seconds);
         Ok(Outputs::new()
             .with("image", r.image)
             .with("exitance", r.exitance)
             .with("points", Scalar(r.points as f64))
             .with("spacing", Scalar(r.spacing))
-            .with("terms", Scalar(r.terms))
-            .with("seconds", Scalar(start.elapsed().as_secs_f64()))
-            .with("gather_seconds", Scalar(r.gather_seconds)))
+            .with("terms", Scalar(r.terms)))
     }
 }
 

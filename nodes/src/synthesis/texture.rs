@@ -15,7 +15,6 @@ use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -82,7 +81,6 @@ impl Node for Texture {
                 Port::output("source", Image::TYPE, "exemplar pixel per output pixel: x/(W−1), y/(H−1), 0"),
                 Port::output("energy", "Scalar", "mean RMS distance per channel from each output patch to its nearest exemplar patch"),
                 Port::output("energy_start", "Scalar", "the same after the first search of the finest stage"),
-                Port::output("seconds", "Scalar", "time, s"),
             ],
             disk_cache: true,
         }
@@ -217,7 +215,6 @@ impl Node for Texture {
             rounds: p.search_rounds as usize,
             seed: p.seed,
         };
-        let start = Instant::now();
         let out = optimize::synthesize(
             &exemplar,
             ex.channels,
@@ -229,7 +226,6 @@ impl Node for Texture {
                 Ok::<(), NodeError>(())
             },
         )?;
-        let seconds = start.elapsed().as_secs_f64();
         let energy_start = out
             .stages
             .last()
@@ -258,8 +254,7 @@ impl Node for Texture {
             )
             .with("source", source)
             .with("energy", Scalar(out.energy))
-            .with("energy_start", Scalar(energy_start))
-            .with("seconds", Scalar(seconds)))
+            .with("energy_start", Scalar(energy_start)))
     }
 }
 

@@ -4,11 +4,16 @@
 //! "MESOFLOW-CACHE\x01\n" | u64 header length | header JSON | payload | blake3(header ‖ payload)
 //! ```
 //!
-//! The header names the kind, the compute time and each output's port, type and payload length.
-//! Entries are written to a temporary file in `<dir>/tmp` and renamed into place, so a reader (in
-//! this process or another) sees a whole entry or none; the trailing checksum catches truncation
-//! and corruption, which the engine reports as a warning and recomputes.
+//! The header names the key and kind the entry was written for, the compute time and timings, and
+//! each output's port, type and payload length. A read compares the recorded key and kind with the
+//! ones asked for, so an entry copied or renamed over another is refused (and recomputed) rather
+//! than served. Entries are written to a temporary file in `<dir>/tmp` and renamed into place, so
+//! a reader (in this process or another) sees a whole entry or none; the trailing checksum catches
+//! truncation and corruption, which the engine reports as a warning and recomputes. Temporary
+//! files older than [`ORPHAN_AGE`] were left by a process that died mid-write: every write and
+//! `cache stats` reclaim them.
 
+use super::Timing;
 use crate::codec::Encoder;
 use crate::key::Key;
 use crate::node::Outputs;
@@ -20,7 +25,12 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use thiserror::Error;
 
-const MAGIC: &[u8; 16] = b"MESOFLOW-CACHE\x01\n";
+/// Format 2 records the key and the timings; a format-1 entry reads as a miss and is overwritten.
+const MAGIC: &[u8; 16] = b"MESOFLOW-CACHE\x02\n";
+const MAGIC_PREFIX: &[u8] = b"MESOFLOW-CACHE";
+
+/// A temporary file older than this is an orphan: no write takes anywhere near as long.
+pub const ORPHAN_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
 
 #[derive(Debug, Error)]
 pub enum DiskError {
@@ -35,8 +45,10 @@ pub enum DiskError {
 
 #[derive(Serialize, Deserialize)]
 struct Header {
+    key: String,
     kind: String,
-    seconds: f64,
+    #[serde(flatten)]
+    timing: Timing,
     outputs: Vec<OutputHeader>,
 }
 
@@ -65,6 +77,10 @@ pub struct CacheStats {
     pub entries: u64,
     pub bytes: u64,
     pub unreadable: u64,
+    /// Temporary files left by interrupted writes that are still younger than [`ORPHAN_AGE`].
+    pub temporary: u64,
+    /// Orphaned temporary files removed by this call.
+    pub reclaimed: u64,
     pub by_kind: BTreeMap<String, KindStats>,
 }
 
@@ -88,8 +104,14 @@ impl DiskCache {
         self.entry_path(key).is_file()
     }
 
-    /// `Ok(None)` on a miss; `Err(Corrupt)` for an entry that exists but cannot be trusted.
-    pub fn get(&self, key: &Key, registry: &Registry) -> Result<Option<(Outputs, f64)>, DiskError> {
+    /// `Ok(None)` on a miss; `Err(Corrupt)` for an entry that exists but cannot be trusted: bad
+    /// checksum, or written for another key or kind than the one asked for.
+    pub fn get(
+        &self,
+        key: &Key,
+        kind: &str,
+        registry: &Registry,
+    ) -> Result<Option<(Outputs, Timing)>, DiskError> {
         let path = self.entry_path(key);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
@@ -101,7 +123,10 @@ impl DiskCache {
                 })
             }
         };
-        decode_entry(&bytes, registry)
+        if bytes.starts_with(MAGIC_PREFIX) && !bytes.starts_with(MAGIC) {
+            return Ok(None); // an older format: recomputed and overwritten
+        }
+        decode_entry(&bytes, key, kind, registry)
             .map(Some)
             .map_err(|message| DiskError::Corrupt {
                 path: path.display().to_string(),
@@ -119,7 +144,7 @@ impl DiskCache {
         key: &Key,
         kind: &str,
         outputs: &Outputs,
-        seconds: f64,
+        timing: &Timing,
     ) -> Result<(), DiskError> {
         let io = |path: &Path| {
             let path = path.display().to_string();
@@ -137,8 +162,9 @@ impl DiskCache {
             });
         }
         let header = serde_json::to_vec(&Header {
+            key: key.hex(),
             kind: kind.into(),
-            seconds,
+            timing: timing.clone(),
             outputs: headers,
         })
         .map_err(|e| DiskError::Corrupt {
@@ -150,6 +176,7 @@ impl DiskCache {
         let final_path = self.entry_path(key);
         let tmp_dir = self.dir.join("tmp");
         std::fs::create_dir_all(&tmp_dir).map_err(io(&tmp_dir))?;
+        reclaim_orphans(&tmp_dir);
         if let Some(parent) = final_path.parent() {
             std::fs::create_dir_all(parent).map_err(io(parent))?;
         }
@@ -195,6 +222,9 @@ impl DiskCache {
         let Ok(shards) = std::fs::read_dir(&self.dir) else {
             return stats;
         };
+        let tmp_dir = self.dir.join("tmp");
+        stats.reclaimed = reclaim_orphans(&tmp_dir);
+        stats.temporary = std::fs::read_dir(&tmp_dir).map_or(0, |d| d.count() as u64);
         for shard in shards.flatten() {
             if shard.file_name() == "tmp" {
                 continue;
@@ -218,6 +248,26 @@ impl DiskCache {
         }
         stats
     }
+}
+
+/// Removes temporary files older than [`ORPHAN_AGE`]; returns how many.
+fn reclaim_orphans(tmp_dir: &Path) -> u64 {
+    let Ok(files) = std::fs::read_dir(tmp_dir) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for f in files.flatten() {
+        let old = f
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age > ORPHAN_AGE);
+        if old && std::fs::remove_file(f.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
 }
 
 /// blake3 of the concatenated parts; large inputs are hashed on the rayon pool (blake3's tree
@@ -250,7 +300,12 @@ fn read_kind(path: &Path) -> Option<String> {
         .map(|h| h.kind)
 }
 
-fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), String> {
+fn decode_entry(
+    bytes: &[u8],
+    key: &Key,
+    kind: &str,
+    registry: &Registry,
+) -> Result<(Outputs, Timing), String> {
     if bytes.len() < MAGIC.len() + 8 + 32 || &bytes[..16] != MAGIC {
         return Err("not a mesoflow cache entry or truncated".into());
     }
@@ -265,6 +320,20 @@ fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), Str
         .filter(|l| *l <= content.len())
         .ok_or("bad header length")?;
     let header: Header = serde_json::from_slice(&content[..len]).map_err(|e| e.to_string())?;
+    if header.key != key.hex() {
+        return Err(format!(
+            "holds the entry of key {} (kind `{}`), not of {}",
+            header.key,
+            header.kind,
+            key.hex()
+        ));
+    }
+    if header.kind != kind {
+        return Err(format!(
+            "was written by kind `{}`, not `{kind}`",
+            header.kind
+        ));
+    }
     let mut rest = &content[len..];
     let mut outputs = Outputs::new();
     for o in header.outputs {
@@ -281,7 +350,7 @@ fn decode_entry(bytes: &[u8], registry: &Registry) -> Result<(Outputs, f64), Str
     if !rest.is_empty() {
         return Err("trailing bytes".into());
     }
-    Ok((outputs, header.seconds))
+    Ok((outputs, header.timing))
 }
 
 #[cfg(test)]
@@ -305,16 +374,23 @@ mod tests {
         let cache = DiskCache::new(dir.path());
         let reg = Registry::new();
         let key = Key([7; 32]);
-        assert!(cache.get(&key, &reg).unwrap().is_none());
-        cache.put(&key, "test.kind", &sample(), 1.25).unwrap();
-        let (out, secs) = cache.get(&key, &reg).unwrap().unwrap();
-        assert_eq!(secs, 1.25);
+        assert!(cache.get(&key, "test.kind", &reg).unwrap().is_none());
+        let timing = Timing {
+            seconds: 1.25,
+            timings: [("gpu_ms".to_string(), 3.5)].into(),
+        };
+        cache.put(&key, "test.kind", &sample(), &timing).unwrap();
+        let (out, back) = cache.get(&key, "test.kind", &reg).unwrap().unwrap();
+        assert_eq!(back, timing);
         assert_eq!(out.get("x").unwrap().as_scalar(), Some(2.5));
         let full = std::fs::read(cache.entry_path(&key)).unwrap();
         for cut in [0, 10, 30, full.len() / 2, full.len() - 1] {
             std::fs::write(cache.entry_path(&key), &full[..cut]).unwrap();
             assert!(
-                matches!(cache.get(&key, &reg), Err(DiskError::Corrupt { .. })),
+                matches!(
+                    cache.get(&key, "test.kind", &reg),
+                    Err(DiskError::Corrupt { .. })
+                ),
                 "cut {cut}"
             );
         }
@@ -322,7 +398,7 @@ mod tests {
         flipped[full.len() / 2] ^= 1;
         std::fs::write(cache.entry_path(&key), &flipped).unwrap();
         assert!(matches!(
-            cache.get(&key, &reg),
+            cache.get(&key, "test.kind", &reg),
             Err(DiskError::Corrupt { .. })
         ));
         let stats = cache.stats();
@@ -336,5 +412,47 @@ mod tests {
         );
         assert_eq!(cache.clear().unwrap(), 1);
         assert_eq!(cache.stats().entries, 0);
+    }
+
+    #[test]
+    fn an_entry_is_served_only_for_its_own_key_and_kind() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = DiskCache::new(dir.path());
+        let reg = Registry::new();
+        let (a, b) = (Key([1; 32]), Key([2; 32]));
+        cache
+            .put(&a, "test.kind", &sample(), &Timing::default())
+            .unwrap();
+        // Another entry copied over this key's file: refused, never served.
+        std::fs::create_dir_all(cache.entry_path(&b).parent().unwrap()).unwrap();
+        std::fs::copy(cache.entry_path(&a), cache.entry_path(&b)).unwrap();
+        let err = cache.get(&b, "test.kind", &reg).unwrap_err().to_string();
+        assert!(err.contains("holds the entry of key 0101"), "{err}");
+        // The right key asked for by another kind: refused too.
+        let err = cache.get(&a, "other.kind", &reg).unwrap_err().to_string();
+        assert!(err.contains("written by kind `test.kind`"), "{err}");
+        assert!(cache.get(&a, "test.kind", &reg).unwrap().is_some());
+    }
+
+    #[test]
+    fn orphaned_temporary_files_are_counted_then_reclaimed_by_age() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = DiskCache::new(dir.path());
+        let tmp = dir.path().join("tmp");
+        std::fs::create_dir_all(&tmp).unwrap();
+        let fresh = tmp.join("fresh.tmp");
+        let old = tmp.join("old.tmp");
+        std::fs::write(&fresh, b"x").unwrap();
+        std::fs::write(&old, b"x").unwrap();
+        let long_ago = std::time::SystemTime::now() - ORPHAN_AGE * 2;
+        std::fs::File::options()
+            .write(true)
+            .open(&old)
+            .unwrap()
+            .set_modified(long_ago)
+            .unwrap();
+        let stats = cache.stats();
+        assert_eq!((stats.reclaimed, stats.temporary), (1, 1));
+        assert!(fresh.exists() && !old.exists());
     }
 }

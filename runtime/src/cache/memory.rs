@@ -1,6 +1,7 @@
 //! In-process cache of node outputs, bounded in bytes. When full it evicts the entries that are
 //! cheapest to get back: least compute time per byte first.
 
+use super::Timing;
 use crate::key::Key;
 use crate::node::Outputs;
 use std::collections::HashMap;
@@ -9,7 +10,7 @@ use std::sync::Mutex;
 struct Entry {
     outputs: Outputs,
     bytes: usize,
-    seconds: f64,
+    timing: Timing,
 }
 
 pub struct MemoryCache {
@@ -41,8 +42,11 @@ impl MemoryCache {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    pub fn get(&self, key: &Key) -> Option<Outputs> {
-        self.lock().entries.get(key).map(|e| e.outputs.clone())
+    pub fn get(&self, key: &Key) -> Option<(Outputs, Timing)> {
+        self.lock()
+            .entries
+            .get(key)
+            .map(|e| (e.outputs.clone(), e.timing.clone()))
     }
 
     pub fn used(&self) -> usize {
@@ -58,7 +62,7 @@ impl MemoryCache {
     }
 
     /// Inserts, evicting as needed; an entry larger than the whole budget is not kept.
-    pub fn insert(&self, key: Key, outputs: Outputs, seconds: f64) {
+    pub fn insert(&self, key: Key, outputs: Outputs, timing: Timing) {
         let bytes = outputs.byte_size().max(1);
         if bytes > self.budget {
             return;
@@ -72,8 +76,8 @@ impl MemoryCache {
                 .entries
                 .iter()
                 .min_by(|a, b| {
-                    let va = a.1.seconds / a.1.bytes as f64;
-                    let vb = b.1.seconds / b.1.bytes as f64;
+                    let va = a.1.timing.seconds / a.1.bytes as f64;
+                    let vb = b.1.timing.seconds / b.1.bytes as f64;
                     va.total_cmp(&vb).then_with(|| a.0.cmp(b.0))
                 })
                 .map(|(k, _)| *k);
@@ -88,7 +92,7 @@ impl MemoryCache {
             Entry {
                 outputs,
                 bytes,
-                seconds,
+                timing,
             },
         );
     }
@@ -98,6 +102,13 @@ impl MemoryCache {
 mod tests {
     use super::*;
     use crate::value::Artifact;
+
+    fn secs(seconds: f64) -> Timing {
+        Timing {
+            seconds,
+            ..Timing::default()
+        }
+    }
 
     fn out(n: usize) -> Outputs {
         Outputs::new().with(
@@ -112,16 +123,16 @@ mod tests {
     #[test]
     fn evicts_least_seconds_per_byte_first() {
         let c = MemoryCache::new(300);
-        c.insert(Key([1; 32]), out(100), 10.0); // 0.1 s/byte: dear to recompute
-        c.insert(Key([2; 32]), out(100), 0.1); // 0.001 s/byte: cheap
-        c.insert(Key([3; 32]), out(100), 1.0); // 0.01 s/byte
-        c.insert(Key([4; 32]), out(100), 5.0); // needs room: the cheapest (2) goes
+        c.insert(Key([1; 32]), out(100), secs(10.0)); // 0.1 s/byte: dear to recompute
+        c.insert(Key([2; 32]), out(100), secs(0.1)); // 0.001 s/byte: cheap
+        c.insert(Key([3; 32]), out(100), secs(1.0)); // 0.01 s/byte
+        c.insert(Key([4; 32]), out(100), secs(5.0)); // needs room: the cheapest (2) goes
         assert!(c.get(&Key([2; 32])).is_none());
         for k in [1, 3, 4] {
             assert!(c.get(&Key([k; 32])).is_some(), "{k}");
         }
         assert!(c.used() <= 300);
-        c.insert(Key([5; 32]), out(1000), 1.0);
+        c.insert(Key([5; 32]), out(1000), secs(1.0));
         assert!(
             c.get(&Key([5; 32])).is_none(),
             "larger than the budget: not kept"

@@ -4,8 +4,21 @@
 mod disk;
 mod memory;
 
-pub use disk::{CacheStats, DiskCache, DiskError, KindStats};
+pub use disk::{CacheStats, DiskCache, DiskError, KindStats, ORPHAN_AGE};
 pub use memory::MemoryCache;
+
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// What the computation that produced a cached value measured: its wall time and the node's own
+/// timings (`NodeContext::timing`). Metadata about the value, never part of it: `--verify-cache`
+/// compares values only, and a hit reports these as the cost of the value it served.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    pub seconds: f64,
+    #[serde(default)]
+    pub timings: BTreeMap<String, f64>,
+}
 
 /// Default memory budget: a quarter of physical memory (2 GiB when it cannot be read).
 pub fn default_memory_budget() -> usize {

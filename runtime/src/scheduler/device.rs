@@ -1,0 +1,69 @@
+//! Where a node runs. In `auto` mode a GPU node takes the GPU only when the adapter is worth it: a
+//! software OpenGL adapter (llvmpipe through GL) runs our compute shaders slower than the CPU path
+//! and cannot render to `Rgba32Float`, so the CPU path is taken with a warning naming why. Mesa's
+//! Vulkan lavapipe is kept: it is complete, and it is how machines without a GPU test the GPU code.
+
+use crate::engine::{DeviceMode, Engine, RunOptions};
+use crate::gpu::Gpu;
+use mesoflow_graph::DevicePreference;
+use std::sync::Arc;
+
+pub(crate) struct Choice {
+    /// `Some` to run on the GPU lane, `None` for the CPU path.
+    pub gpu: Option<Arc<Gpu>>,
+    /// Why a GPU node took its CPU path (a warning for the report).
+    pub fallback: Option<String>,
+}
+
+pub(crate) fn planned(pref: DevicePreference, mode: DeviceMode) -> DevicePreference {
+    if mode == DeviceMode::Cpu {
+        DevicePreference::Cpu
+    } else {
+        pref
+    }
+}
+
+/// `Err` when a GPU was required (`--device gpu`, `MESOFLOW_REQUIRE_GPU=1`) and none can be had.
+pub(crate) fn choose(
+    engine: &Engine,
+    pref: DevicePreference,
+    opts: &RunOptions,
+) -> Result<Choice, String> {
+    let cpu = |fallback| Choice {
+        gpu: None,
+        fallback,
+    };
+    if planned(pref, opts.device) == DevicePreference::Cpu {
+        return Ok(cpu(None));
+    }
+    match engine.gpu.get() {
+        Ok(gpu) if opts.device == DeviceMode::Auto && unsuitable(&gpu) => {
+            let why = format!(
+                "the only GPU adapter is {}: software OpenGL runs this node slower than the CPU \
+                 path and lacks float render targets; ran the CPU path (--device gpu forces it)",
+                gpu.describe()
+            );
+            if opts.require_gpu {
+                Err(format!(
+                    "{why} (MESOFLOW_REQUIRE_GPU=1 forbids the CPU fallback)"
+                ))
+            } else {
+                Ok(cpu(Some(why)))
+            }
+        }
+        Ok(gpu) => Ok(Choice {
+            gpu: Some(gpu),
+            fallback: None,
+        }),
+        Err(e) if opts.device == DeviceMode::Gpu => Err(format!("{e} (--device gpu)")),
+        Err(e) if opts.require_gpu => Err(format!(
+            "{e} (MESOFLOW_REQUIRE_GPU=1 forbids the CPU fallback)"
+        )),
+        Err(_) => Ok(cpu(Some("no GPU adapter; ran the CPU path".into()))),
+    }
+}
+
+/// An adapter `auto` passes over: software rasterisation through OpenGL.
+fn unsuitable(gpu: &Gpu) -> bool {
+    gpu.is_software() && gpu.info.backend == wgpu::Backend::Gl
+}

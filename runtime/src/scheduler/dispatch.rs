@@ -1,0 +1,287 @@
+//! Phase 4, **execute**: the nodes to compute run as soon as their inputs are ready, CPU nodes on
+//! rayon, GPU nodes one at a time on the GPU lane thread. Results go to the caches, their files
+//! are written, and a failure stops its dependants while independent nodes finish. Cancellation
+//! stops dispatching; running nodes see the flag.
+
+use super::plan::Plan;
+use super::verify::{check_outputs, compare, mismatch};
+use super::write::write_artifacts;
+use super::{cancel_dependants, failure, metrics, timings_of, Sink, Slot};
+use crate::cache::Timing;
+use crate::engine::{Engine, RunObserver, RunOptions};
+use crate::key::Key;
+use crate::node::{DynNode, Inputs, NodeContext, NodeError, Outputs, Prepared};
+use crate::report::{NodeReport, NodeStatus};
+use mesoflow_graph::CheckedGraph;
+use std::collections::BTreeSet;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+struct Done {
+    idx: usize,
+    result: Result<Outputs, NodeError>,
+    timing: Timing,
+    device: &'static str,
+    verified: bool,
+}
+
+/// What a run wrote, and on which adapter its GPU nodes ran.
+pub(crate) struct Executed {
+    pub files: Vec<String>,
+    pub adapter: Option<String>,
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run_all(
+    engine: &Engine,
+    graph: &CheckedGraph,
+    plan: &Plan,
+    slots: &mut [Option<Slot>],
+    compute: &[bool],
+    opts: &RunOptions,
+    sink: &Arc<Sink>,
+    observer: &Arc<dyn RunObserver>,
+    mut files: Vec<String>,
+) -> Executed {
+    let n = graph.nodes.len();
+    let mut adapter = None;
+    let mut waiting: Vec<usize> = (0..n)
+        .map(|i| {
+            if compute[i] {
+                plan.upstream[i].iter().filter(|&&u| compute[u]).count()
+            } else {
+                0
+            }
+        })
+        .collect();
+    let mut ready: BTreeSet<usize> = (0..n).filter(|&i| compute[i] && waiting[i] == 0).collect();
+    let (tx, rx) = mpsc::channel::<Done>();
+    let gpu_lane = Arc::new(Mutex::new(()));
+    let mut running = 0usize;
+    loop {
+        while !opts.cancel.load(Ordering::Relaxed) {
+            let Some(i) = ready.pop_first() else { break };
+            if slots[i].as_ref().is_none_or(|s| s.report.is_some()) {
+                continue; // failed while preparing
+            }
+            let cn = &graph.nodes[i];
+            let mut inputs = Inputs::new();
+            for e in &cn.inputs {
+                let value = plan
+                    .index
+                    .get(e.from.node.as_str())
+                    .and_then(|&u| slots[u].as_ref())
+                    .and_then(|s| s.outputs.as_ref())
+                    .and_then(|o| o.get(&e.from.port))
+                    .cloned();
+                if let Some(v) = value {
+                    inputs = inputs.with(&e.port, v);
+                }
+            }
+            let Some(slot) = slots[i].as_mut() else {
+                continue;
+            };
+            let gpu = match super::device::choose(engine, slot.node.spec().device, opts) {
+                Ok(choice) => {
+                    if let Some(why) = choice.fallback {
+                        sink.push(&cn.id, why);
+                    }
+                    choice.gpu
+                }
+                Err(message) => {
+                    let r = failure(cn, &slot.node, NodeStatus::Failed, message, slot.key);
+                    observer.node_finished(&r);
+                    slot.report = Some(r);
+                    cancel_dependants(i, graph, &plan.upstream, compute, slots, observer);
+                    continue;
+                }
+            };
+            if let Some(g) = &gpu {
+                adapter.get_or_insert_with(|| g.describe());
+            }
+            let device = if gpu.is_some() { "gpu" } else { "cpu" };
+            observer.node_started(&cn.id, &cn.kind, device);
+            let task = Task {
+                idx: i,
+                node: slot.node.clone(),
+                prepared: slot.prepared.clone(),
+                key: slot.key,
+                inputs,
+                ctx: NodeContext {
+                    node: cn.id.clone(),
+                    base_dir: opts.base_dir.clone(),
+                    cancel: opts.cancel.clone(),
+                    gpu,
+                    sink: sink.clone(),
+                    timings: Default::default(),
+                },
+                expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
+                memory: opts.use_cache.then(|| engine.memory.clone()),
+                disk: if opts.use_cache && slot.node.spec().disk_cache {
+                    engine.disk.clone()
+                } else {
+                    None
+                },
+                device,
+                tx: tx.clone(),
+            };
+            running += 1;
+            if running == 1 && ready.is_empty() && device == "cpu" {
+                // Nothing else is runnable: a hand-off to the pool would only add a thread
+                // wake-up per node (it dominates long chains of small nodes). The node's own
+                // parallel loops still use the pool.
+                task.run();
+            } else if device == "gpu" {
+                // The GPU lane: GPU nodes submit to the one device one at a time, off the rayon
+                // pool so CPU nodes keep running beside them.
+                let lane = gpu_lane.clone();
+                std::thread::spawn(move || {
+                    let _guard = lane.lock().unwrap_or_else(|e| e.into_inner());
+                    task.run();
+                });
+            } else {
+                rayon::spawn(move || task.run());
+            }
+        }
+        if running == 0 {
+            break;
+        }
+        let Ok(done) = rx.recv() else { break };
+        running -= 1;
+        let i = done.idx;
+        let cn = &graph.nodes[i];
+        let Some(slot) = slots[i].as_mut() else {
+            continue;
+        };
+        let key = slot.key;
+        let written = match &done.result {
+            Ok(outputs) => write_artifacts(outputs, &opts.out_dir),
+            Err(_) => Ok(Vec::new()),
+        };
+        let report = match (done.result, written) {
+            (Ok(outputs), Ok(paths)) => {
+                files.extend(paths);
+                let status = match (&slot.expected, done.verified) {
+                    (Some((_, s)), true) => *s,
+                    _ => NodeStatus::Computed,
+                };
+                let r = NodeReport {
+                    id: cn.id.clone(),
+                    kind: cn.kind.clone(),
+                    device: done.device.into(),
+                    status,
+                    seconds: done.timing.seconds,
+                    bytes: outputs.byte_size() as u64,
+                    key: key.map(|k| k.hex()).unwrap_or_default(),
+                    metrics: metrics(&outputs),
+                    timings: timings_of(&done.timing),
+                    kind_version: slot.node.spec().version,
+                    error: None,
+                    verified: done.verified,
+                };
+                slot.outputs = Some(outputs);
+                for &j in &plan.downstream[i] {
+                    if compute[j] {
+                        waiting[j] -= 1;
+                        if waiting[j] == 0 {
+                            ready.insert(j);
+                        }
+                    }
+                }
+                r
+            }
+            (result, written) => {
+                let (status, message) = match (result, written) {
+                    (Err(NodeError::Cancelled), _) => {
+                        (NodeStatus::Cancelled, NodeError::Cancelled.to_string())
+                    }
+                    (Err(e), _) => (NodeStatus::Failed, e.to_string()),
+                    (Ok(_), Err(e)) => (NodeStatus::Failed, e),
+                    (Ok(_), Ok(_)) => (NodeStatus::Failed, "internal: unreachable".into()),
+                };
+                let mut r = failure(cn, &slot.node, status, message, key);
+                r.seconds = done.timing.seconds;
+                r.device = done.device.into();
+                cancel_dependants(i, graph, &plan.upstream, compute, slots, observer);
+                r
+            }
+        };
+        observer.node_finished(&report);
+        if let Some(slot) = slots[i].as_mut() {
+            slot.report = Some(report);
+        }
+    }
+    Executed { files, adapter }
+}
+
+struct Task {
+    idx: usize,
+    node: Arc<dyn DynNode>,
+    prepared: Option<Arc<Prepared>>,
+    key: Option<Key>,
+    inputs: Inputs,
+    ctx: NodeContext,
+    expected: Option<Outputs>,
+    memory: Option<Arc<crate::cache::MemoryCache>>,
+    disk: Option<crate::cache::DiskCache>,
+    device: &'static str,
+    tx: mpsc::Sender<Done>,
+}
+
+impl Task {
+    fn run(self) {
+        let t = Instant::now();
+        let result = match &self.prepared {
+            Some(p) => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                self.node.run(&self.ctx, p, &self.inputs)
+            }))
+            .unwrap_or_else(|panic| {
+                let msg = panic
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
+                Err(NodeError::Failed(format!("internal error (panic): {msg}")))
+            }),
+            None => Err(NodeError::Failed("internal: no prepared parameters".into())),
+        };
+        let timing = Timing {
+            seconds: t.elapsed().as_secs_f64(),
+            timings: self.ctx.timings(),
+        };
+        let result = result.and_then(|out| check_outputs(self.node.as_ref(), out));
+        let mut verified = false;
+        let result = match (result, &self.expected) {
+            (Ok(out), Some(expected)) => match compare(expected, &out) {
+                Ok(()) => {
+                    verified = true;
+                    Ok(out)
+                }
+                Err(port) => Err(mismatch(self.node.as_ref(), &port)),
+            },
+            (r, _) => r,
+        };
+        // A cancelled run may still store a node that completed: the entry is whole.
+        if let (Ok(out), Some(key)) = (&result, self.key) {
+            if let Some(memory) = &self.memory {
+                memory.insert(key, out.clone(), timing.clone());
+            }
+            if let Some(disk) = &self.disk {
+                if !verified {
+                    if let Err(e) = disk.put(&key, self.node.spec().kind, out, &timing) {
+                        self.ctx.warn(format!("disk cache not written: {e}"));
+                    }
+                }
+            }
+        }
+        let _ = self.tx.send(Done {
+            idx: self.idx,
+            result,
+            timing,
+            device: self.device,
+            verified,
+        });
+    }
+}

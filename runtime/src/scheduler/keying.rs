@@ -1,0 +1,108 @@
+//! Phase 2, **key**: in topological order, apply parameter defaults, hash the files a node declares
+//! it reads, and derive each node's Merkle key from its inputs' keys. A node whose key cannot be
+//! made fails here; its dependants are cancelled.
+
+use super::{failure, Slot};
+use crate::key::{self, Key, KeyParts};
+use crate::node::{DynNode, NodeError, Prepared};
+use crate::report::NodeStatus;
+use mesoflow_graph::CheckedNode;
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+use std::sync::Arc;
+
+pub(crate) struct Keyed {
+    pub slots: Vec<Option<Slot>>,
+    /// Files nodes declared they read (what `watch` watches).
+    pub read_files: BTreeSet<String>,
+}
+
+pub(crate) fn key_all(
+    engine: &crate::engine::Engine,
+    graph: &mesoflow_graph::CheckedGraph,
+    plan: &super::plan::Plan,
+    base_dir: &Path,
+) -> Keyed {
+    let mut slots: Vec<Option<Slot>> = Vec::with_capacity(graph.nodes.len());
+    let mut read_files = BTreeSet::new();
+    for (i, cn) in graph.nodes.iter().enumerate() {
+        if !plan.needed[i] {
+            slots.push(None);
+            continue;
+        }
+        let Some(node) = engine.registry.node(&cn.kind).cloned() else {
+            slots.push(None);
+            continue;
+        };
+        let mut slot = Slot::new(node);
+        let failed_input = plan.upstream[i]
+            .iter()
+            .find(|&&u| slots[u].as_ref().is_none_or(|s| s.key.is_none()));
+        let keyed = match failed_input {
+            Some(&u) => Err((
+                NodeStatus::Cancelled,
+                format!("not run: input node `{}` failed", graph.nodes[u].id),
+            )),
+            None => prepare_and_key(
+                &slot.node,
+                cn,
+                &slots,
+                &plan.index,
+                base_dir,
+                &mut read_files,
+            )
+            .map_err(|e| (NodeStatus::Failed, e.to_string())),
+        };
+        match keyed {
+            Ok((prepared, key)) => {
+                slot.prepared = Some(Arc::new(prepared));
+                slot.key = Some(key);
+            }
+            Err((status, error)) => {
+                slot.report = Some(failure(cn, &slot.node, status, error, None))
+            }
+        }
+        slots.push(Some(slot));
+    }
+    Keyed { slots, read_files }
+}
+
+fn prepare_and_key(
+    node: &Arc<dyn DynNode>,
+    cn: &CheckedNode,
+    slots: &[Option<Slot>],
+    index: &BTreeMap<&str, usize>,
+    base: &Path,
+    read_files: &mut BTreeSet<String>,
+) -> Result<(Prepared, Key), NodeError> {
+    let prepared = node.prepare(&cn.params)?;
+    let mut files = Vec::new();
+    for path in node.files(&prepared, base)? {
+        let hash = key::hash_file(&path).map_err(|e| NodeError::file(&path, e))?;
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        files.push((name, hash));
+        let shown = std::fs::canonicalize(&path).unwrap_or(path);
+        read_files.insert(shown.display().to_string());
+    }
+    let mut inputs = Vec::new();
+    for e in &cn.inputs {
+        let k = index
+            .get(e.from.node.as_str())
+            .and_then(|&u| slots[u].as_ref())
+            .and_then(|s| s.key)
+            .ok_or_else(|| NodeError::input(&e.port, format!("`{}` has no key", e.from)))?;
+        inputs.push((e.port.as_str(), k, e.from.port.as_str()));
+    }
+    let spec = node.spec();
+    let key = key::compute(&KeyParts {
+        kind: spec.kind,
+        version: spec.version,
+        params: &prepared.canonical,
+        inputs,
+        files,
+    });
+    Ok((prepared, key))
+}

@@ -1,0 +1,249 @@
+//! Demand-driven execution of one checked graph, one module per phase:
+//!
+//! 1. [`plan`]: the requested outputs (by default the sinks) and their ancestors.
+//! 2. [`keying`]: parameter defaults, declared files hashed, Merkle keys.
+//! 3. [`demand`]: cache lookups from the requested nodes upwards; a hit ends its branch.
+//! 4. [`dispatch`]: the misses run as their inputs become ready (rayon lane, GPU lane, chosen in
+//!    [`device`]); [`write`] puts their files under the output folder; [`verify`] holds
+//!    `--verify-cache` hits to their recomputation.
+//!
+//! then the report is assembled here.
+
+mod demand;
+mod device;
+mod dispatch;
+mod keying;
+mod plan;
+mod verify;
+mod write;
+
+use crate::cache::Timing;
+use crate::engine::{Engine, RunObserver, RunOptions};
+use crate::key::Key;
+use crate::node::{DynNode, Outputs, Prepared, ProgressSink};
+use crate::report::{NodeReport, NodeStatus, RunReport, Warning};
+use mesoflow_graph::{CheckedGraph, DevicePreference};
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+pub(crate) use device::planned as planned_device;
+
+/// Collects warnings and forwards progress to the observer.
+pub(crate) struct Sink {
+    observer: Arc<dyn RunObserver>,
+    warnings: Mutex<Vec<Warning>>,
+}
+
+impl Sink {
+    pub(crate) fn push(&self, node: &str, message: String) {
+        tracing::warn!(node, "{message}");
+        self.warnings
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(Warning {
+                node: node.into(),
+                message,
+            });
+    }
+}
+
+impl ProgressSink for Sink {
+    fn progress(&self, node: &str, done: u64, total: u64) {
+        self.observer.progress(node, done, total);
+    }
+    fn warn(&self, node: &str, message: String) {
+        self.push(node, message);
+    }
+}
+
+/// Per-node state of one run.
+pub(crate) struct Slot {
+    pub node: Arc<dyn DynNode>,
+    pub prepared: Option<Arc<Prepared>>,
+    pub key: Option<Key>,
+    pub outputs: Option<Outputs>,
+    pub report: Option<NodeReport>,
+    /// A cached value to compare against (`--verify-cache`).
+    pub expected: Option<(Outputs, NodeStatus)>,
+}
+
+impl Slot {
+    fn new(node: Arc<dyn DynNode>) -> Slot {
+        Slot {
+            node,
+            prepared: None,
+            key: None,
+            outputs: None,
+            report: None,
+            expected: None,
+        }
+    }
+}
+
+pub(crate) fn device_name(d: DevicePreference) -> &'static str {
+    match d {
+        DevicePreference::Cpu => "cpu",
+        DevicePreference::Gpu => "gpu",
+    }
+}
+
+/// Every scalar output, for the report.
+pub(crate) fn metrics(outputs: &Outputs) -> BTreeMap<String, f64> {
+    outputs
+        .values
+        .iter()
+        .filter_map(|(name, v)| v.as_scalar().map(|x| (name.clone(), x)))
+        .collect()
+}
+
+/// The report's `timings`: the compute wall time as `seconds`, then the kind's own.
+pub(crate) fn timings_of(timing: &Timing) -> BTreeMap<String, f64> {
+    let mut t = timing.timings.clone();
+    t.insert("seconds".into(), timing.seconds);
+    t
+}
+
+pub(crate) fn execute(
+    engine: &Engine,
+    graph: &CheckedGraph,
+    opts: &RunOptions,
+    observer: Arc<dyn RunObserver>,
+) -> RunReport {
+    let t0 = Instant::now();
+    let sink = Arc::new(Sink {
+        observer: observer.clone(),
+        warnings: Mutex::new(Vec::new()),
+    });
+    let plan = plan::Plan::new(graph, opts);
+    let keying::Keyed {
+        mut slots,
+        read_files,
+    } = keying::key_all(engine, graph, &plan, &opts.base_dir);
+    let compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
+
+    // Cache hits write their files now; a hit whose files cannot be written fails like a node.
+    let mut files = Vec::new();
+    for (i, cn) in graph.nodes.iter().enumerate() {
+        let Some(slot) = slots[i].as_mut() else {
+            continue;
+        };
+        if let Some(out) = &slot.outputs {
+            match write::write_artifacts(out, &opts.out_dir) {
+                Ok(paths) => files.extend(paths),
+                Err(e) => {
+                    slot.report = Some(failure(cn, &slot.node, NodeStatus::Failed, e, slot.key));
+                    slot.outputs = None;
+                    cancel_dependants(i, graph, &plan.upstream, &compute, &mut slots, &observer);
+                    continue;
+                }
+            }
+        }
+        if let Some(r) = &slot.report {
+            observer.node_finished(r);
+        }
+    }
+
+    let executed = dispatch::run_all(
+        engine, graph, &plan, &mut slots, &compute, opts, &sink, &observer, files,
+    );
+
+    let cancelled = opts.cancel.load(std::sync::atomic::Ordering::Relaxed);
+    let mut nodes = Vec::new();
+    let mut skipped = Vec::new();
+    for (i, cn) in graph.nodes.iter().enumerate() {
+        let Some(slot) = slots[i].as_mut() else {
+            continue;
+        };
+        match slot.report.take() {
+            Some(r) => nodes.push(r),
+            None if compute[i] => nodes.push(failure(
+                cn,
+                &slot.node,
+                NodeStatus::Cancelled,
+                "cancelled".into(),
+                slot.key,
+            )),
+            None => skipped.push(cn.id.clone()),
+        }
+    }
+    let ok = nodes.iter().all(|r| {
+        matches!(
+            r.status,
+            NodeStatus::Computed | NodeStatus::Memory | NodeStatus::Disk
+        )
+    });
+    let warnings = std::mem::take(&mut *sink.warnings.lock().unwrap_or_else(|e| e.into_inner()));
+    RunReport {
+        mesoflow: 1,
+        version: env!("CARGO_PKG_VERSION").into(),
+        graph: opts.graph_name.clone(),
+        adapter: executed.adapter,
+        ok,
+        seconds: t0.elapsed().as_secs_f64(),
+        nodes,
+        warnings,
+        skipped,
+        files: executed.files,
+        cancelled,
+        read: read_files.into_iter().collect(),
+    }
+}
+
+pub(crate) fn failure(
+    cn: &mesoflow_graph::CheckedNode,
+    node: &Arc<dyn DynNode>,
+    status: NodeStatus,
+    error: String,
+    key: Option<Key>,
+) -> NodeReport {
+    NodeReport {
+        id: cn.id.clone(),
+        kind: cn.kind.clone(),
+        device: device_name(node.spec().device).into(),
+        status,
+        seconds: 0.0,
+        bytes: 0,
+        key: key.map(|k| k.hex()).unwrap_or_default(),
+        metrics: BTreeMap::new(),
+        timings: BTreeMap::new(),
+        kind_version: node.spec().version,
+        error: Some(format!("node `{}`: {error}", cn.id)),
+        verified: false,
+    }
+}
+
+/// Marks every not-yet-run descendant of `failed` as cancelled.
+pub(crate) fn cancel_dependants(
+    failed: usize,
+    graph: &CheckedGraph,
+    upstream: &[Vec<usize>],
+    compute: &[bool],
+    slots: &mut [Option<Slot>],
+    observer: &Arc<dyn RunObserver>,
+) {
+    let mut dead = BTreeSet::from([failed]);
+    for j in failed + 1..graph.nodes.len() {
+        if compute[j] && upstream[j].iter().any(|u| dead.contains(u)) {
+            dead.insert(j);
+            if let Some(slot) = slots[j].as_mut() {
+                if slot.report.is_none() {
+                    let message =
+                        format!("not run: input node `{}` failed", graph.nodes[failed].id);
+                    let r = failure(
+                        &graph.nodes[j],
+                        &slot.node,
+                        NodeStatus::Cancelled,
+                        message,
+                        slot.key,
+                    );
+                    observer.node_finished(&r);
+                    slot.report = Some(r);
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
