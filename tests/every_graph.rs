@@ -1,0 +1,213 @@
+//! Every shipped graph, at small sizes, three times over one disk cache: cold, warm into a new
+//! output folder (every file must be written again, every node served from the cache or not
+//! needed), and with `--verify-cache` (every hit recomputed and equal to its cache entry).
+
+mod common;
+use common::*;
+use std::collections::BTreeSet;
+use std::path::Path;
+
+const DIRS: &str = r#"{"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#;
+
+/// Parameter overrides that make a graph small enough for CI; the graph's structure is unchanged.
+fn small(graph: &str) -> Vec<String> {
+    let render = |ids: &[&str]| -> Vec<String> {
+        ids.iter()
+            .flat_map(|id| {
+                [
+                    format!("{id}.camera.resolution=[32,24]"),
+                    format!("{id}.shadow_resolution=128"),
+                ]
+            })
+            .collect()
+    };
+    let sss = |ids: &[&str]| -> Vec<String> {
+        let mut v = render(ids);
+        v.extend(ids.iter().map(|id| format!("{id}.max_points=3000")));
+        v
+    };
+    let mut s: Vec<String> = match graph {
+        "btf_capture" => vec!["surface.size=16".into()],
+        "btf_compress" => vec!["surface.size=16".into(), "pca.rank=3".into()],
+        "isomap" => vec!["roll.n=300".into(), "landmark.landmarks=50".into()],
+        "mdf_render" => {
+            let mut v: Vec<String> = vec![
+                "surface.size=16".into(),
+                format!("capture.views={DIRS}"),
+                format!("capture.lights={DIRS}"),
+                format!("mdf.views={DIRS}"),
+                "pca.rank=4".into(),
+            ];
+            v.extend(render(&[
+                "sphere_plain",
+                "sphere_mdf",
+                "torus_plain",
+                "torus_mdf",
+                "torus_reference",
+            ]));
+            v
+        }
+        "qh_fit" => vec![
+            "measured.photons=20000".into(),
+            "fit_mc.photons=40000".into(),
+            "refit.photons=20000".into(),
+        ],
+        "qh_render" => {
+            let mut v: Vec<String> = vec![
+                "surface.size=16".into(),
+                format!("lrf.views={DIRS}"),
+                format!("lrf.lights={DIRS}"),
+                "torus.segments=[32,16]".into(),
+            ];
+            v.extend(sss(&["homogeneous", "qh"]));
+            v
+        }
+        "quickstart" => vec!["surface.size=32".into()],
+        "sss_models" => vec!["reference.photons=20000".into(), "profile.points=64".into()],
+        "sss_render" => {
+            let mut v: Vec<String> = vec!["torus.segments=[32,16]".into()];
+            v.extend(sss(&["marble", "skin", "marble_reference"]));
+            v
+        }
+        "weathering" => vec!["sample.size=24".into()],
+        "weathering_transfer" => vec![
+            "sample.size=32".into(),
+            "sample.seeds=4".into(),
+            "guide.width=48".into(),
+            "guide.height=32".into(),
+            "synth.patch_sizes=[8,4]".into(),
+            "synth.levels=2".into(),
+            "synth.iterations=1".into(),
+        ],
+        other => panic!("graphs/{other}.json has no small settings in tests/every_graph.rs"),
+    };
+    s.sort();
+    s
+}
+
+fn run(
+    root: &Path,
+    graph: &Path,
+    cache: &Path,
+    out: &Path,
+    sets: &[String],
+    extra: &[&str],
+) -> Run {
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        graph.display().to_string(),
+        "--quiet".into(),
+        "--cache-dir".into(),
+        cache.display().to_string(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    for kv in sets {
+        args.push("--set".into());
+        args.push(kv.clone());
+    }
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    mesoflow(&args, root)
+}
+
+/// Files under `dir`, relative, without the report.
+fn files(dir: &Path) -> BTreeSet<String> {
+    fn walk(base: &Path, dir: &Path, out: &mut BTreeSet<String>) {
+        for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                walk(base, &p, out);
+            } else if let Ok(rel) = p.strip_prefix(base) {
+                out.insert(rel.display().to_string());
+            }
+        }
+    }
+    let mut out = BTreeSet::new();
+    walk(dir, dir, &mut out);
+    out.remove("report.json");
+    out
+}
+
+#[test]
+fn every_graph_runs_cold_then_warm_with_every_file_then_verifies_its_cache() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut graphs: Vec<_> = std::fs::read_dir(root.join("graphs"))
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|x| x == "json"))
+        .collect();
+    graphs.sort();
+    assert!(graphs.len() >= 11, "{graphs:?}");
+    for graph in graphs {
+        let name = graph.file_stem().unwrap().to_string_lossy().into_owned();
+        let sets = small(&name);
+        let s = Scratch::new();
+        let cache = s.path("cache");
+        let (cold, warm, verify) = (s.path("cold"), s.path("warm"), s.path("verify"));
+
+        let r = run(root, &graph, &cache, &cold, &sets, &[]);
+        assert_eq!(r.code, 0, "{name} cold: {}", r.stderr);
+        let cold_files = files(&cold);
+
+        let r = run(root, &graph, &cache, &warm, &sets, &[]);
+        assert_eq!(r.code, 0, "{name} warm: {}", r.stderr);
+        let rep = report(&warm);
+        let computed: Vec<_> = statuses(&rep)
+            .into_iter()
+            .filter(|(_, st)| st == "computed")
+            .collect();
+        // Kinds that never enter the disk cache (`disk_cache: false`: cheaper to recompute than
+        // to read back) compute again in a new process; any other computed node is a miss.
+        let allowed = [
+            "scalar.constant",
+            "scalar.affine",
+            "mesh.primitive",
+            "btf.lod",
+            "btf.write_ubo2003",
+            "btf.reconstruct",
+            "qh.fit_dipole",
+            "image.ramp",
+            "image.blur",
+            "image.compare",
+            "image.row",
+            "points.read",
+            "points.synthetic",
+            "weathering.sample",
+            "sss.material",
+            "sss.compare",
+        ];
+        for (id, _) in &computed {
+            let kind = rep["nodes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|n| n["id"] == id.as_str())
+                .map(|n| n["kind"].as_str().unwrap_or("").to_string())
+                .unwrap_or_default();
+            assert!(
+                allowed.contains(&kind.as_str()),
+                "{name}: `{id}` ({kind}) was computed again on a warm run"
+            );
+        }
+        assert_eq!(
+            files(&warm),
+            cold_files,
+            "{name}: a warm run into a new folder must write every file"
+        );
+        for f in &cold_files {
+            assert_eq!(
+                std::fs::read(cold.join(f)).unwrap(),
+                std::fs::read(warm.join(f)).unwrap(),
+                "{name}: {f} differs between the cold and the warm run"
+            );
+        }
+
+        let r = run(root, &graph, &cache, &verify, &sets, &["--verify-cache"]);
+        assert_eq!(r.code, 0, "{name} --verify-cache: {}", r.stderr);
+        let rep = report(&verify);
+        assert_eq!(rep["ok"], true, "{name}");
+        assert_no_temp_files(&cache);
+    }
+}
