@@ -1034,3 +1034,229 @@ fn qh_fit_graph_recovers_known_coefficients_through_the_monte_carlo_table() {
     assert!(es < 0.05 && ea < 0.05, "σs′ {es}, σa {ea}");
     assert!(metric(&rep, "fit_pbd", "error_sigma_a") > ea);
 }
+
+#[test]
+fn a_machine_whose_only_adapter_is_software_opengl_runs_the_gpu_graphs_on_the_cpu_path() {
+    // WGPU_BACKEND=gl: the machine without Mesa's Vulkan driver. `auto` must not pick llvmpipe
+    // through GL (no float render targets, slower than the CPU path): the CPU path, a warning.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let dirs = r#"{"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#;
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        root.join("graphs/mdf_render.json").display().to_string(),
+        "--quiet".into(),
+        "--no-cache".into(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    let mut sets: Vec<String> = vec![
+        "surface.size=16".into(),
+        format!("capture.views={dirs}"),
+        format!("capture.lights={dirs}"),
+        format!("mdf.views={dirs}"),
+    ];
+    for r in [
+        "sphere_plain",
+        "sphere_mdf",
+        "torus_plain",
+        "torus_mdf",
+        "torus_reference",
+    ] {
+        sets.push(format!("{r}.camera.resolution=[32,24]"));
+    }
+    for kv in sets {
+        args.push("--set".into());
+        args.push(kv);
+    }
+    let r = Run::from(
+        bin()
+            .args(&args)
+            .env("WGPU_BACKEND", "gl")
+            .env_remove("MESOFLOW_REQUIRE_GPU")
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out);
+    let devices = per_node(&rep, "device");
+    for id in ["mdf", "sphere_mdf", "torus_mdf"] {
+        assert_eq!(devices[id], "cpu", "{id}: {rep}");
+    }
+    let w = rep["warnings"].as_array().unwrap();
+    let why = |text: &str| {
+        w.iter()
+            .any(|w| w["node"] == "torus_mdf" && w["message"].as_str().unwrap().contains(text))
+    };
+    // CI installs Mesa's GL driver, so there the adapter exists and the reason is named.
+    if std::env::var("CI").is_ok() {
+        assert!(why("software OpenGL"), "{w:?}");
+    } else {
+        assert!(why("software OpenGL") || why("no GPU adapter"), "{w:?}");
+    }
+}
+
+#[test]
+fn hostile_inputs_get_clear_errors_not_panics_or_hangs() {
+    let s = Scratch::new();
+    let run = |name: &str, graph: &str, env: &[(&str, &str)]| {
+        let g = s.write(&format!("{name}.json"), graph);
+        let out = s.path(&format!("out_{name}"));
+        let mut c = bin();
+        c.args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+        ])
+        .arg(&out)
+        .current_dir(s.dir.path());
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        let started = Instant::now();
+        let r = Run::from(c.output().unwrap());
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "{name}: took too long"
+        );
+        assert!(!r.stderr.contains("panicked"), "{name}: {}", r.stderr);
+        r
+    };
+    // Writes stay inside the output folder: refused at validation, exit 2.
+    for (name, path) in [("abs", "/tmp/mesoflow_escape.png"), ("up", "../escape.png")] {
+        let r = run(
+            name,
+            &format!(
+                r#"{{"mesoflow": 1, "nodes": {{
+                  "s": {{"kind": "heightfield.procedural", "params": {{"size": 8}}}},
+                  "n": {{"kind": "heightfield.normals", "inputs": {{"height": "s.height"}}}},
+                  "w": {{"kind": "image.write", "inputs": {{"image": "n.preview"}}, "params": {{"path": "{path}"}}}}}}}}"#
+            ),
+            &[],
+        );
+        assert_eq!(r.code, 2, "{name}: {}", r.stderr);
+        assert!(
+            r.stderr.contains("node `w`: parameter `path`"),
+            "{}",
+            r.stderr
+        );
+    }
+    // Integers the parameter cannot hold: exit 2 naming the field.
+    for (name, param, value) in [
+        ("big", "size", "4294967296"),
+        ("negzero", "seed", "-0.0"),
+        ("huge", "seed", "18446744073709551616"),
+    ] {
+        let r = run(
+            name,
+            &format!(
+                r#"{{"mesoflow": 1, "nodes": {{"s": {{"kind": "heightfield.procedural", "params": {{"{param}": {value}}}}}}}}}"#
+            ),
+            &[],
+        );
+        assert_eq!(r.code, 2, "{name}: {}", r.stderr);
+        assert!(
+            r.stderr.contains(&format!("parameter `{param}`")),
+            "{name}: {}",
+            r.stderr
+        );
+    }
+    // A non-regular file as input: refused, not read forever.
+    let r = run(
+        "devzero",
+        r#"{"mesoflow": 1, "nodes": {"h": {"kind": "heightfield.read", "params": {"path": "/dev/zero"}}}}"#,
+        &[],
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let rep = report(&s.path("out_devzero"));
+    assert!(
+        rep["nodes"][0]["error"]
+            .as_str()
+            .unwrap()
+            .contains("not a regular file"),
+        "{rep}"
+    );
+    // A malformed memory budget is an error, not ignored.
+    let r = run(
+        "budget",
+        r#"{"mesoflow": 1, "nodes": {"s": {"kind": "heightfield.procedural", "params": {"size": 8}}}}"#,
+        &[("MESOFLOW_MEMORY_BUDGET_GB", "abc")],
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("MESOFLOW_MEMORY_BUDGET_GB"),
+        "{}",
+        r.stderr
+    );
+    // An absurd thread count is capped, not spawned.
+    let r = run(
+        "threads",
+        r#"{"mesoflow": 1, "nodes": {"s": {"kind": "heightfield.procedural", "params": {"size": 8}}}}"#,
+        &[("RAYON_NUM_THREADS", "100000")],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.contains("using"), "{}", r.stderr);
+}
+
+#[test]
+fn output_prints_the_values_asked_for_and_suggests_near_names() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let out = s.path("o");
+    let go = |output: &str| {
+        mesoflow(
+            &[
+                "run",
+                g.to_str().unwrap(),
+                "--quiet",
+                "--no-cache",
+                "--set",
+                "surface.size=16",
+                "--output",
+                output,
+                "--out-dir",
+                out.to_str().unwrap(),
+            ],
+            root,
+        )
+    };
+    let r = go("normals.rms_slope");
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.contains("normals.rms_slope = "), "{}", r.stdout);
+    let r = go("normals.rms_slop");
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("did you mean `rms_slope`"),
+        "{}",
+        r.stderr
+    );
+    let r = go("normal.rms_slope");
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("did you mean `normals`"), "{}", r.stderr);
+}
+
+#[test]
+fn listing_into_a_closed_pipe_ends_quietly() {
+    use std::io::Read;
+    use std::process::Stdio;
+    for cmd in ["schema", "nodes"] {
+        let mut child = bin()
+            .arg(cmd)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Read one byte, then close the pipe: the writer meets EPIPE.
+        let mut stdout = child.stdout.take().unwrap();
+        let mut one = [0u8; 1];
+        stdout.read_exact(&mut one).unwrap();
+        drop(stdout);
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{cmd}: {err}");
+    }
+}

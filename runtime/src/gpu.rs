@@ -13,7 +13,15 @@ impl Gpu {
     /// "NVIDIA H100, Vulkan", "llvmpipe (LLVM 15.0.6, 256 bits), Vulkan, software".
     pub fn describe(&self) -> String {
         let software = if self.is_software() { ", software" } else { "" };
-        format!("{}, {}{software}", self.info.name, self.info.backend)
+        let api = match self.info.backend {
+            wgpu::Backend::Vulkan => "Vulkan",
+            wgpu::Backend::Metal => "Metal",
+            wgpu::Backend::Dx12 => "DirectX 12",
+            wgpu::Backend::Gl => "OpenGL",
+            wgpu::Backend::BrowserWebGpu => "WebGPU",
+            wgpu::Backend::Noop => "no-op",
+        };
+        format!("{}, {api}{software}", self.info.name)
     }
 
     /// A rasteriser running on the CPU (lavapipe, llvmpipe, SwiftShader).
