@@ -841,8 +841,9 @@ mod tests {
             assert!(e <= last && r.terms < brute.terms, "threshold {t}: {e}");
             last = e;
         }
-        // The documented bound (README): threshold 0.02 within 0.5% RMS of brute force.
-        assert!(last < 5e-3, "{last}");
+        // The documented bound (README): threshold 0.02 within 1e-3 relative RMS of brute force
+        // (measured 2.6e-4: the bound leaves 4× for other platforms' summation order).
+        assert!(last < 1e-3, "{last}");
     }
 
     #[test]
@@ -857,10 +858,11 @@ mod tests {
                 continue;
             };
             let g = render(Some(&gpu), &sphere, &m, &profile, &sphere_scene(0.0)).unwrap();
-            // f32 sums of ~2000 terms against f64: 1e-4 relative is a generous float bound.
+            // f32 sums of ~2000 terms against f64: rounding grows like √n·2⁻²⁴ ≈ 3e-6, so 5e-6
+            // relative RMS is the float bound (the README quotes it; lavapipe measures 8e-7).
             let e = rel_rms(&g.exitance.data, &cpu.exitance.data);
             eprintln!("{}: relative RMS {e:.2e}", gpu.describe());
-            assert!(e < 1e-4, "{}: {e}", gpu.describe());
+            assert!(e < 5e-6, "{}: {e}", gpu.describe());
             tested += 1;
         }
         crate::gpu::require_tested(tested);

@@ -46,7 +46,19 @@ pub struct Params {
     /// Relief height in sample widths (0 = flat): smooth bumps whose normals tilt the Ward
     /// lobe per pixel, for fits that need photometric-stereo normals.
     pub bumps: f64,
+    /// The reflectance the capture is rendered with: `ward` (the model `brdf.fit_ward` fits, for
+    /// solver checks) or `cook_torrance` (Beckmann, Fresnel, masking–shadowing: a model the
+    /// Ward fit cannot reproduce, for cross-model checks).
+    pub reflectance: Reflectance,
     pub seed: u64,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Reflectance {
+    #[default]
+    Ward,
+    CookTorrance,
 }
 
 impl Default for Params {
@@ -63,6 +75,7 @@ impl Default for Params {
             views: DirectionSet::List(vec![[0.0, 0.0]]),
             noise: 0.0,
             bumps: 0.0,
+            reflectance: Reflectance::Ward,
             seed: 1,
         }
     }
@@ -117,7 +130,7 @@ impl Node for WeatheringSample {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         for (name, v) in [
             ("radius", p.radius),
             ("roughness", p.roughness),
@@ -137,6 +150,10 @@ impl Node for WeatheringSample {
         p.views
             .validate()
             .map_err(|e| NodeError::param("views", e))?;
+        Ok(())
+    }
+
+    fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         let s = generate(p);
         Ok(Outputs::new()
             .with("btf", s.btf)
@@ -268,11 +285,19 @@ pub fn generate(p: &Params) -> Sample {
         let (pair, c) = (plane / 3, plane % 3);
         for (i, o) in out.iter_mut().enumerate() {
             let q = &maps[i * WARD_PARAMS..(i + 1) * WARD_PARAMS];
-            let g = match &normals {
-                Some(nv) => PairGeometry::with_normal(&pairs[pair], nv[i]),
-                None => geo[pair],
+            let mut v = match p.reflectance {
+                Reflectance::Ward => {
+                    let g = match &normals {
+                        Some(nv) => PairGeometry::with_normal(&pairs[pair], nv[i]),
+                        None => geo[pair],
+                    };
+                    g.value(q[c], q[3], q[4])
+                }
+                Reflectance::CookTorrance => {
+                    let n = normals.as_ref().map_or([0.0, 0.0, 1.0], |nv| nv[i]);
+                    super::cook_torrance::value(&pairs[pair], n, q[c], q[3], q[4])
+                }
             };
-            let mut v = g.value(q[c], q[3], q[4]);
             if p.noise > 0.0 {
                 v *= 1.0 + p.noise * gaussian(p.seed, &[3, plane as u64, i as u64]);
             }
