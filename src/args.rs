@@ -70,7 +70,8 @@ pub enum CacheAction {
 
 #[derive(Args)]
 pub struct CacheArgs {
-    /// Use the cache beside this graph (default: ./.mesoflow/cache).
+    /// Use the cache beside this graph, as `run` does (default: every .mesoflow/cache here and
+    /// one folder down).
     pub graph: Option<PathBuf>,
     #[arg(long, env = "MESOFLOW_CACHE")]
     pub cache_dir: Option<PathBuf>,

@@ -44,6 +44,16 @@ pub fn check() -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Mesa's Vulkan device-select layer connects to a Wayland or X display to find the GPU driving
+/// it, and prints `error: XDG_RUNTIME_DIR is invalid` on every headless run. mesoflow chooses its
+/// adapter itself and draws nothing, so the layer is switched off unless the user set it.
+pub fn quiet_vulkan_device_select() {
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        // Called at start-up, before any thread exists.
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+}
+
 /// Restores the default SIGPIPE action, so `mesoflow nodes | head` ends quietly like any Unix
 /// tool instead of panicking on a closed pipe.
 pub fn quiet_broken_pipes() {

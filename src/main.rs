@@ -21,6 +21,7 @@ fn main() {
         .with_writer(std::io::stderr)
         .init();
     env::quiet_broken_pipes();
+    env::quiet_vulkan_device_select();
     let cli = args::Cli::parse();
     let code = match env::check().and_then(|()| commands::dispatch(cli)) {
         Ok(code) => code,
