@@ -118,14 +118,22 @@ fn main() {
     };
     let key = Key([42; 32]);
     cache
-        .put(&key, "bench", &Outputs::new().with("height", hf), 1.0)
+        .put(
+            &key,
+            "bench",
+            &Outputs::new().with("height", hf),
+            &mesoflow_runtime::cache::Timing::default(),
+        )
         .expect("put");
     let entry = cache.entry_path(&key);
     let bytes = std::fs::metadata(&entry).expect("entry").len() as f64;
     let raw = tmp.path().join("raw.bin");
     std::fs::copy(&entry, &raw).expect("copy");
     let t_cache = time(7, || {
-        let (o, _) = cache.get(&key, &registry).expect("get").expect("hit");
+        let (o, _) = cache
+            .get(&key, "bench", &registry)
+            .expect("get")
+            .expect("hit");
         assert_eq!(o.byte_size(), side * side * 4);
     });
     let t_raw = time(7, || {

@@ -48,7 +48,11 @@ fn tables() {
             };
             // Three channels per call: one table row is a third of it, so time one channel's
             // worth by tabulating all three and dividing.
-            std::hint::black_box(profile::tabulate(&m, &p, &|_, _| {}));
+            std::hint::black_box(profile::tabulate(
+                &m,
+                &p,
+                &mesoflow_nodes::progress::Counter::none(),
+            ));
         }
         let s = start.elapsed().as_secs_f64() / 3.0;
         println!("| {} | {s:.4} | {:.3} |", model.name(), s * 10.0);
@@ -71,7 +75,14 @@ fn monte_carlo(photons: u64, peer: bool) {
             eta: 1.3,
         };
         let start = Instant::now();
-        let t = montecarlo::trace(&m, &[0.0, 1.0], photons, 1, 0);
+        let t = montecarlo::trace(
+            &m,
+            &[0.0, 1.0],
+            photons,
+            1,
+            0,
+            &mesoflow_nodes::progress::Counter::none(),
+        );
         let secs = start.elapsed().as_secs_f64();
         let ours = format!(
             "| {name} | {:.0} | {:.5} ± {:.5} |",
@@ -122,7 +133,12 @@ fn renders(counts: &[usize], width: u32, height: u32, gpu: Option<&Gpu>) {
         ..Default::default()
     })
     .expect("skin1");
-    let prof = profile::tabulate(&m, &profile::Params::default(), &|_, _| {}).profile;
+    let prof = profile::tabulate(
+        &m,
+        &profile::Params::default(),
+        &mesoflow_nodes::progress::Counter::none(),
+    )
+    .profile;
     println!(
         "\n| sss.render {width}×{height}, samples | octree 0.05 CPU, s | brute CPU, s | octree RMS vs brute | brute GPU, s |\n|---|---|---|---|---|"
     );

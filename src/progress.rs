@@ -22,9 +22,11 @@ impl Bars {
 
 impl RunObserver for Bars {
     fn node_started(&self, id: &str, kind: &str, device: &str) {
+        // A spinner with the elapsed time until the node reports progress; then a bar with an
+        // ETA (a node that reports nothing never shows an empty `0/0`).
         let bar = self.multi.add(ProgressBar::new_spinner());
         bar.set_style(
-            ProgressStyle::with_template("{spinner} {prefix:<28} {wide_bar} {pos}/{len} {elapsed}")
+            ProgressStyle::with_template("{spinner} {prefix:<28} {elapsed}")
                 .unwrap_or_else(|_| ProgressStyle::default_spinner()),
         );
         bar.set_prefix(format!("{id} ({kind}, {device})"));
@@ -37,7 +39,18 @@ impl RunObserver for Bars {
 
     fn progress(&self, id: &str, done: u64, total: u64) {
         if let Some(bar) = self.bars.lock().unwrap_or_else(|e| e.into_inner()).get(id) {
-            bar.set_length(total);
+            if total == 0 {
+                return;
+            }
+            if bar.length() != Some(total) {
+                bar.set_style(
+                    ProgressStyle::with_template(
+                        "{spinner} {prefix:<28} {wide_bar} {pos}/{len} {elapsed}, eta {eta}",
+                    )
+                    .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+                );
+                bar.set_length(total);
+            }
             bar.set_position(done);
         }
     }

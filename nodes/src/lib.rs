@@ -12,6 +12,7 @@ pub mod manifold;
 pub mod mdf;
 pub mod memory;
 pub mod mesh;
+pub mod progress;
 pub mod qh;
 mod registry;
 pub mod render;

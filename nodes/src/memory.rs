@@ -38,6 +38,29 @@ pub fn check(bytes: u64, what: &str, param_gb: Option<f64>) -> Result<(), NodeEr
     ))
 }
 
+/// `Err` naming `param` (the parameter whose value asks for the memory) when `bytes` for `what`
+/// exceed the budget of `MESOFLOW_MEMORY_BUDGET_GB` (else 80% of physical memory). For nodes
+/// without a `memory_budget_gb` parameter of their own.
+pub fn check_param(bytes: u64, what: &str, param: &str) -> Result<(), NodeError> {
+    let budget = budget_bytes(None);
+    if bytes <= budget {
+        return Ok(());
+    }
+    Err(NodeError::param(
+        param,
+        format!(
+            "{what} needs {:.2} GB, over the memory budget of {:.2} GB (lower `{param}`, or set MESOFLOW_MEMORY_BUDGET_GB)",
+            bytes as f64 / 1e9,
+            budget as f64 / 1e9
+        ),
+    ))
+}
+
+/// `a · b · …` in u64, saturating: sizes computed from user parameters must not wrap.
+pub fn product(factors: &[u64]) -> u64 {
+    factors.iter().fold(1u64, |acc, f| acc.saturating_mul(*f))
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -459,6 +459,7 @@ pub fn fit(ctx: &NodeContext, btf: &Btf, p: &Params) -> Result<Fit, NodeError> {
         |i| starts[clusters.labels[i]],
         p,
     );
+    ctx.check_cancel()?;
     let mut normals = normals;
     if let Some(nv) = normals.as_mut() {
         // Photometric stereo's normal is only a start: the Ward lobe it cannot model tilts it.
@@ -555,6 +556,9 @@ fn fit_pixels(
     let rows: Vec<Vec<([f64; WARD_PARAMS], f32, bool)>> = (0..h)
         .into_par_iter()
         .map(|y| {
+            if ctx.is_cancelled() {
+                return Vec::new(); // the caller returns `Cancelled`
+            }
             let row = (0..w)
                 .map(|x| {
                     let i = y * w + x;

@@ -16,8 +16,11 @@ pub struct Params {
     pub height: u32,
     /// Direction of increase, degrees: 0 = left to right, 90 = top to bottom.
     pub angle: f64,
-    /// Value at the start and at the end of the ramp.
+    /// Value at the start and at the end of the ramp (|v| ≤ 10³⁰: the difference of two larger
+    /// values can overflow to infinity).
+    #[schemars(range(min = -1e30, max = 1e30))]
     pub from: f64,
+    #[schemars(range(min = -1e30, max = 1e30))]
     pub to: f64,
 }
 

@@ -66,6 +66,12 @@ fn read_samples(path: &Path) -> Result<(Image, bool), NodeError> {
             | image::ColorType::Rgba8
     );
     let (width, height) = (img.width() as usize, img.height() as usize);
+    if width == 0 || height == 0 {
+        return Err(NodeError::file(
+            path,
+            format!("the image is empty ({width} × {height})"),
+        ));
+    }
     let grey = img.color().channel_count() <= 2;
     let (channels, data): (usize, Vec<f32>) = match (grey, img.color().has_alpha()) {
         (true, false) => (1, img.to_luma32f().into_raw()),
@@ -89,6 +95,12 @@ fn read_exr(path: &Path) -> Result<Image, NodeError> {
         .map_err(|e| NodeError::file(path, format!("cannot decode EXR: {e}")))?;
     let layer = &img.layer_data;
     let (width, height) = (layer.size.width(), layer.size.height());
+    if width == 0 || height == 0 {
+        return Err(NodeError::file(
+            path,
+            format!("the image is empty ({width} × {height})"),
+        ));
+    }
     let find = |name: &str| {
         layer
             .channel_data
@@ -146,43 +158,11 @@ pub fn read_grey(path: &Path) -> Result<Grid, NodeError> {
 }
 
 fn read_npy_2d(path: &Path) -> Result<Grid, NodeError> {
-    let bytes = std::fs::read(path).map_err(|e| NodeError::file(path, e))?;
-    let npy = npyz::NpyFile::new(&bytes[..])
-        .map_err(|e| NodeError::file(path, format!("not an NPY file: {e}")))?;
-    let shape = npy.shape().to_vec();
-    if shape.len() != 2 {
-        return Err(NodeError::file(
-            path,
-            format!("expected a 2-D array (H, W), got shape {shape:?}"),
-        ));
-    }
-    if npy.order() != npyz::Order::C {
-        return Err(NodeError::file(
-            path,
-            "Fortran-ordered arrays are not supported; save with order='C'",
-        ));
-    }
-    let descr = npy.dtype().descr();
-    let type_str = descr.trim_matches(|c| c == '\'' || c == '"');
-    let data: Vec<f32> = if type_str.ends_with("f4") {
-        npy.into_vec::<f32>()
-            .map_err(|e| NodeError::file(path, e))?
-    } else if type_str.ends_with("f8") {
-        npy.into_vec::<f64>()
-            .map_err(|e| NodeError::file(path, e))?
-            .into_iter()
-            .map(|v| v as f32)
-            .collect()
-    } else {
-        return Err(NodeError::file(
-            path,
-            format!("expected float32 or float64 samples, got dtype {type_str}"),
-        ));
-    };
+    let a = super::npy_read::read(path, 2, "(H, W)")?;
     Ok(Grid {
-        width: shape[1] as usize,
-        height: shape[0] as usize,
-        data,
+        width: a.shape[1],
+        height: a.shape[0],
+        data: a.data.into_iter().map(|v| v as f32).collect(),
     })
 }
 

@@ -3,4 +3,5 @@
 pub mod formats;
 pub mod image_read;
 pub mod image_write;
+pub mod npy_read;
 pub mod npy_write;

@@ -49,7 +49,8 @@ pub struct Params {
     pub light: [f64; 2],
     /// View direction [θ, φ], degrees.
     pub view: [f64; 2],
-    /// Scale of the relit values before sRGB encoding.
+    /// Scale of the relit values before sRGB encoding (0 to 10⁶).
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub exposure: f64,
     /// Milliseconds per GIF frame.
     pub frame_ms: u32,

@@ -11,6 +11,7 @@
 
 use super::eigen;
 use super::graph::Graph;
+use crate::progress::Counter;
 use crate::rng;
 use crate::types::{Embedding, KnnGraph, PointSet};
 use faer::{Mat, MatRef};
@@ -83,7 +84,7 @@ impl Node for Isomap {
                 format!("{} vertices for {} points", graph.n, points.n),
             ));
         }
-        let r = isomap(points, graph, p)?;
+        let r = isomap_with(points, graph, p, &Counter::new(ctx, 0))?;
         for w in &r.warnings {
             ctx.warn(w.clone());
         }
@@ -109,12 +110,19 @@ pub struct Isomapped {
 }
 
 /// Shortest-path rows from each source, in parallel, in source order.
-fn geodesics(g: &Graph, sources: &[usize]) -> Vec<Vec<f64>> {
+/// One Dijkstra per source, counted on `watch`; once it is stopped the remaining searches are
+/// skipped (empty rows: the caller returns `Cancelled`).
+fn geodesics(g: &Graph, sources: &[usize], watch: &Counter) -> Vec<Vec<f64>> {
     let c = g.compact();
     sources
         .par_iter()
         .map_init(crate::manifold::graph::Heap::new, |heap, &s| {
-            c.dijkstra_with(&[s], heap)
+            if watch.stopped() {
+                return Vec::new();
+            }
+            let row = c.dijkstra_with(&[s], heap);
+            watch.add(1);
+            row
         })
         .collect()
 }
@@ -150,6 +158,16 @@ fn kernel(rows: &[Vec<f64>], landmarks: &[usize]) -> Vec<f64> {
 }
 
 pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped, NodeError> {
+    isomap_with(points, knn, p, &Counter::none())
+}
+
+/// [`isomap`] with progress (one unit per shortest-path search) and cancellation.
+pub fn isomap_with(
+    points: &PointSet,
+    knn: &KnnGraph,
+    p: &Params,
+    watch: &Counter,
+) -> Result<Isomapped, NodeError> {
     let n = points.n;
     let k = p.components as usize;
     if k == 0 || k >= n {
@@ -178,6 +196,15 @@ pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped
         }
         l => l,
     };
+    // Geodesic rows (m × n f64), the m × m kernel and the eigensolver's copy of it.
+    let (mu, nu) = (m as u64, n as u64);
+    let bytes = crate::memory::product(&[mu, nu, 8])
+        .saturating_add(crate::memory::product(&[2, mu, mu, 8]));
+    crate::memory::check_param(
+        bytes,
+        &format!("Isomap of {n} points with {m} landmarks (all points without `landmarks`)"),
+        "landmarks",
+    )?;
     let landmarks: Vec<usize> = if m == n {
         (0..n).collect()
     } else {
@@ -191,7 +218,11 @@ pub fn isomap(points: &PointSet, knn: &KnnGraph, p: &Params) -> Result<Isomapped
         chosen
     };
     let t0 = Instant::now();
-    let rows = geodesics(&g, &landmarks);
+    watch.grow(landmarks.len() as u64);
+    let rows = geodesics(&g, &landmarks, watch);
+    if watch.stopped() {
+        return Err(NodeError::Cancelled);
+    }
     let paths_seconds = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let b = kernel(&rows, &landmarks);

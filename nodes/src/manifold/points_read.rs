@@ -50,47 +50,19 @@ impl Node for PointsRead {
 }
 
 pub fn read(path: &Path) -> Result<PointSet, NodeError> {
-    let bytes = std::fs::read(path).map_err(|e| NodeError::file(path, e))?;
-    let npy = npyz::NpyFile::new(&bytes[..])
-        .map_err(|e| NodeError::file(path, format!("not an NPY file: {e}")))?;
-    let shape = npy.shape().to_vec();
-    if shape.len() != 2 {
-        return Err(NodeError::file(
-            path,
-            format!("expected a 2-D array (n, D), got shape {shape:?}"),
-        ));
-    }
-    if npy.order() != npyz::Order::C {
-        return Err(NodeError::file(
-            path,
-            "Fortran-ordered arrays are not supported; save with order='C'",
-        ));
-    }
-    let descr = npy.dtype().descr();
-    let ty = descr.trim_matches(|c| c == '\'' || c == '"').to_string();
-    let data: Vec<f64> = if ty.ends_with("f8") {
-        npy.into_vec::<f64>()
-            .map_err(|e| NodeError::file(path, e))?
-    } else if ty.ends_with("f4") {
-        npy.into_vec::<f32>()
-            .map_err(|e| NodeError::file(path, e))?
-            .into_iter()
-            .map(f64::from)
-            .collect()
-    } else {
-        return Err(NodeError::file(path, format!("dtype {ty} is not f4 or f8")));
-    };
-    let (n, dims) = (shape[0] as usize, shape[1] as usize);
-    if n == 0 || dims == 0 {
-        return Err(NodeError::file(path, format!("empty point set {shape:?}")));
-    }
-    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+    let a = crate::io::npy_read::read(path, 2, "(n, D)")?;
+    let (n, dims) = (a.shape[0], a.shape[1]);
+    if let Some(i) = a.data.iter().position(|v| !v.is_finite()) {
         return Err(NodeError::file(
             path,
             format!("point {} coordinate {} is not finite", i / dims, i % dims),
         ));
     }
-    Ok(PointSet { n, dims, data })
+    Ok(PointSet {
+        n,
+        dims,
+        data: a.data,
+    })
 }
 
 #[cfg(test)]

@@ -33,7 +33,8 @@ pub struct Params {
     /// Shell thickness in texels (of the height field, or of the output for a mesh tile),
     /// measured from the tile's lowest point; default: the tile's height range (the tightest
     /// shell). Must not be less than that range.
-    #[schemars(range(min = 0.0))]
+    /// At most 10⁶ texels: a deeper shell means rays that walk for ever.
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub depth: Option<f64>,
     /// Compress the table to this rank (SVD over views × texels); the output is the
     /// reconstruction, and `rmse` its error. Default: uncompressed.
@@ -53,6 +54,17 @@ impl Default for Params {
 }
 
 pub struct Tabulate;
+
+/// The table is f32 per texel and view, held twice at its peak (the result and the GPU's
+/// read-back buffer, or the rank-r reconstruction).
+fn table_fits(width: usize, height: usize, views: usize) -> Result<(), NodeError> {
+    let entries = crate::memory::product(&[width as u64, height as u64, views as u64]);
+    crate::memory::check_param(
+        entries.saturating_mul(8),
+        &format!("an MDF of {width} × {height} texels × {views} views"),
+        "resolution",
+    )
+}
 
 /// Everything both paths need, in height-field texels.
 struct Setup {
@@ -113,6 +125,7 @@ impl Node for Tabulate {
         ) {
             (Some(hf), None) => {
                 let setup = setup(hf, p)?;
+                table_fits(setup.width, setup.height, setup.views.len())?;
                 let data = match ctx.gpu() {
                     Some(gpu) => tabulate_gpu(gpu, hf, &setup)?,
                     None => tabulate_cpu(ctx, hf, &setup)?,
@@ -127,6 +140,7 @@ impl Node for Tabulate {
                 let tile = super::mesh_tile::MeshTile::new(mesh)?;
                 let n = p.resolution.unwrap_or(64) as usize;
                 let views = p.views.directions();
+                table_fits(n, n, views.len())?;
                 let (data, depth) = match ctx.gpu() {
                     Some(gpu) => {
                         super::mesh_tile::tabulate_gpu(gpu, &tile, &views, (n, n), p.depth)?

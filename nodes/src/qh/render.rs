@@ -38,8 +38,9 @@ pub struct Params {
     pub light: LightParams,
     /// Texture tiles per unit of texture coordinate, [along u, along v].
     pub tiling: [f64; 2],
-    /// Millimetres per world unit of the mesh.
-    #[schemars(range(min = 1e-9))]
+    /// Millimetres per world unit of the mesh (10⁻⁹ to 10⁹: beyond, areas in mm² overflow the
+    /// f32 the GPU sums in).
+    #[schemars(range(min = 1e-9, max = 1e9))]
     pub mm_per_unit: f64,
     /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
     pub spacing: Option<f64>,
@@ -394,7 +395,12 @@ mod tests {
         })
         .unwrap();
         let m = medium();
-        let prof = profile::tabulate(&m, &profile::Params::default(), &|_, _| {}).profile;
+        let prof = profile::tabulate(
+            &m,
+            &profile::Params::default(),
+            &crate::progress::Counter::none(),
+        )
+        .profile;
         let p = Params {
             camera: CameraParams {
                 eye: [0.0, 0.5, 4.0],

@@ -41,8 +41,16 @@ fn histogram(mut events: Vec<u32>) -> Vec<(u32, u32)> {
 }
 
 impl WhiteTable {
-    pub fn build(eta: f64, photons: u64, seed: u64, max_events: u32) -> WhiteTable {
-        let (exits, dropped) = montecarlo::white(eta, photons, seed, max_events);
+    /// One white Monte Carlo run; chunks are counted on `watch`, and a stopped watch leaves a
+    /// partial table (the caller checks cancellation).
+    pub fn build(
+        eta: f64,
+        photons: u64,
+        seed: u64,
+        max_events: u32,
+        watch: &crate::progress::Counter,
+    ) -> WhiteTable {
+        let (exits, dropped) = montecarlo::white(eta, photons, seed, max_events, watch);
         let mut edges = vec![0.0];
         let steps = (DECADES.1 - DECADES.0) as usize * PER_DECADE;
         for k in 0..=steps {
@@ -139,7 +147,7 @@ mod tests {
     fn the_table_integrates_to_its_total() {
         // ∫ R̂ 2πρ dρ over the bins equals the total up to the interpolation's error between
         // bin centres (the bins are 8% wide; 2% bound), at two albedos.
-        let t = WhiteTable::build(1.3, 20_000, 5, 4_000);
+        let t = WhiteTable::build(1.3, 20_000, 5, 4_000, &crate::progress::Counter::none());
         for alpha in [0.8, 0.97] {
             let mut integral = 0.0;
             let n = 4000;

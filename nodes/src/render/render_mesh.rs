@@ -117,6 +117,49 @@ impl Node for RenderMesh {
         }
     }
 
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+        let [w, h] = p.camera.resolution;
+        if w > CPU_MAX_SIDE || h > CPU_MAX_SIDE {
+            return Err(NodeError::param(
+                "camera",
+                format!(
+                    "resolution {w}×{h} exceeds the CPU renderer's {CPU_MAX_SIDE} pixels per side"
+                ),
+            ));
+        }
+        light(&p.light)?;
+        for (name, v) in [
+            ("tiling", p.tiling[0]),
+            ("tiling", p.tiling[1]),
+            ("shell", p.shell),
+        ] {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err(NodeError::param(name, "must be finite and not negative"));
+            }
+        }
+        // Peeled layers hold a front and a back fragment per pixel and layer (40 bytes each,
+        // twice while they are binned per tile): about 180 bytes per pixel and layer, for the
+        // image and for the shadow map, whose texels cost as much as pixels.
+        let per_texel = 180 * u64::from(p.layers.max(1)) + 16;
+        let pixels = u64::from(w) * u64::from(h);
+        let texels = if p.shadows {
+            u64::from(p.shadow_resolution).pow(2)
+        } else {
+            0
+        };
+        crate::memory::check_param(
+            pixels.saturating_mul(per_texel),
+            &format!("a {w} × {h} render with {} layers", p.layers),
+            "camera",
+        )?;
+        crate::memory::check_param(
+            texels.saturating_mul(per_texel),
+            &format!("a {0} × {0} shadow map", p.shadow_resolution),
+            "shadow_resolution",
+        )
+    }
+
     fn timings(&self) -> &'static [(&'static str, &'static str)] {
         &[
             ("frame_ms", "mean wall time per frame, ms"),
@@ -143,24 +186,7 @@ impl Node for RenderMesh {
         let mdf = inputs.opt::<Mdf>("mdf")?.filter(|_| p.use_mdf);
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let [w, h] = p.camera.resolution;
-        if w > CPU_MAX_SIDE || h > CPU_MAX_SIDE {
-            return Err(NodeError::param(
-                "camera",
-                format!(
-                    "resolution {w}×{h} exceeds the CPU renderer's {CPU_MAX_SIDE} pixels per side"
-                ),
-            ));
-        }
         let light = light(&p.light)?;
-        for (name, v) in [
-            ("tiling", p.tiling[0]),
-            ("tiling", p.tiling[1]),
-            ("shell", p.shell),
-        ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err(NodeError::param(name, "must be finite and not negative"));
-            }
-        }
         let degenerate = mesh.degenerate_triangles();
         if degenerate > 0 {
             ctx.warn(format!("{degenerate} zero-area triangles are skipped"));
@@ -392,6 +418,8 @@ mod tests {
         if let Some(m) = mdf {
             inputs = inputs.with("mdf", Arc::new(m));
         }
+        // As the engine does: the parameter checks (`prepare`), then the run.
+        RenderMesh.check(p)?;
         let out = RenderMesh.run(&ctx, p, &inputs)?;
         let img = out
             .get("image")

@@ -340,7 +340,7 @@ mod tests {
                     model,
                     ..Default::default()
                 },
-                &|_, _| {},
+                &crate::progress::Counter::none(),
             )
             .profile;
             for (c, want) in [0.3, 0.6, 0.9].iter().enumerate() {

@@ -9,6 +9,7 @@
 //! SplitMix64 seeded by hash(seed, channel, c), and chunk tallies are added in chunk order.
 
 use super::fresnel;
+use crate::progress::Counter;
 use crate::rng;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -148,8 +149,12 @@ fn chunk(
     count: u64,
     max_events: u32,
     mut exits: Option<&mut Vec<(f64, u32)>>,
+    watch: &Counter,
 ) -> Tally {
     let mut t = Tally::new(edges.len() - 1);
+    if watch.stopped() {
+        return t; // the caller sees the cancellation and drops the partial tally
+    }
     let mut rnd = Stream(rng::hash(seed, &[channel, c]));
     let sigma_t = m.sigma_s + m.sigma_a;
     let albedo = m.sigma_s / sigma_t;
@@ -204,14 +209,30 @@ fn chunk(
     t
 }
 
-/// Traces `photons` photons; `edges` are the tally's bin edges in mm, from 0, increasing.
-pub fn trace(m: &Medium, edges: &[f64], photons: u64, seed: u64, channel: u64) -> Tally {
-    let chunks = photons.div_ceil(CHUNK);
+/// Chunks of photons `photons` makes: the unit of progress that `watch` counts.
+pub fn chunks(photons: u64) -> u64 {
+    photons.div_ceil(CHUNK)
+}
+
+/// Traces `photons` photons; `edges` are the tally's bin edges in mm, from 0, increasing. Each
+/// finished chunk is counted on `watch`; once it is stopped, the rest of the chunks are skipped
+/// (the tally is then partial: callers check for cancellation).
+pub fn trace(
+    m: &Medium,
+    edges: &[f64],
+    photons: u64,
+    seed: u64,
+    channel: u64,
+    watch: &Counter,
+) -> Tally {
+    let chunks = chunks(photons);
     let parts: Vec<Tally> = (0..chunks)
         .into_par_iter()
         .map(|c| {
             let count = CHUNK.min(photons - c * CHUNK);
-            chunk(m, edges, seed, channel, c, count, MAX_EVENTS, None)
+            let t = chunk(m, edges, seed, channel, c, count, MAX_EVENTS, None, watch);
+            watch.add(1);
+            t
         })
         .collect();
     parts
@@ -226,7 +247,13 @@ pub fn trace(m: &Medium, edges: &[f64], photons: u64, seed: u64, channel: u64) -
 /// photons escaping at ρ. Photons still walking after `max_events` are dropped (their weight
 /// is at most α′^max_events for any albedo the caller will ask). Returns the exits in photon
 /// order (chunk by chunk, so independent of the thread count) and the number dropped.
-pub fn white(eta: f64, photons: u64, seed: u64, max_events: u32) -> (Vec<(f64, u32)>, u64) {
+pub fn white(
+    eta: f64,
+    photons: u64,
+    seed: u64,
+    max_events: u32,
+    watch: &Counter,
+) -> (Vec<(f64, u32)>, u64) {
     let m = Medium {
         sigma_s: 1.0,
         sigma_a: 0.0,
@@ -248,7 +275,9 @@ pub fn white(eta: f64, photons: u64, seed: u64, max_events: u32) -> (Vec<(f64, u
                 count,
                 max_events,
                 Some(&mut exits),
+                watch,
             );
+            watch.add(1);
             let dropped = count - exits.len() as u64;
             debug_assert!(t.lost <= dropped as f64 + 1e-9);
             (exits, dropped)
@@ -269,7 +298,7 @@ mod tests {
             g,
             eta,
         };
-        trace(&m, &[0.0, 1.0, 10.0], photons, 7, 0)
+        trace(&m, &[0.0, 1.0, 10.0], photons, 7, 0, &Counter::none())
     }
 
     /// Asserts |got − want| within `k` standard errors, printing both.
@@ -386,7 +415,7 @@ mod tests {
         // the same medium (independent photons): totals within 4 combined standard errors.
         // 5000 events: α′^5000 < 1e-40 for the albedos asked, so dropping walkers is harmless;
         // the heavy tail P(T > n) ∝ n^−½ drops a few % of them.
-        let (exits, dropped) = white(1.3, 20_000, 3, 5_000);
+        let (exits, dropped) = white(1.3, 20_000, 3, 5_000, &Counter::none());
         assert!(dropped < 1_000, "{dropped}");
         for alpha in [0.5f64, 0.9, 0.98] {
             let w: Vec<f64> = exits.iter().map(|e| alpha.powi(e.1 as i32)).collect();
@@ -404,6 +433,7 @@ mod tests {
                 20_000,
                 11,
                 0,
+                &Counter::none(),
             );
             let se = (se_white.powi(2) + direct.stderr().powi(2)).sqrt();
             within(mean, direct.total(), se, 4.0, "white vs direct");

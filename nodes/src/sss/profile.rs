@@ -13,6 +13,7 @@
 use super::diffusion::Medium;
 use super::dipole::Dipole;
 use super::montecarlo;
+use crate::progress::Counter;
 use crate::types::{DiffusionProfile, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -110,7 +111,13 @@ impl Node for Profile {
                 "at least 1000 photons per channel",
             ));
         }
-        let tab = tabulate(m, p, &|_, done| ctx.progress(done, 3));
+        let chunks = if p.model == Model::Montecarlo {
+            3 * montecarlo::chunks(p.photons)
+        } else {
+            0
+        };
+        let tab = tabulate(m, p, &Counter::new(ctx, chunks));
+        ctx.check_cancel()?;
         if let Some(c) = (0..3).find(|&c| tab.lost[c] > 1e-4) {
             ctx.warn(format!(
                 "{:.2}% of channel {c}'s photon weight was still inside after {} scattering events and is missing from the total (little or no absorption: the walk back to the surface is heavy-tailed); the total is low by about that much",
@@ -193,12 +200,9 @@ pub fn energy(rd: &dyn Fn(f64) -> f64, zr: f64) -> (f64, f64) {
     (total, radii[i].max(10.0 * zr))
 }
 
-/// The profile of `p.model` for material `m`; `progress(channel, done)` after each channel.
-pub fn tabulate(
-    m: &ScatteringMaterial,
-    p: &Params,
-    progress: &(dyn Fn(usize, u64) + Sync),
-) -> Tabulated {
+/// The profile of `p.model` for material `m`. A Monte Carlo profile counts its photon chunks on
+/// `watch` and stops early once it is stopped (the result is then partial: check cancellation).
+pub fn tabulate(m: &ScatteringMaterial, p: &Params, watch: &Counter) -> Tabulated {
     let n = p.points.max(8) as usize;
     let zr = [0, 1, 2].map(|c| 1.0 / (m.sigma_s_prime[c] + m.sigma_a[c]));
     // Monte Carlo tallies on the dipole's grid: a material-adapted guide that needs no photons.
@@ -232,7 +236,7 @@ pub fn tabulate(
                 g: m.g,
                 eta: m.eta,
             };
-            let t = montecarlo::trace(&medium, &edges, p.photons, p.seed, c as u64);
+            let t = montecarlo::trace(&medium, &edges, p.photons, p.seed, c as u64, watch);
             let photons = t.photons as f64;
             rd[c] = t
                 .bins
@@ -244,7 +248,6 @@ pub fn tabulate(
             stderr[c] = t.stderr();
             events += t.events;
             lost[c] = t.lost / photons;
-            progress(c, c as u64 + 1);
         }
         (rd, total)
     } else {
@@ -305,7 +308,7 @@ pub fn dipole_profile(m: &ScatteringMaterial, n: usize) -> DiffusionProfile {
         points: n as u32,
         ..Default::default()
     };
-    tabulate(m, &p, &|_, _| {}).profile
+    tabulate(m, &p, &Counter::none()).profile
 }
 
 #[cfg(test)]
@@ -446,7 +449,7 @@ mod tests {
                     points: 64,
                     ..Default::default()
                 },
-                &|_, _| {},
+                &Counter::none(),
             );
             let mut dipole_l1 = None;
             if p == Preset::Ketchup {
@@ -466,7 +469,7 @@ mod tests {
                         points: 64,
                         ..Default::default()
                     },
-                    &|_, _| {},
+                    &Counter::none(),
                 );
                 let e = compare(&mc.profile, &t.profile).unwrap();
                 // Every preset reflects in every channel: the relative errors exist.

@@ -39,8 +39,9 @@ use std::time::Instant;
 pub struct Params {
     pub camera: CameraParams,
     pub light: LightParams,
-    /// Millimetres per world unit of the mesh.
-    #[schemars(range(min = 1e-9))]
+    /// Millimetres per world unit of the mesh (10⁻⁹ to 10⁹: beyond, areas in mm² overflow the
+    /// f32 the GPU sums in).
+    #[schemars(range(min = 1e-9, max = 1e9))]
     pub mm_per_unit: f64,
     /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
     pub spacing: Option<f64>,
@@ -729,7 +730,7 @@ mod tests {
                 model: Model::Dipole,
                 ..Default::default()
             },
-            &|_, _| {},
+            &crate::progress::Counter::none(),
         )
         .profile
     }

@@ -35,7 +35,8 @@ pub struct Params {
     pub exponent: f64,
     /// Output tiles seamlessly (patches wrap around its edges).
     pub periodic: bool,
-    /// Weight of the guide channels against the colour channels in the patch distance.
+    /// Weight of the guide channels against the colour channels in the patch distance (0 to 10⁶).
+    #[schemars(range(min = 0.0, max = 1e6))]
     pub guide_weight: f64,
     /// PatchMatch rounds per search.
     #[schemars(range(min = 1, max = 64))]
@@ -129,7 +130,7 @@ impl Node for Texture {
                 ),
             ));
         }
-        check_finite("exemplar", ex)?;
+        check_values("exemplar", ex)?;
         let guides = match (ex_guide, target_guide) {
             (None, None) => None,
             (Some(eg), Some(tg)) => {
@@ -151,8 +152,8 @@ impl Node for Texture {
                         ),
                     ));
                 }
-                check_finite("exemplar_guide", eg)?;
-                check_finite("target_guide", tg)?;
+                check_values("exemplar_guide", eg)?;
+                check_values("target_guide", tg)?;
                 Some((eg, tg))
             }
             (Some(_), None) => {
@@ -258,22 +259,31 @@ impl Node for Texture {
     }
 }
 
-fn check_finite(port: &str, img: &Image) -> Result<(), NodeError> {
-    match img.data.iter().position(|v| !v.is_finite()) {
+/// Pixels must be finite and at most [`MAX_VALUE`] in magnitude: patch distances are f32 sums of
+/// squares over up to 32² pixels, channels and a guide weight up to 10⁶, which overflow beyond.
+fn check_values(port: &str, img: &Image) -> Result<(), NodeError> {
+    match img
+        .data
+        .iter()
+        .position(|v| !(v.is_finite() && v.abs() <= MAX_VALUE))
+    {
         Some(i) => {
             let px = i / img.channels;
             Err(NodeError::input(
                 port,
                 format!(
-                    "pixel ({}, {}) is not finite",
+                    "pixel ({}, {}) is {}: values must be finite and within ±{MAX_VALUE:e}",
                     px % img.width,
-                    px / img.width
+                    px / img.width,
+                    img.data[i]
                 ),
             ))
         }
         None => Ok(()),
     }
 }
+
+const MAX_VALUE: f32 = 1e12;
 
 fn plane(img: &Image, scale: f32) -> Plane {
     Plane {

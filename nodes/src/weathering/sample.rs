@@ -150,7 +150,15 @@ impl Node for WeatheringSample {
         p.views
             .validate()
             .map_err(|e| NodeError::param("views", e))?;
-        Ok(())
+        // The capture: RGB f32 per pixel and (view, light) pair; checked before it is made.
+        let pairs =
+            (p.views.directions().len() as u64).saturating_mul(p.lights.directions().len() as u64);
+        let pixels = u64::from(p.size) * u64::from(p.size);
+        crate::memory::check_param(
+            crate::memory::product(&[pairs, pixels, 3, 4]),
+            &format!("a {0} × {0} capture under {pairs} direction pairs", p.size),
+            "lights",
+        )
     }
 
     fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
