@@ -219,7 +219,15 @@ fn check_typed(
             .err()
             .map(|m| (name.clone(), m))
     });
-    let (param, message) = culprit.unwrap_or(("params".into(), message));
+    let (param, mut message) = culprit.unwrap_or(("params".into(), message));
+    // serde's words ("did not match any variant of untagged enum …") say what failed, the schema
+    // says what would do.
+    if let Some(sub) = sig.params.get("properties").and_then(|p| p.get(&param)) {
+        message = format!(
+            "{message}; expected {}",
+            crate::params::expected_text(&sig.params, sub)
+        );
+    }
     Some(GraphError::ParamInvalid {
         node: node.into(),
         param,

@@ -197,8 +197,13 @@ impl fmt::Display for GraphErrors {
             self.file,
             if n == 1 { "" } else { "s" }
         )?;
-        for e in &self.errors {
+        // A generated file can hold thousands of the same mistake: the first hundred say it.
+        const SHOWN: usize = 100;
+        for e in self.errors.iter().take(SHOWN) {
             writeln!(f, "  {}: {e}", self.file)?;
+        }
+        if n > SHOWN {
+            writeln!(f, "  … and {} more", n - SHOWN)?;
         }
         Ok(())
     }

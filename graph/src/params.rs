@@ -297,6 +297,14 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
             return Err(Problem::Range(format!("{x} must be less than {m}")));
         }
     }
+    if let (Some(Value::Array(prefix)), Some(arr)) = (s.get("prefixItems"), v.as_array()) {
+        for (i, (item, sub)) in arr.iter().zip(prefix).enumerate() {
+            check_value(root, sub, item).map_err(|p| match p {
+                Problem::Range(m) => Problem::Range(format!("element {i}: {m}")),
+                Problem::Type { .. } => type_error(None),
+            })?;
+        }
+    }
     if let (Some(items), Some(arr)) = (s.get("items"), v.as_array()) {
         for (i, item) in arr.iter().enumerate() {
             check_value(root, items, item).map_err(|p| match p {
@@ -322,6 +330,20 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
             return Err(Problem::Range(format!(
                 "{len} elements, at most {m} expected"
             )));
+        }
+    }
+    if let (Some(required), Some(obj)) =
+        (s.get("required").and_then(Value::as_array), v.as_object())
+    {
+        if let Some(missing) = required
+            .iter()
+            .filter_map(Value::as_str)
+            .find(|r| !obj.contains_key(*r))
+        {
+            return Err(Problem::Type {
+                expected: format!("{} (`{missing}` is missing)", expected_text(root, s)),
+                suggestion: None,
+            });
         }
     }
     if let (Some(props), Some(obj)) = (

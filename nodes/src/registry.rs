@@ -47,3 +47,73 @@ pub fn registry() -> Registry {
     r.register(crate::util::sleep::Sleep);
     r
 }
+
+#[cfg(test)]
+mod tests {
+    use mesoflow_graph::params::check_params;
+    use serde_json::{json, Map, Value};
+
+    /// Values that break parameter structs in ways a JSON Schema may not say.
+    fn hostile() -> Vec<Value> {
+        vec![
+            json!(4294967296u64),
+            json!(-1),
+            json!(-0.0),
+            json!(1.5),
+            json!(18446744073709551615u64),
+            json!(1e308),
+            json!(-1e308),
+            json!({}),
+            json!([]),
+            json!(""),
+            json!(null),
+            json!(true),
+            json!([[1e308, -1e308]]),
+            json!({"thetas": [], "phis": []}),
+        ]
+    }
+
+    #[test]
+    fn the_schema_accepts_nothing_the_parameters_refuse() {
+        // `validate` runs both the schema and the typed check, so a user never meets a value
+        // that validates and then fails to load. This holds the schema itself (what editors and
+        // the studio read) to the same standard: every value it accepts, the struct accepts.
+        let r = super::registry();
+        let mut disagree = Vec::new();
+        let mut tried = 0;
+        for sig in r.signatures() {
+            let node = r.node(&sig.kind).unwrap();
+            let props = sig.params["properties"]
+                .as_object()
+                .cloned()
+                .unwrap_or_default();
+            let required: Vec<&str> = sig.params["required"]
+                .as_array()
+                .map(|a| a.iter().filter_map(Value::as_str).collect())
+                .unwrap_or_default();
+            for name in props.keys() {
+                for v in hostile() {
+                    let mut params = Map::new();
+                    for r in &required {
+                        params.insert(r.to_string(), json!("x.png"));
+                    }
+                    params.insert(name.clone(), v.clone());
+                    let schema_ok = check_params("n", &sig.kind, &sig.params, &params).is_empty();
+                    let typed_ok = node.prepare(&params).is_ok();
+                    tried += 1;
+                    if schema_ok && !typed_ok {
+                        let e = node.prepare(&params).err().map(|e| e.to_string());
+                        disagree.push(format!("{}.{name} = {v}: {e:?}", sig.kind));
+                    }
+                }
+            }
+        }
+        println!("{tried} (kind, parameter, value) cases");
+        assert!(
+            disagree.is_empty(),
+            "{} disagreements:\n{}",
+            disagree.len(),
+            disagree.join("\n")
+        );
+    }
+}

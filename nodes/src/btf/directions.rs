@@ -18,10 +18,32 @@ pub enum Named {
 pub enum DirectionSet {
     /// A named sampling.
     Named(Named),
-    /// Every θ with every φ (θ = 0 gives one direction), degrees.
-    Rings { thetas: Vec<f64>, phis: Vec<f64> },
-    /// Explicit [θ, φ] pairs, degrees.
-    List(Vec<[f64; 2]>),
+    /// Every θ with every φ (θ = 0 gives one direction), degrees; θ in [0°, 90°).
+    Rings {
+        #[schemars(length(min = 1), inner(range(min = 0.0, max = 89.999999)))]
+        thetas: Vec<f64>,
+        #[schemars(length(min = 1))]
+        phis: Vec<f64>,
+    },
+    /// Explicit [θ, φ] pairs, degrees; θ in [0°, 90°).
+    List(#[schemars(schema_with = "list_schema")] Vec<[f64; 2]>),
+}
+
+/// At least one [θ, φ] pair, θ in [0°, 90°) (`prefixItems`: each position its own schema).
+fn list_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    schemars::json_schema!({
+        "type": "array",
+        "minItems": 1,
+        "items": {
+            "type": "array",
+            "minItems": 2,
+            "maxItems": 2,
+            "prefixItems": [
+                {"type": "number", "minimum": 0.0, "maximum": 89.999999},
+                {"type": "number"}
+            ]
+        }
+    })
 }
 
 impl DirectionSet {

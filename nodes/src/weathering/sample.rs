@@ -33,18 +33,22 @@ pub struct Params {
     /// Points rust grows from.
     #[schemars(range(min = 1, max = 1000))]
     pub seeds: u32,
-    /// Distance (in sample widths) at which the degree falls to 0 without noise.
+    /// Distance (in sample widths) at which the degree falls to 0 without noise (> 0).
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub radius: f64,
     /// Amplitude of the noise on the degree.
+    #[schemars(range(min = 0.0))]
     pub roughness: f64,
     /// Light directions (degrees).
     pub lights: DirectionSet,
     /// View directions (degrees).
     pub views: DirectionSet,
     /// Relative Gaussian noise on captured values (0 = exact).
+    #[schemars(range(min = 0.0))]
     pub noise: f64,
     /// Relief height in sample widths (0 = flat): smooth bumps whose normals tilt the Ward
     /// lobe per pixel, for fits that need photometric-stereo normals.
+    #[schemars(range(min = 0.0))]
     pub bumps: f64,
     /// The reflectance the capture is rendered with: `ward` (the model `brdf.fit_ward` fits, for
     /// solver checks) or `cook_torrance` (Beckmann, Fresnel, masking–shadowing: a model the

@@ -1,0 +1,174 @@
+//! The hostile-input corpus (`tests/hostile/corpus.json`): every case is run through `mesoflow
+//! run` with a time limit and must end with its expected exit code and message, never a panic, an
+//! abort or a hang. The counts are printed for BENCHMARKS.md.
+
+mod common;
+use common::*;
+use serde_json::Value;
+use std::io::Read;
+use std::path::Path;
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+/// Longer than any case needs (they are refused before work, or are tiny): past it, a hang.
+const LIMIT: Duration = Duration::from_secs(60);
+
+/// An NPY v1.0 file by hand (numpy's format spec).
+fn npy(descr: &str, fortran: bool, shape: &[usize], payload: &[u8]) -> Vec<u8> {
+    let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
+    let tuple = if dims.len() == 1 {
+        format!("({},)", dims[0])
+    } else {
+        format!("({})", dims.join(", "))
+    };
+    let order = if fortran { "True" } else { "False" };
+    let mut header =
+        format!("{{'descr': '{descr}', 'fortran_order': {order}, 'shape': {tuple}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+    bytes.extend_from_slice(header.as_bytes());
+    bytes.extend_from_slice(payload);
+    bytes
+}
+
+fn fixtures(dir: &Path) {
+    let f32s = |n: usize| -> Vec<u8> { (0..n).flat_map(|i| (i as f32).to_le_bytes()).collect() };
+    let write = |name: &str, bytes: Vec<u8>| std::fs::write(dir.join(name), bytes).unwrap();
+    write("zero_rows.npy", npy("<f4", false, &[0, 3], &[]));
+    write("zero_columns.npy", npy("<f4", false, &[3, 0], &[]));
+    write("vector.npy", npy("<f4", false, &[16], &f32s(16)));
+    write("integers.npy", npy("<i4", false, &[4, 2], &[0; 32]));
+    let mut truncated = npy("<f4", false, &[100, 3], &f32s(300));
+    truncated.truncate(truncated.len() - 100);
+    write("truncated.npy", truncated);
+    write("fortran.npy", npy("<f4", true, &[8, 8], &f32s(64)));
+    let be: Vec<u8> = (0..30).flat_map(|i| (i as f64).to_be_bytes()).collect();
+    write("big_endian.npy", npy(">f8", false, &[10, 3], &be));
+    write("fake.png", b"\x89PNG\r\n\x1a\nnot really".to_vec());
+    // A 2 × 2 RGB EXR with one NaN, written with the exr crate's own writer.
+    write("nan.exr", nan_exr());
+}
+
+fn nan_exr() -> Vec<u8> {
+    use exr::prelude::*;
+    let mut out = std::io::Cursor::new(Vec::new());
+    let pixels = SpecificChannels::rgb(|p: Vec2<usize>| {
+        let v = if p.0 == 1 && p.1 == 0 { f32::NAN } else { 0.5 };
+        (v, 0.5f32, 0.5f32)
+    });
+    Image::from_channels((2, 2), pixels)
+        .write()
+        .to_buffered(&mut out)
+        .unwrap();
+    out.into_inner()
+}
+
+struct Outcome {
+    code: Option<i32>,
+    output: String,
+    hung: bool,
+}
+
+fn run_case(dir: &Path, name: &str, text: &str, env: &serde_json::Map<String, Value>) -> Outcome {
+    let graph = dir.join(format!("{name}.json"));
+    std::fs::write(&graph, text).unwrap();
+    let out = dir.join(format!("out_{name}"));
+    let mut cmd = bin();
+    cmd.args([
+        "run",
+        graph.to_str().unwrap(),
+        "--quiet",
+        "--no-cache",
+        "--out-dir",
+    ])
+    .arg(&out)
+    .current_dir(dir)
+    .env_remove("MESOFLOW_MEMORY_BUDGET_GB")
+    .env_remove("RAYON_NUM_THREADS")
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    for (k, v) in env {
+        cmd.env(k, v.as_str().unwrap_or_default());
+    }
+    let mut child = cmd.spawn().unwrap();
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break Some(s);
+        }
+        if start.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut output = String::new();
+    if let Some(mut e) = child.stderr.take() {
+        let _ = e.read_to_string(&mut output);
+    }
+    if let Some(mut o) = child.stdout.take() {
+        let _ = o.read_to_string(&mut output);
+    }
+    // A node's error is in the report as well as on stderr.
+    if let Ok(report) = std::fs::read_to_string(out.join("report.json")) {
+        output.push_str(&report);
+    }
+    Outcome {
+        code: status.and_then(|s| s.code()),
+        output,
+        hung: status.is_none(),
+    }
+}
+
+#[test]
+fn every_hostile_input_gets_its_clear_error() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let corpus: Value = serde_json::from_str(
+        &std::fs::read_to_string(root.join("tests/hostile/corpus.json")).unwrap(),
+    )
+    .unwrap();
+    let s = Scratch::new();
+    fixtures(s.dir.path());
+    let (mut clear, mut panics, mut hangs, mut wrong) = (0, 0, 0, Vec::new());
+    let cases = corpus["cases"].as_array().unwrap();
+    for case in cases {
+        let name = case["name"].as_str().unwrap();
+        let text = match (&case["graph"], case["text"].as_str()) {
+            (Value::Null, Some(t)) => t.to_string(),
+            (g, _) => serde_json::to_string_pretty(g).unwrap(),
+        };
+        let empty = serde_json::Map::new();
+        let env = case["env"].as_object().unwrap_or(&empty);
+        let o = run_case(s.dir.path(), name, &text, env);
+        let want_code = case["code"].as_i64().unwrap() as i32;
+        let want = case["message"].as_str().unwrap();
+        let panicked = o.output.contains("panicked") || o.output.contains("internal error");
+        if o.hung {
+            hangs += 1;
+            wrong.push(format!("{name}: no answer within {LIMIT:?}"));
+        } else if panicked || o.code.is_none() {
+            panics += 1;
+            wrong.push(format!(
+                "{name}: panic or abort ({:?}): {}",
+                o.code, o.output
+            ));
+        } else if o.code != Some(want_code) || !o.output.contains(want) {
+            wrong.push(format!(
+                "{name}: exit {:?} (want {want_code}), message lacks `{want}`: {}",
+                o.code, o.output
+            ));
+        } else {
+            clear += 1;
+        }
+    }
+    println!(
+        "hostile corpus: {} tried, {clear} clear errors (or accepted as expected), {panics} panics or aborts, {hangs} hangs",
+        cases.len()
+    );
+    assert!(wrong.is_empty(), "{}", wrong.join("\n\n"));
+}
