@@ -13,8 +13,12 @@ fn inline_refs(schema: &Value, defs: &Map<String, Value>, depth: usize) -> Value
                 let name = target.rsplit('/').next().unwrap_or_default();
                 if let Some(def) = defs.get(name).filter(|_| depth < 32) {
                     let mut resolved = inline_refs(def, defs, depth + 1);
-                    if let (Value::Object(r), Some(d)) = (&mut resolved, obj.get("default")) {
-                        r.insert("default".into(), d.clone());
+                    // The field's own keywords (its doc, its default) beside the `$ref` win over
+                    // the definition's: "views" says what views are, not what a DirectionSet is.
+                    if let Value::Object(r) = &mut resolved {
+                        for (k, v) in obj.iter().filter(|(k, _)| k.as_str() != "$ref") {
+                            r.insert(k.clone(), inline_refs(v, defs, depth + 1));
+                        }
                     }
                     return resolved;
                 }

@@ -117,3 +117,62 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod docs {
+    use serde_json::Value;
+
+    /// Every property of every parameter object (nested ones included) has a description.
+    fn undocumented(root: &Value, s: &Value, path: &str, out: &mut Vec<String>, depth: usize) {
+        if depth > 8 {
+            return;
+        }
+        let resolve = |v: &Value| -> Value {
+            match v.get("$ref").and_then(Value::as_str) {
+                Some(r) => {
+                    let name = r.rsplit('/').next().unwrap_or_default();
+                    let mut d = root["$defs"][name].clone();
+                    if let (Value::Object(d), Value::Object(o)) = (&mut d, v) {
+                        for (k, x) in o.iter().filter(|(k, _)| k.as_str() != "$ref") {
+                            d.insert(k.clone(), x.clone());
+                        }
+                    }
+                    d
+                }
+                None => v.clone(),
+            }
+        };
+        let s = resolve(s);
+        if let Some(props) = s.get("properties").and_then(Value::as_object) {
+            for (k, v) in props {
+                let v = resolve(v);
+                if v.get("description").is_none() {
+                    out.push(format!("{path}{k}"));
+                }
+                undocumented(root, &v, &format!("{path}{k}."), out, depth + 1);
+            }
+        }
+        for key in ["anyOf", "oneOf"] {
+            for b in s.get(key).and_then(Value::as_array).into_iter().flatten() {
+                undocumented(root, b, path, out, depth + 1);
+            }
+        }
+    }
+
+    #[test]
+    fn every_parameter_field_is_documented() {
+        let r = super::registry();
+        let mut missing = Vec::new();
+        for sig in r.signatures() {
+            let mut out = Vec::new();
+            undocumented(&sig.params, &sig.params, "", &mut out, 0);
+            missing.extend(out.into_iter().map(|p| format!("{}: {p}", sig.kind)));
+        }
+        assert!(
+            missing.is_empty(),
+            "{} undocumented:\n{}",
+            missing.len(),
+            missing.join("\n")
+        );
+    }
+}

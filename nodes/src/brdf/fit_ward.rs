@@ -71,6 +71,7 @@ pub struct Params {
     pub tolerance: f64,
     /// Weights of (ρd, ρs, ln α) in the appearance vectors.
     pub weights: [f64; 3],
+    /// Seed of the k-means++ cluster starts.
     pub seed: u64,
     /// Memory budget in GB for the per-pixel vectors (default: see docs/architecture.md).
     pub memory_budget_gb: Option<f64>,

@@ -20,8 +20,10 @@ pub enum DirectionSet {
     Named(Named),
     /// Every θ with every φ (θ = 0 gives one direction), degrees; θ in [0°, 90°).
     Rings {
+        /// Polar angles from the normal, degrees, in [0°, 90°).
         #[schemars(length(min = 1), inner(range(min = 0.0, max = 89.999999)))]
         thetas: Vec<f64>,
+        /// Azimuths from the tangent +x towards +y, degrees.
         #[schemars(length(min = 1))]
         phis: Vec<f64>,
     },

@@ -64,7 +64,9 @@ pub enum Color {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// What the rows of the factorised matrix are: `texels` (coefficient maps × eigen-ABRDFs), `directions` (eigen-textures × per-direction weights) or `per_view` (one factorisation per view).
     pub layout: Layout,
+    /// `exact` truncated SVD or `randomized` (Halko et al.): faster on large BTFs, with `power_iterations` for accuracy.
     pub solver: Solver,
     /// Components per block (luma with `ycbcr`). Give at most one of `rank`, `max_rmse`,
     /// `energy`; none means rank 8.
@@ -76,6 +78,7 @@ pub struct Params {
     /// Smallest rank keeping at least this fraction of each block's centred energy (Σσ²).
     #[schemars(range(min = 0.0, max = 1.0))]
     pub energy: Option<f64>,
+    /// Colour space of the factorisation: `rgb`, or `ycbcr` (luma at `rank`, chroma at `chroma_rank`).
     pub color: Color,
     /// Components of each chroma channel with `ycbcr`; default max(1, luma rank / 4).
     #[schemars(range(min = 0, max = 100000))]

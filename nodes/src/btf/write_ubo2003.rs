@@ -30,6 +30,7 @@ pub struct Params {
     /// Folder, relative to the output folder.
     #[schemars(extend("x-output-path" = true))]
     pub path: String,
+    /// File format of the images: `exr` (linear f32) or `png` (`bits` per sample).
     #[serde(default = "exr")]
     pub format: Format,
     /// Bits per PNG sample: 8 or 16.

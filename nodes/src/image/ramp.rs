@@ -10,8 +10,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// Width in pixels.
     #[schemars(range(min = 1, max = 16384))]
     pub width: u32,
+    /// Height in pixels.
     #[schemars(range(min = 1, max = 16384))]
     pub height: u32,
     /// Direction of increase, degrees: 0 = left to right, 90 = top to bottom.
@@ -20,6 +22,7 @@ pub struct Params {
     /// values can overflow to infinity).
     #[schemars(range(min = -1e30, max = 1e30))]
     pub from: f64,
+    /// Value at the end of the ramp.
     #[schemars(range(min = -1e30, max = 1e30))]
     pub to: f64,
 }

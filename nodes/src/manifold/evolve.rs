@@ -37,10 +37,12 @@ pub enum Course {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// Frames of the sequence (the first is the sample as captured).
     #[schemars(range(min = 1, max = 1000))]
     pub frames: u32,
     /// Degree change per frame at rate 1.
     pub step: f64,
+    /// `weather` (the degree rises) or `deweather` (it falls).
     pub direction: Course,
     /// Pixels averaged for the appearance at a degree.
     #[schemars(range(min = 1))]

@@ -22,12 +22,15 @@ pub enum Shape {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// `swiss_roll` or `s_curve` (scikit-learn's make_swiss_roll and make_s_curve).
     pub shape: Shape,
+    /// Number of points.
     #[schemars(range(min = 2, max = 10000000))]
     pub n: u32,
     /// Uniform jitter of each coordinate, ± noise/2.
     #[schemars(range(min = 0.0))]
     pub noise: f64,
+    /// Seed of the points and their noise.
     pub seed: u64,
 }
 

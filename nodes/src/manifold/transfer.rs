@@ -35,6 +35,7 @@ pub struct Params {
     pub light: [f64; 2],
     /// View direction [θ, φ] of the preview, degrees.
     pub view: [f64; 2],
+    /// Seed of the pick among pixels of the same degree (without a source map).
     pub seed: u64,
 }
 

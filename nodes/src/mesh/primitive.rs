@@ -26,6 +26,7 @@ pub enum Shape {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// `plane`, `sphere`, `cylinder` or `torus`.
     pub shape: Shape,
     /// Plane side, or sphere/cylinder radius, or torus major radius (world units).
     #[schemars(range(min = 0.0))]

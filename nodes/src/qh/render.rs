@@ -34,7 +34,9 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// Pinhole or orthographic camera (as `render.mesh`).
     pub camera: CameraParams,
+    /// The directional light.
     pub light: LightParams,
     /// Texture tiles per unit of texture coordinate, [along u, along v].
     pub tiling: [f64; 2],
@@ -50,7 +52,9 @@ pub struct Params {
     /// Octree criterion ΔA/d² (CPU); 0 = brute force.
     #[schemars(range(min = 0.0))]
     pub threshold: f64,
+    /// Shadow-map the light, so that surface not lit directly receives only light transmitted through the material.
     pub shadows: bool,
+    /// Shadow map size in texels (square).
     #[schemars(range(min = 1, max = 16384))]
     pub shadow_resolution: u32,
     /// Linear RGB where the mesh is not hit.

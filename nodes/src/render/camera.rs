@@ -34,8 +34,11 @@ pub fn normalize(a: V3) -> Option<V3> {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct CameraParams {
+    /// Camera position, world units.
     pub eye: [f64; 3],
+    /// The point the camera looks at.
     pub target: [f64; 3],
+    /// Up direction of the image (need not be orthogonal to the view).
     pub up: [f64; 3],
     /// Vertical field of view, degrees (pinhole).
     #[schemars(range(min = 0.01, max = 179.0))]

@@ -44,7 +44,9 @@ impl Default for LightParams {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// Pinhole (`fov`) or orthographic camera, looking from `eye` at `target`.
     pub camera: CameraParams,
+    /// A directional light, or a point light with `position`.
     pub light: LightParams,
     /// Texture tiles per unit of texture coordinate, [along u, along v].
     pub tiling: [f64; 2],

@@ -48,6 +48,7 @@ impl Model {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// `dipole`, `better_dipole`, `pbd` (photon beam diffusion) or `montecarlo` (the photon-tracing reference).
     pub model: Model,
     /// Radius samples.
     #[schemars(range(min = 8, max = 1000000))]

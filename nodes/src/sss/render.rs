@@ -37,7 +37,9 @@ use std::time::Instant;
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
+    /// Pinhole or orthographic camera (as `render.mesh`).
     pub camera: CameraParams,
+    /// The directional light.
     pub light: LightParams,
     /// Millimetres per world unit of the mesh (10⁻⁹ to 10⁹: beyond, areas in mm² overflow the
     /// f32 the GPU sums in).
@@ -53,7 +55,9 @@ pub struct Params {
     pub threshold: f64,
     /// Add single scattering (needs the material's σs, g).
     pub single_scattering: bool,
+    /// Shadow-map the light, so that surface not lit directly receives only light transmitted through the material.
     pub shadows: bool,
+    /// Shadow map size in texels (square).
     #[schemars(range(min = 1, max = 16384))]
     pub shadow_resolution: u32,
     /// Linear RGB where the mesh is not hit.

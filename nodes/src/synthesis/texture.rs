@@ -41,6 +41,7 @@ pub struct Params {
     /// PatchMatch rounds per search.
     #[schemars(range(min = 1, max = 64))]
     pub search_rounds: u32,
+    /// Seed of the initial nearest-patch field and of the random search.
     pub seed: u64,
 }
 

@@ -54,6 +54,7 @@ pub struct Params {
     /// solver checks) or `cook_torrance` (Beckmann, Fresnel, masking–shadowing: a model the
     /// Ward fit cannot reproduce, for cross-model checks).
     pub reflectance: Reflectance,
+    /// Seed of the rust seeds, the noise and the per-pixel variation.
     pub seed: u64,
 }
 
