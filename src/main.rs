@@ -8,6 +8,7 @@ mod chart;
 mod commands;
 mod env;
 mod exit;
+mod interrupt;
 mod load;
 mod progress;
 

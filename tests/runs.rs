@@ -333,6 +333,64 @@ fn ctrl_c_cancels_with_130_and_leaves_no_partial_entry() {
 }
 
 #[test]
+fn a_second_ctrl_c_quits_at_once_and_still_writes_the_report() {
+    // `slow` ignores cancellation (a node stuck in a long loop): the first Ctrl-C cannot end the
+    // run, the second ends the process, and the report says what had finished.
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "quick": {"kind": "debug.sleep", "params": {"ms": 1}},
+            "slow": {"kind": "debug.sleep", "inputs": {"x": "quick.y"}, "params": {"ms": 60000, "deaf": true}}
+        }}"#,
+    );
+    let out = s.path("o");
+    let mut child = bin()
+        .args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+        ])
+        .arg(&out)
+        .current_dir(s.dir.path())
+        .spawn()
+        .unwrap();
+    // Give the run time to finish `quick` and start `slow`.
+    std::thread::sleep(Duration::from_millis(1500));
+    let int = || {
+        let ok = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(ok.success());
+    };
+    int();
+    std::thread::sleep(Duration::from_millis(500));
+    int();
+    let t = Instant::now();
+    let status = child.wait().unwrap();
+    assert!(
+        t.elapsed() < Duration::from_secs(10),
+        "took {:?}",
+        t.elapsed()
+    );
+    assert_eq!(status.code(), Some(130));
+    let rep = report(&out);
+    assert_eq!(rep["cancelled"], true);
+    assert_eq!(rep["ok"], false);
+    assert_eq!(statuses(&rep)["quick"], "computed");
+    assert!(
+        rep["warnings"][0]["message"]
+            .as_str()
+            .unwrap()
+            .contains("interrupted twice"),
+        "{rep}"
+    );
+}
+
+#[test]
 fn a_failure_stops_its_dependants_and_lets_independent_nodes_finish() {
     let s = Scratch::new();
     let g = s.write(
@@ -1296,5 +1354,60 @@ fn listing_into_a_closed_pipe_ends_quietly() {
         let out = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&out.stderr);
         assert!(!err.contains("panicked"), "{cmd}: {err}");
+    }
+}
+
+#[test]
+fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
+    // CPU and GPU paths agree to tested tolerances, not to the bit: the path is part of the key.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let cache = s.path("cache");
+    let go = |out: &str, device: &str| {
+        let out_dir = s.path(out);
+        let r = mesoflow(
+            &[
+                "run",
+                g.to_str().unwrap(),
+                "--quiet",
+                "--set",
+                "surface.size=16",
+                "--device",
+                device,
+                "--output",
+                "normals.rms_slope",
+                "--cache-dir",
+                cache.to_str().unwrap(),
+                "--out-dir",
+                out_dir.to_str().unwrap(),
+            ],
+            root,
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        report(&out_dir)
+    };
+    let cpu = go("cpu", "cpu");
+    let cpu_again = go("cpu2", "cpu");
+    assert_eq!(statuses(&cpu_again)["normals"], "disk");
+    let auto = go("auto", "auto");
+    let on_gpu = per_node(&auto, "device")["normals"] == "gpu";
+    if std::env::var("MESOFLOW_REQUIRE_GPU").as_deref() == Ok("1") {
+        assert!(on_gpu, "CI has lavapipe: {auto}");
+    }
+    let (k_cpu, k_auto) = (
+        keys(&cpu)["normals"].clone(),
+        keys(&auto)["normals"].clone(),
+    );
+    if on_gpu {
+        assert_ne!(k_cpu, k_auto);
+        assert_eq!(statuses(&auto)["normals"], "computed");
+        // The CPU-only node upstream is shared.
+        assert_eq!(statuses(&auto)["surface"], "disk");
+    } else {
+        assert_eq!(
+            k_cpu, k_auto,
+            "no adapter: auto is the CPU path, the same value"
+        );
     }
 }

@@ -102,6 +102,10 @@ pub struct KeyParts<'a> {
     /// the node declared them. The name enters because readers take meaning from it (UBO2003
     /// angles are in the file names); the folder does not, so keys stay machine-independent.
     pub files: Vec<(String, [u8; 32])>,
+    /// The path a GPU-capable kind takes, `"cpu"` or `"gpu"`: the two compute the same thing to
+    /// tested tolerances, not to the bit, so a value of one never stands for the other. `None`
+    /// for CPU-only kinds. The adapter's name stays out, so keys match across machines.
+    pub device: Option<&'a str>,
 }
 
 pub fn compute(parts: &KeyParts) -> Key {
@@ -126,6 +130,9 @@ pub fn compute(parts: &KeyParts) -> Key {
     for (name, hash) in &parts.files {
         field(name.as_bytes());
         field(hash);
+    }
+    if let Some(device) = parts.device {
+        field(device.as_bytes());
     }
     Key(*h.finalize().as_bytes())
 }
@@ -157,6 +164,7 @@ mod tests {
             params: &params,
             inputs: vec![],
             files: vec![],
+            device: None,
         })
     }
 
@@ -195,6 +203,7 @@ mod tests {
             params: &p,
             inputs: vec![],
             files: vec![],
+            device: None,
         };
         let k0 = compute(&base);
         let k1 = compute(&KeyParts { version: 2, ..base });
@@ -204,6 +213,7 @@ mod tests {
             params: &p,
             inputs: vec![("x", k0, "out")],
             files: vec![],
+            device: None,
         };
         let k2 = compute(&base);
         let k3 = compute(&KeyParts {
@@ -218,6 +228,7 @@ mod tests {
                 params: &p,
                 inputs: vec![],
                 files: vec![(name.into(), content)],
+                device: None,
             })
         };
         // The same bytes under another name: another key (names carry meaning for readers).
@@ -225,7 +236,18 @@ mod tests {
             named("tl000_pl000_tv000_pv000.png"),
             named("tl015_pl000_tv000_pv000.png"),
         );
-        let all = [k0, k1, k2, k3, k4, k5];
+        let on = |device| {
+            compute(&KeyParts {
+                kind: "k",
+                version: 1,
+                params: &p,
+                inputs: vec![],
+                files: vec![],
+                device: Some(device),
+            })
+        };
+        let (k6, k7) = (on("cpu"), on("gpu"));
+        let all = [k0, k1, k2, k3, k4, k5, k6, k7];
         for i in 0..all.len() {
             for j in 0..i {
                 assert_ne!(all[i], all[j]);

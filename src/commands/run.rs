@@ -12,8 +12,8 @@ use mesoflow_runtime::{
     DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, RunReport, SilentObserver,
 };
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 
 /// The folder a graph's relative input paths resolve against.
 pub fn graph_dir(graph: &Path) -> PathBuf {
@@ -74,21 +74,9 @@ pub fn engine(opts: &CacheOptions, graph: &Path) -> anyhow::Result<Engine> {
     ))
 }
 
-/// The run's cancellation flag, set by Ctrl-C. A second Ctrl-C exits at once.
+/// The run's cancellation flag (Ctrl-C; see `interrupt`).
 pub fn cancel_flag() -> Arc<AtomicBool> {
-    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
-    FLAG.get_or_init(|| {
-        let flag = Arc::new(AtomicBool::new(false));
-        let f = flag.clone();
-        let _ = ctrlc::set_handler(move || {
-            if f.swap(true, Ordering::SeqCst) {
-                std::process::exit(exit::CANCELLED);
-            }
-            eprintln!("\ncancelling: waiting for running nodes to stop (Ctrl-C again to quit now)");
-        });
-        flag
-    })
-    .clone()
+    crate::interrupt::cancel_flag()
 }
 
 pub fn device_mode(d: DeviceArg) -> DeviceMode {
@@ -188,11 +176,16 @@ impl Runner {
             verify_cache: self.base.verify_cache,
             cancel: self.base.cancel.clone(),
         };
-        let observer: Arc<dyn RunObserver> = if self.quiet {
+        let shown: Arc<dyn RunObserver> = if self.quiet {
             Arc::new(SilentObserver)
         } else {
             Arc::new(Bars::new())
         };
+        let observer: Arc<dyn RunObserver> = Arc::new(crate::interrupt::Recording::start(
+            &opts.graph_name,
+            out_dir.to_path_buf(),
+            shown,
+        ));
         let report = self
             .engine
             .run(graph, &opts, observer)

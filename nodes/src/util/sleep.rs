@@ -15,6 +15,8 @@ pub struct Params {
     pub ms: u64,
     /// Fail after waiting (to test failure handling).
     pub fail: bool,
+    /// Ignore cancellation (a node stuck in a loop: to test a second Ctrl-C).
+    pub deaf: bool,
 }
 
 impl Default for Params {
@@ -22,6 +24,7 @@ impl Default for Params {
         Params {
             ms: 100,
             fail: false,
+            deaf: false,
         }
     }
 }
@@ -47,7 +50,9 @@ impl Node for Sleep {
         let start = Instant::now();
         let total = Duration::from_millis(p.ms);
         while start.elapsed() < total {
-            ctx.check_cancel()?;
+            if !p.deaf {
+                ctx.check_cancel()?;
+            }
             ctx.progress(start.elapsed().as_millis() as u64, p.ms);
             std::thread::sleep(
                 Duration::from_millis(10).min(total.saturating_sub(start.elapsed())),

@@ -55,7 +55,11 @@ pub(crate) fn demand(
                 slot.report = Some(NodeReport {
                     id: cn.id.clone(),
                     kind: cn.kind.clone(),
-                    device: device_name(planned_device(spec.device, opts.device)).into(),
+                    device: match &slot.device {
+                        Some(c) if c.gpu.is_some() => "gpu".into(),
+                        Some(_) => "cpu".into(),
+                        None => device_name(planned_device(spec.device, opts.device)).into(),
+                    },
                     status,
                     seconds,
                     bytes: outputs.byte_size() as u64,

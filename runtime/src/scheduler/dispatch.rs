@@ -83,21 +83,12 @@ pub(crate) fn run_all(
             let Some(slot) = slots[i].as_mut() else {
                 continue;
             };
-            let gpu = match super::device::choose(engine, slot.node.spec().device, opts) {
-                Ok(choice) => {
-                    if let Some(why) = choice.fallback {
-                        sink.push(&cn.id, why);
-                    }
-                    choice.gpu
-                }
-                Err(message) => {
-                    let r = failure(cn, &slot.node, NodeStatus::Failed, message, slot.key);
-                    observer.node_finished(&r);
-                    slot.report = Some(r);
-                    cancel_dependants(i, graph, &plan.upstream, compute, slots, observer);
-                    continue;
-                }
-            };
+            // Chosen while keying (the path is part of the key).
+            let choice = slot.device.take();
+            if let Some(why) = choice.as_ref().and_then(|c| c.fallback.clone()) {
+                sink.push(&cn.id, why);
+            }
+            let gpu = choice.and_then(|c| c.gpu);
             if let Some(g) = &gpu {
                 adapter.get_or_insert_with(|| g.describe());
             }

@@ -6,7 +6,7 @@ use super::{failure, Slot};
 use crate::key::{self, Key, KeyParts};
 use crate::node::{DynNode, NodeError, Prepared};
 use crate::report::NodeStatus;
-use mesoflow_graph::CheckedNode;
+use mesoflow_graph::{CheckedNode, DevicePreference};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::sync::Arc;
@@ -21,8 +21,9 @@ pub(crate) fn key_all(
     engine: &crate::engine::Engine,
     graph: &mesoflow_graph::CheckedGraph,
     plan: &super::plan::Plan,
-    base_dir: &Path,
+    opts: &crate::engine::RunOptions,
 ) -> Keyed {
+    let base_dir = opts.base_dir.as_path();
     let mut slots: Vec<Option<Slot>> = Vec::with_capacity(graph.nodes.len());
     let mut read_files = BTreeSet::new();
     for (i, cn) in graph.nodes.iter().enumerate() {
@@ -38,25 +39,37 @@ pub(crate) fn key_all(
         let failed_input = plan.upstream[i]
             .iter()
             .find(|&&u| slots[u].as_ref().is_none_or(|s| s.key.is_none()));
-        let keyed = match failed_input {
-            Some(&u) => Err((
-                NodeStatus::Cancelled,
-                format!("not run: input node `{}` failed", graph.nodes[u].id),
-            )),
-            None => prepare_and_key(
-                &slot.node,
-                cn,
-                &slots,
-                &plan.index,
-                base_dir,
-                &mut read_files,
-            )
-            .map_err(|e| (NodeStatus::Failed, e.to_string())),
-        };
+        let keyed =
+            match failed_input {
+                Some(&u) => Err((
+                    NodeStatus::Cancelled,
+                    format!("not run: input node `{}` failed", graph.nodes[u].id),
+                )),
+                None => {
+                    super::device::choose(engine, slot.node.spec().device, opts)
+                        .map_err(|e| (NodeStatus::Failed, e))
+                        .and_then(|choice| {
+                            let path = (slot.node.spec().device == DevicePreference::Gpu)
+                                .then(|| if choice.gpu.is_some() { "gpu" } else { "cpu" });
+                            prepare_and_key(
+                                &slot.node,
+                                cn,
+                                &slots,
+                                &plan.index,
+                                base_dir,
+                                path,
+                                &mut read_files,
+                            )
+                            .map(|(prepared, key)| (prepared, key, choice))
+                            .map_err(|e| (NodeStatus::Failed, e.to_string()))
+                        })
+                }
+            };
         match keyed {
-            Ok((prepared, key)) => {
+            Ok((prepared, key, choice)) => {
                 slot.prepared = Some(Arc::new(prepared));
                 slot.key = Some(key);
+                slot.device = Some(choice);
             }
             Err((status, error)) => {
                 slot.report = Some(failure(cn, &slot.node, status, error, None))
@@ -73,6 +86,7 @@ fn prepare_and_key(
     slots: &[Option<Slot>],
     index: &BTreeMap<&str, usize>,
     base: &Path,
+    device: Option<&str>,
     read_files: &mut BTreeSet<String>,
 ) -> Result<(Prepared, Key), NodeError> {
     let prepared = node.prepare(&cn.params)?;
@@ -103,6 +117,7 @@ fn prepare_and_key(
         params: &prepared.canonical,
         inputs,
         files,
+        device,
     });
     Ok((prepared, key))
 }

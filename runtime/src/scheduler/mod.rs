@@ -66,6 +66,8 @@ pub(crate) struct Slot {
     pub report: Option<NodeReport>,
     /// A cached value to compare against (`--verify-cache`).
     pub expected: Option<(Outputs, NodeStatus)>,
+    /// Where the node runs, chosen before its key (the path is part of it).
+    pub device: Option<device::Choice>,
 }
 
 impl Slot {
@@ -77,6 +79,7 @@ impl Slot {
             outputs: None,
             report: None,
             expected: None,
+            device: None,
         }
     }
 }
@@ -119,7 +122,7 @@ pub(crate) fn execute(
     let keying::Keyed {
         mut slots,
         read_files,
-    } = keying::key_all(engine, graph, &plan, &opts.base_dir);
+    } = keying::key_all(engine, graph, &plan, opts);
     let compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
 
     // Cache hits write their files now; a hit whose files cannot be written fails like a node.
