@@ -19,6 +19,7 @@
 //! they are (RGB, direction-independent, periodic bilinear lookup) and take precedence.
 
 use crate::heightfield::raycast::Caster;
+use crate::progress::Counter;
 use crate::render::camera::{dot, CameraParams, V3};
 use crate::render::layers::Frag;
 use crate::render::material::{texel_taps, Material, Source};
@@ -158,6 +159,7 @@ impl Node for QhRender {
             inputs.get::<DiffusionProfile>("profile")?,
             &terms,
             p,
+            &Counter::new(ctx, 0),
         )?;
         for w in r.warnings {
             ctx.warn(w);
@@ -185,6 +187,7 @@ pub fn render(
     profile: &DiffusionProfile,
     terms: &Terms,
     p: &Params,
+    watch: &Counter,
 ) -> Result<sss_render::Rendered, NodeError> {
     for (name, img) in [("entrance", terms.entrance), ("exiting", terms.exiting)] {
         if let Some(i) = img {
@@ -229,7 +232,7 @@ pub fn render(
         caster: terms.height.map(Caster::new),
         shadow,
     };
-    sss_render::render_with(gpu, mesh, material, profile, &p.global(), &weights)
+    sss_render::render_with(gpu, mesh, material, profile, &p.global(), &weights, watch)
 }
 
 fn light(p: &LightParams) -> Result<Light, NodeError> {
@@ -441,7 +444,7 @@ mod tests {
             exiting: None,
             height: Some(&hf),
         };
-        let qh = render(None, &mesh, &lrf, &m, &prof, &terms, &p).unwrap();
+        let qh = render(None, &mesh, &lrf, &m, &prof, &terms, &p, &Counter::none()).unwrap();
         let homogeneous = sss_render::render(None, &mesh, &m, &prof, &p.global()).unwrap();
         assert_eq!(qh.image.data, homogeneous.image.data);
     }
@@ -456,7 +459,7 @@ mod tests {
             exiting: None,
             height: None,
         };
-        let base = render(None, &mesh, &lrf, &m, &prof, &none, &p).unwrap();
+        let base = render(None, &mesh, &lrf, &m, &prof, &none, &p, &Counter::none()).unwrap();
         // The global term is linear in the entering irradiance: f = 0.5 halves the exitance.
         let half = Image {
             width: 2,
@@ -469,7 +472,7 @@ mod tests {
             exiting: None,
             height: None,
         };
-        let halved = render(None, &mesh, &lrf, &m, &prof, &terms, &p).unwrap();
+        let halved = render(None, &mesh, &lrf, &m, &prof, &terms, &p, &Counter::none()).unwrap();
         for (a, b) in halved.exitance.data.iter().zip(&base.exitance.data) {
             assert!(
                 (a - 0.5 * b).abs() <= 1e-6 * b.abs().max(1e-6),
@@ -481,7 +484,7 @@ mod tests {
         let k = 0.25f32;
         let bright = constant_btf(k);
         let lrf = Material::new(Source::Raw(&bright));
-        let lit = render(None, &mesh, &lrf, &m, &prof, &none, &p).unwrap();
+        let lit = render(None, &mesh, &lrf, &m, &prof, &none, &p, &Counter::none()).unwrap();
         let added: Vec<f32> = lit
             .image
             .data
@@ -517,14 +520,24 @@ mod tests {
             exiting: None,
             height: Some(&weave),
         };
-        let woven = render(None, &mesh, &lrf, &m, &prof, &terms, &p).unwrap();
+        let woven = render(None, &mesh, &lrf, &m, &prof, &terms, &p, &Counter::none()).unwrap();
         let hf = flat(32);
         let flat_terms = Terms {
             entrance: None,
             exiting: None,
             height: Some(&hf),
         };
-        let plain = render(None, &mesh, &lrf, &m, &prof, &flat_terms, &p).unwrap();
+        let plain = render(
+            None,
+            &mesh,
+            &lrf,
+            &m,
+            &prof,
+            &flat_terms,
+            &p,
+            &Counter::none(),
+        )
+        .unwrap();
         assert!(woven.image.data.iter().all(|v| v.is_finite() && *v >= 0.0));
         let sum = |d: &[f32]| d.iter().map(|v| *v as f64).sum::<f64>();
         let (w, f) = (sum(&woven.image.data), sum(&plain.image.data));
@@ -541,7 +554,9 @@ mod tests {
             exiting: None,
             height: None,
         };
-        assert!(render(None, &mesh, &lrf, &m, &prof, &terms, &p)
-            .is_err_and(|e| e.to_string().contains("entrance")));
+        assert!(
+            render(None, &mesh, &lrf, &m, &prof, &terms, &p, &Counter::none())
+                .is_err_and(|e| e.to_string().contains("entrance"))
+        );
     }
 }

@@ -20,6 +20,7 @@
 use super::fresnel;
 use super::octree::{Octree, Source};
 use super::points;
+use crate::progress::Counter;
 use crate::render::camera::{dot, normalize, sub, Camera, CameraParams, V3};
 use crate::render::layers::{self, Frag};
 use crate::render::render_mesh::{bounding_sphere, LightParams};
@@ -121,7 +122,8 @@ impl Node for Render {
         let mesh = inputs.get::<Mesh>("mesh")?;
         let material = inputs.get::<ScatteringMaterial>("material")?;
         let profile = inputs.get::<DiffusionProfile>("profile")?;
-        let r = render(ctx.gpu(), mesh, material, profile, p)?;
+        let watch = Counter::new(ctx, 0);
+        let r = render_with(ctx.gpu(), mesh, material, profile, p, &Homogeneous, &watch)?;
         for w in r.warnings {
             ctx.warn(w);
         }
@@ -177,7 +179,15 @@ pub fn render(
     profile: &DiffusionProfile,
     p: &Params,
 ) -> Result<Rendered, NodeError> {
-    render_with(gpu, mesh, material, profile, p, &Homogeneous)
+    render_with(
+        gpu,
+        mesh,
+        material,
+        profile,
+        p,
+        &Homogeneous,
+        &Counter::none(),
+    )
 }
 
 /// `render` with entrance, exiting and local terms.
@@ -188,6 +198,7 @@ pub fn render_with(
     profile: &DiffusionProfile,
     p: &Params,
     weights: &dyn Weights,
+    watch: &Counter,
 ) -> Result<Rendered, NodeError> {
     mesh.check().map_err(|e| NodeError::input("mesh", e))?;
     if profile.radii.len() < 2 {
@@ -210,8 +221,11 @@ pub fn render_with(
     let gather_start = Instant::now();
     let (sums, terms) = match gpu {
         Some(gpu) => (gather_gpu(gpu, &setup, &view)?, setup.sources.len() as f64),
-        None => gather_cpu(&setup, &view, p.threshold),
+        None => gather_cpu(&setup, &view, p.threshold, watch),
     };
+    if watch.stopped() {
+        return Err(NodeError::Cancelled);
+    }
     let gather_seconds = gather_start.elapsed().as_secs_f64();
     let (image, exitance) = finish(&setup, &view, &sums, p, material, &light, weights);
     if image
@@ -533,21 +547,32 @@ impl View {
     }
 }
 
-/// Per pixel Σ Rd·E·ΔA beyond the near disc (without the disc term), and the mean terms.
-fn gather_cpu(setup: &Setup, view: &View, threshold: f64) -> (Vec<[f64; 3]>, f64) {
+/// Per pixel Σ Rd·E·ΔA beyond the near disc (without the disc term), and the mean terms. Pixels
+/// go in blocks of [`BLOCK`], counted on `watch`; a stopped watch skips the remaining blocks.
+fn gather_cpu(setup: &Setup, view: &View, threshold: f64, watch: &Counter) -> (Vec<[f64; 3]>, f64) {
+    const BLOCK: usize = 1024;
     let unit = setup.unit;
+    watch.grow(view.hits.len().div_ceil(BLOCK) as u64);
     let results: Vec<([f64; 3], usize)> = view
         .hits
-        .par_iter()
-        .map(|h| match h {
-            Some((p, ..)) => {
-                setup
-                    .octree
-                    .gather(p.map(|v| v * unit), setup.near, threshold, &|r| {
-                        setup.table.at(r)
-                    })
-            }
-            None => ([0.0; 3], 0),
+        .par_chunks(BLOCK)
+        .flat_map_iter(|block| {
+            let stopped = watch.stopped();
+            let sums: Vec<([f64; 3], usize)> = block
+                .iter()
+                .map(|h| match h {
+                    Some((p, ..)) if !stopped => {
+                        setup
+                            .octree
+                            .gather(p.map(|v| v * unit), setup.near, threshold, &|r| {
+                                setup.table.at(r)
+                            })
+                    }
+                    _ => ([0.0; 3], 0),
+                })
+                .collect();
+            watch.add(1);
+            sums
         })
         .collect();
     let hit = view.hits.iter().filter(|h| h.is_some()).count().max(1);
