@@ -29,21 +29,12 @@ fn pipeline(s: &Scratch) -> std::path::PathBuf {
 }
 
 fn write_npy(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> f32) {
-    let mut header = format!("{{'descr': '<f4', 'fortran_order': False, 'shape': ({h}, {w}), }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    for y in 0..h {
-        for x in 0..w {
-            bytes.extend_from_slice(&f(x, y).to_le_bytes());
-        }
-    }
+    let payload: Vec<u8> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .flat_map(|(x, y)| f(x, y).to_le_bytes())
+        .collect();
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
-    std::fs::write(path, bytes).unwrap();
+    std::fs::write(path, npy_bytes("<f4", false, &[h, w], &payload)).unwrap();
 }
 
 fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> (Run, serde_json::Value) {
@@ -1410,4 +1401,107 @@ fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
             "no adapter: auto is the CPU path, the same value"
         );
     }
+}
+
+#[test]
+fn a_measured_time_is_one_column_read_from_the_report() {
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "surface": {"kind": "heightfield.procedural", "params": {"size": 16, "pattern": "noise"}},
+            "normals": {"kind": "heightfield.normals", "inputs": {"height": "surface.height"}}
+        }}"#,
+    );
+    let out = s.path("sweep");
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=1,2",
+            "--measure",
+            "normals.rms_slope",
+            "--measure",
+            "normals.seconds",
+            "--device",
+            "cpu",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    // Each run's line shows its measures.
+    assert!(r.stdout.contains("normals.rms_slope="), "{}", r.stdout);
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert_eq!(
+        header,
+        "normals.scale,normals.rms_slope,normals.seconds,run_seconds,ok"
+    );
+    for line in csv.lines().skip(1) {
+        let t: f64 = line.split(',').nth(2).unwrap().parse().unwrap();
+        assert!(t >= 0.0 && t.is_finite(), "{line}");
+    }
+    // A misspelt measure is refused with what there is.
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=1",
+            "--measure",
+            "normals.secnds",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("did you mean `seconds`"), "{}", r.stderr);
+}
+
+#[test]
+fn ctrl_c_stops_a_monte_carlo_profile_within_a_second() {
+    // 10⁹ photons would take hours: the photon loop must see the flag.
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "material": {"kind": "sss.material", "params": {"preset": "marble"}},
+            "profile": {"kind": "sss.profile", "inputs": {"material": "material.material"},
+                        "params": {"model": "montecarlo", "photons": 1000000000}}
+        }}"#,
+    );
+    let out = s.path("o");
+    let mut child = bin()
+        .args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+        ])
+        .arg(&out)
+        .current_dir(s.dir.path())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1500));
+    let ok = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    let t = Instant::now();
+    let status = child.wait().unwrap();
+    // A second is the issue's bound; a loaded CI machine gets a margin.
+    assert!(
+        t.elapsed() < Duration::from_secs(3),
+        "took {:?}",
+        t.elapsed()
+    );
+    assert_eq!(status.code(), Some(130));
+    let rep = report(&out);
+    assert_eq!(statuses(&rep)["profile"], "cancelled");
 }

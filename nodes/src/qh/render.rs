@@ -179,6 +179,7 @@ pub struct Terms<'a> {
 }
 
 /// The render: local + global, on the GPU when one is given.
+#[allow(clippy::too_many_arguments)]
 pub fn render(
     gpu: Option<&mesoflow_runtime::Gpu>,
     mesh: &Mesh,
