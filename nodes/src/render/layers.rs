@@ -5,6 +5,7 @@
 //! and the barycentric weights of the triangle's corners 1 and 2.
 
 use super::camera::{cross, dot, sub, Camera, V3};
+use crate::progress::Counter;
 use crate::types::Mesh;
 use rayon::prelude::*;
 
@@ -60,7 +61,9 @@ const TILE: u32 = 16;
 /// A pixel's index and its layers (front, back).
 type PixelLayers = (usize, Vec<(Option<Frag>, Option<Frag>)>);
 
-pub fn trace(mesh: &Mesh, cam: &Camera, count: usize) -> Layers {
+/// The layers of every pixel; screen tiles are counted on `watch`, and once it is stopped the
+/// remaining tiles are left empty (the caller returns `Cancelled`).
+pub fn trace(mesh: &Mesh, cam: &Camera, count: usize, watch: &Counter) -> Layers {
     let (w, h) = (cam.width, cam.height);
     let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
     let pos = |i: usize| mesh.positions[i].map(|v| v as f64);
@@ -95,12 +98,17 @@ pub fn trace(mesh: &Mesh, cam: &Camera, count: usize) -> Layers {
         }
     }
     let plane = (w * h) as usize;
+    watch.grow(bins.len() as u64);
     let per_tile: Vec<Vec<PixelLayers>> = bins
         .par_iter()
         .enumerate()
         .map(|(b, tris)| {
             let (bx, by) = (b as u32 % tiles_x, b as u32 / tiles_x);
             let mut out = Vec::new();
+            watch.add(1);
+            if watch.stopped() {
+                return out;
+            }
             for y in by * TILE..((by + 1) * TILE).min(h) {
                 for x in bx * TILE..((bx + 1) * TILE).min(w) {
                     let (o, d) = cam.ray(x, y);
@@ -182,7 +190,7 @@ mod tests {
             ..Default::default()
         })
         .unwrap();
-        let l = trace(&mesh, &cam, 2);
+        let l = trace(&mesh, &cam, 2, &Counter::none());
         let plane = 24 * 24;
         for y in 0..24u32 {
             for x in 0..24u32 {
@@ -223,7 +231,7 @@ mod tests {
             ..Default::default()
         })
         .unwrap();
-        let l = trace(&mesh, &cam, 3);
+        let l = trace(&mesh, &cam, 3, &Counter::none());
         // The ring (axis y, radii 1 ± 0.3) seen along z: the ray through (x, 0) crosses the tube
         // on the near and the far side while |x| < 0.7 (two layers), once for |x| ∈ (0.7, 1.3)
         // (one layer), not at all beyond. Pixel 15 is x = 0, pixel 25 is x ≈ 0.97.

@@ -11,6 +11,7 @@ use super::camera::{dot, normalize, sub, Camera, CameraParams};
 use super::layers;
 use super::material::{Material, MdfLookup, Source};
 use super::shade::{Light, Scene, ShadowMap};
+use crate::progress::Counter;
 use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -208,10 +209,11 @@ impl Node for RenderMesh {
             None => {
                 let start = Instant::now();
                 let mut frame = (Vec::new(), 0.0);
-                for k in 0..p.frames {
+                // One counter for all frames: each frame's screen tiles add to its total.
+                let watch = Counter::new(ctx, 0);
+                for _ in 0..p.frames {
                     ctx.check_cancel()?;
-                    frame = render_cpu(&scene, &camera, p)?;
-                    ctx.progress(k as u64 + 1, p.frames as u64);
+                    frame = render_cpu(&scene, &camera, p, &watch)?;
                 }
                 let ms = start.elapsed().as_secs_f64() * 1e3 / p.frames as f64;
                 (frame.0, frame.1, ms, None)
@@ -293,6 +295,7 @@ pub fn render_cpu(
     scene: &Scene,
     camera: &Camera,
     p: &Params,
+    watch: &Counter,
 ) -> Result<(Vec<f32>, f64), NodeError> {
     let count = p.layers.max(1) as usize;
     let shadow = if p.shadows {
@@ -303,13 +306,16 @@ pub fn render_cpu(
             ));
         }
         let cam = shadow_camera(scene, p.shadow_resolution)?;
-        let l = layers::trace(scene.mesh, &cam, count);
+        let l = layers::trace(scene.mesh, &cam, count, watch);
         let radius = bounding_sphere(scene.mesh).1;
         Some(ShadowMap::build(scene, cam, &l, radius))
     } else {
         None
     };
-    let l = layers::trace(scene.mesh, camera, count);
+    let l = layers::trace(scene.mesh, camera, count, watch);
+    if watch.stopped() {
+        return Err(NodeError::Cancelled);
+    }
     let (w, h) = (camera.width as usize, camera.height as usize);
     let pixels: Vec<([f64; 3], bool)> = (0..w * h)
         .into_par_iter()
@@ -596,7 +602,7 @@ mod tests {
             ..Default::default()
         })
         .unwrap();
-        let layers = super::layers::trace(&mesh, &cam, 1);
+        let layers = super::layers::trace(&mesh, &cam, 1, &Counter::none());
         let (_, d) = cam.ray(0, 0);
         for (parallax, want_u) in [(false, 0.5), (true, 0.0)] {
             let scene = Scene {
@@ -751,7 +757,7 @@ mod tests {
             let ctx = NodeContext::detached(None);
             match gpu {
                 Some(g) => render_gpu(&ctx, g, &scene, &cam, p).map(|(d, c, _, t)| (d, c, t)),
-                None => render_cpu(&scene, &cam, p).map(|(d, c)| (d, c, None)),
+                None => render_cpu(&scene, &cam, p, &Counter::none()).map(|(d, c)| (d, c, None)),
             }
         };
         // The MDF must matter in this scene, or agreement with it would prove nothing.

@@ -492,7 +492,7 @@ pub fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, No
     };
     let camera =
         Camera::enclosing(c, r, dir, from, size).map_err(|e| NodeError::param("light", e))?;
-    let l = layers::trace(mesh, &camera, 1);
+    let l = layers::trace(mesh, &camera, 1, &Counter::none());
     let depth = l
         .front
         .iter()
@@ -528,7 +528,7 @@ fn surface(mesh: &Mesh, f: &Frag) -> (V3, V3) {
 
 impl View {
     fn new(mesh: &Mesh, camera: &Camera) -> View {
-        let l = layers::trace(mesh, camera, 1);
+        let l = layers::trace(mesh, camera, 1, &Counter::none());
         let (w, h) = (camera.width as usize, camera.height as usize);
         let hits = (0..w * h)
             .map(|px| {
