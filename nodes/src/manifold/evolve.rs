@@ -41,6 +41,7 @@ pub struct Params {
     #[schemars(range(min = 1, max = 1000))]
     pub frames: u32,
     /// Degree change per frame at rate 1.
+    #[schemars(range(min = 0.0))]
     pub step: f64,
     /// `weather` (the degree rises) or `deweather` (it falls).
     pub direction: Course,
@@ -52,7 +53,7 @@ pub struct Params {
     /// View direction [θ, φ], degrees.
     pub view: [f64; 2],
     /// Scale of the relit values before sRGB encoding (0 to 10⁶).
-    #[schemars(range(min = 0.0, max = 1e6))]
+    #[schemars(range(max = 1e6), extend("exclusiveMinimum" = 0.0))]
     pub exposure: f64,
     /// Milliseconds per GIF frame.
     pub frame_ms: u32,
@@ -104,6 +105,21 @@ impl Node for Evolve {
         }
     }
 
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        if !(p.step.is_finite() && p.step >= 0.0) {
+            return Err(NodeError::param("step", "must be finite and not negative"));
+        }
+        if !(p.exposure.is_finite() && p.exposure > 0.0) {
+            return Err(NodeError::param("exposure", "must be finite and positive"));
+        }
+        for (name, d) in [("light", p.light), ("view", p.view)] {
+            if !(0.0..90.0).contains(&d[0]) || !d[1].is_finite() {
+                return Err(NodeError::param(name, "θ must be in [0°, 90°)"));
+            }
+        }
+        Ok(())
+    }
+
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let maps = inputs.get::<BrdfMap>("maps")?;
         let degree = inputs.get::<Image>("degree")?;
@@ -131,17 +147,6 @@ impl Node for Evolve {
         if let Some(r) = rate {
             if (0..n).any(|i| r.data[i * r.channels] < 0.0) {
                 return Err(NodeError::input("rate", "rates must not be negative"));
-            }
-        }
-        if !(p.step.is_finite() && p.step >= 0.0) {
-            return Err(NodeError::param("step", "must be finite and not negative"));
-        }
-        if !(p.exposure.is_finite() && p.exposure > 0.0) {
-            return Err(NodeError::param("exposure", "must be finite and positive"));
-        }
-        for (name, d) in [("light", p.light), ("view", p.view)] {
-            if !(0.0..90.0).contains(&d[0]) || !d[1].is_finite() {
-                return Err(NodeError::param(name, "θ must be in [0°, 90°)"));
             }
         }
         let omega: Vec<f64> = (0..n)

@@ -29,7 +29,7 @@ pub struct Params {
     /// `plane`, `sphere`, `cylinder` or `torus`.
     pub shape: Shape,
     /// Plane side, or sphere/cylinder radius, or torus major radius (world units).
-    #[schemars(range(min = 0.0))]
+    #[schemars(extend("exclusiveMinimum" = 0.0))]
     pub size: f64,
     /// Torus tube radius or cylinder height (world units).
     #[schemars(range(min = 0.0))]
@@ -67,6 +67,10 @@ impl Node for Primitive {
         }
     }
 
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        validate(p)
+    }
+
     fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         Ok(Outputs::new().with("mesh", build(p)?))
     }
@@ -102,7 +106,8 @@ fn surface(p: &Params, u: f32, v: f32) -> ([f32; 3], [f32; 3]) {
     }
 }
 
-pub fn build(p: &Params) -> Result<Mesh, NodeError> {
+/// The parameters' own rules (cells, radii).
+fn validate(p: &Params) -> Result<(), NodeError> {
     let [su, sv] = p.segments;
     if su == 0 || sv == 0 || su as u64 * sv as u64 > 1 << 24 {
         return Err(NodeError::param(
@@ -132,6 +137,12 @@ pub fn build(p: &Params) -> Result<Mesh, NodeError> {
             ),
         ));
     }
+    Ok(())
+}
+
+pub fn build(p: &Params) -> Result<Mesh, NodeError> {
+    validate(p)?;
+    let [su, sv] = p.segments;
     let mut mesh = Mesh::default();
     for j in 0..=sv {
         for i in 0..=su {

@@ -110,6 +110,11 @@ impl Node for Material {
         }
     }
 
+    /// The whole material is parameters: making it is the check (and cheap).
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        material(p).map(drop)
+    }
+
     fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         Ok(Outputs::new().with("material", material(p)?))
     }

@@ -115,6 +115,10 @@ impl Node for Render {
         }
     }
 
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        check_params(p)
+    }
+
     fn timings(&self) -> &'static [(&'static str, &'static str)] {
         &[("gather_seconds", "wall time of the per-pixel sums, s")]
     }
@@ -204,15 +208,7 @@ pub fn render_with(
     if profile.radii.len() < 2 {
         return Err(NodeError::input("profile", "fewer than two radii"));
     }
-    if !(p.mm_per_unit > 0.0 && p.mm_per_unit.is_finite()) {
-        return Err(NodeError::param("mm_per_unit", "must be a positive length"));
-    }
-    if !(p.threshold >= 0.0 && p.threshold.is_finite()) {
-        return Err(NodeError::param(
-            "threshold",
-            "must be finite and not negative",
-        ));
-    }
+    check_params(p)?;
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     let light = Light::new(&p.light)?;
     let mut warnings = Vec::new();
@@ -254,6 +250,22 @@ pub struct Light {
     direction: V3,
     position: Option<V3>,
     intensity: f64,
+}
+
+/// The parameters' own rules: validated before any work (`Node::check`) and again by
+/// [`render_with`] for callers that skip the engine.
+pub fn check_params(p: &Params) -> Result<(), NodeError> {
+    if !(p.mm_per_unit > 0.0 && p.mm_per_unit.is_finite()) {
+        return Err(NodeError::param("mm_per_unit", "must be a positive length"));
+    }
+    if !(p.threshold >= 0.0 && p.threshold.is_finite()) {
+        return Err(NodeError::param(
+            "threshold",
+            "must be finite and not negative",
+        ));
+    }
+    Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+    Light::new(&p.light).map(drop)
 }
 
 impl Light {

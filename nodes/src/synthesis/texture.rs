@@ -26,12 +26,14 @@ pub struct Params {
     /// Pyramid levels (coarse to fine).
     #[schemars(range(min = 1, max = 8))]
     pub levels: u32,
-    /// Patch sizes in pixels, used largest first at every level where they fit.
+    /// Patch sizes in pixels (at least 2), used largest first at every level where they fit.
+    #[schemars(length(min = 1), inner(range(min = 2)))]
     pub patch_sizes: Vec<u32>,
     /// Search-and-update iterations per patch size per level.
     #[schemars(range(min = 1, max = 100))]
     pub iterations: u32,
     /// Robust exponent r of E = Σ‖x_p − z_p‖^r (Kwatra: 0.8; 2 = plain least squares).
+    #[schemars(range(max = 2.0), extend("exclusiveMinimum" = 0.0))]
     pub exponent: f64,
     /// Output tiles seamlessly (patches wrap around its edges).
     pub periodic: bool,
@@ -88,17 +90,13 @@ impl Node for Texture {
         }
     }
 
-    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let ex = inputs.get::<Image>("exemplar")?;
-        let ex_guide = inputs.opt::<Image>("exemplar_guide")?;
-        let target_guide = inputs.opt::<Image>("target_guide")?;
-        let mut sizes: Vec<usize> = p.patch_sizes.iter().map(|&s| s as usize).collect();
-        sizes.sort_unstable_by(|a, b| b.cmp(a));
-        sizes.dedup();
-        let smallest = *sizes
-            .last()
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        let smallest = p
+            .patch_sizes
+            .iter()
+            .min()
             .ok_or_else(|| NodeError::param("patch_sizes", "give at least one size"))?;
-        if smallest < 2 {
+        if *smallest < 2 {
             return Err(NodeError::param(
                 "patch_sizes",
                 "sizes must be at least 2 pixels",
@@ -122,6 +120,19 @@ impl Node for Texture {
                 return Err(NodeError::param(name, "must be at least 1"));
             }
         }
+        Ok(())
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let ex = inputs.get::<Image>("exemplar")?;
+        let ex_guide = inputs.opt::<Image>("exemplar_guide")?;
+        let target_guide = inputs.opt::<Image>("target_guide")?;
+        let mut sizes: Vec<usize> = p.patch_sizes.iter().map(|&s| s as usize).collect();
+        sizes.sort_unstable_by(|a, b| b.cmp(a));
+        sizes.dedup();
+        let smallest = *sizes
+            .last()
+            .ok_or_else(|| NodeError::param("patch_sizes", "give at least one size"))?;
         if ex.width < smallest || ex.height < smallest {
             return Err(NodeError::input(
                 "exemplar",
