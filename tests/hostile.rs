@@ -29,8 +29,36 @@ fn fixtures(dir: &Path) {
     let be: Vec<u8> = (0..30).flat_map(|i| (i as f64).to_be_bytes()).collect();
     write("big_endian.npy", npy(">f8", false, &[10, 3], &be));
     write("fake.png", b"\x89PNG\r\n\x1a\nnot really".to_vec());
+    write("zero.png", zero_size_png());
     // A 2 × 2 RGB EXR with one NaN, written with the exr crate's own writer.
     write("nan.exr", nan_exr());
+}
+
+/// A PNG whose header says 0 × 0 pixels (the format forbids it; a reader must refuse it).
+fn zero_size_png() -> Vec<u8> {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = 0xffff_ffffu32;
+        for &b in bytes {
+            c ^= u32::from(b);
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+    let mut ihdr = b"IHDR".to_vec();
+    ihdr.extend_from_slice(&0u32.to_be_bytes()); // width
+    ihdr.extend_from_slice(&0u32.to_be_bytes()); // height
+    ihdr.extend_from_slice(&[8, 2, 0, 0, 0]); // 8-bit RGB
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend_from_slice(&13u32.to_be_bytes());
+    png.extend_from_slice(&ihdr);
+    png.extend_from_slice(&crc32(&ihdr).to_be_bytes());
+    png
 }
 
 fn nan_exr() -> Vec<u8> {
