@@ -37,6 +37,31 @@ fn write_npy(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> f32) {
     std::fs::write(path, npy_bytes("<f4", false, &[h, w], &payload)).unwrap();
 }
 
+/// `mesoflow run GRAPH --quiet --no-cache --out-dir OUT` in the background, for Ctrl-C tests.
+fn spawn_run(graph: &Path, out: &Path, cwd: &Path) -> std::process::Child {
+    bin()
+        .args([
+            "run",
+            graph.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+        ])
+        .arg(out)
+        .current_dir(cwd)
+        .spawn()
+        .unwrap()
+}
+
+/// Ctrl-C, as a terminal sends it.
+fn interrupt(child: &std::process::Child) {
+    let ok = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
 fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> (Run, serde_json::Value) {
     let out_dir = s.path(out);
     let mut args = vec![
@@ -284,11 +309,7 @@ fn ctrl_c_cancels_with_130_and_leaves_no_partial_entry() {
         std::thread::sleep(Duration::from_millis(50));
     }
     std::thread::sleep(Duration::from_millis(300));
-    let kill = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
+    interrupt(&child);
     let t = Instant::now();
     let status = child.wait().unwrap();
     assert!(
@@ -336,31 +357,14 @@ fn a_second_ctrl_c_quits_at_once_and_still_writes_the_report() {
         }}"#,
     );
     let out = s.path("o");
-    let mut child = bin()
-        .args([
-            "run",
-            g.to_str().unwrap(),
-            "--quiet",
-            "--no-cache",
-            "--out-dir",
-        ])
-        .arg(&out)
-        .current_dir(s.dir.path())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(&g, &out, s.dir.path());
     // Give the run time to finish `quick` and start `slow`.
     std::thread::sleep(Duration::from_millis(1500));
-    let int = || {
-        let ok = std::process::Command::new("kill")
-            .args(["-INT", &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(ok.success());
-    };
-    int();
+    interrupt(&child);
     std::thread::sleep(Duration::from_millis(500));
-    int();
+    interrupt(&child);
     let t = Instant::now();
+    let mut child = child;
     let status = child.wait().unwrap();
     assert!(
         t.elapsed() < Duration::from_secs(10),
@@ -1475,25 +1479,11 @@ fn ctrl_c_stops_a_monte_carlo_profile_within_a_second() {
         }}"#,
     );
     let out = s.path("o");
-    let mut child = bin()
-        .args([
-            "run",
-            g.to_str().unwrap(),
-            "--quiet",
-            "--no-cache",
-            "--out-dir",
-        ])
-        .arg(&out)
-        .current_dir(s.dir.path())
-        .spawn()
-        .unwrap();
+    let child = spawn_run(&g, &out, s.dir.path());
     std::thread::sleep(Duration::from_millis(1500));
-    let ok = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(ok.success());
+    interrupt(&child);
     let t = Instant::now();
+    let mut child = child;
     let status = child.wait().unwrap();
     // A second is the issue's bound; a loaded CI machine gets a margin.
     assert!(

@@ -24,4 +24,4 @@ pub use edit::{parse_override, Override};
 pub use error::{GraphError, GraphErrors};
 pub use file::{GraphFile, NodeDecl, PortRef, FORMAT_VERSION};
 pub use ports::TypeSet;
-pub use suggest::nearest;
+pub use suggest::{did_you_mean, nearest};

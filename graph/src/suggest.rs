@@ -15,6 +15,16 @@ where
         .map(|(_, c)| c.to_string())
 }
 
+/// `" (did you mean `x`?)"` for the nearest candidate, or nothing: the tail of an error message.
+pub fn did_you_mean<'a, I>(word: &str, candidates: I) -> String
+where
+    I: IntoIterator<Item = &'a str>,
+{
+    nearest(word, candidates)
+        .map(|s| format!(" (did you mean `{s}`?)"))
+        .unwrap_or_default()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

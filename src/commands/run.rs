@@ -99,18 +99,15 @@ pub fn check_outputs(
 ) -> anyhow::Result<()> {
     for o in outputs {
         let Some(i) = graph.index(&o.node) else {
-            let hint = mesoflow_graph::nearest(&o.node, graph.nodes.iter().map(|n| n.id.as_str()))
-                .map(|s| format!(" (did you mean `{s}`?)"))
-                .unwrap_or_default();
+            let hint =
+                mesoflow_graph::did_you_mean(&o.node, graph.nodes.iter().map(|n| n.id.as_str()));
             return Err(invalid(format!("--output {o}: no node `{}`{hint}", o.node)));
         };
         let kind = &graph.nodes[i].kind;
         if let Some(sig) = engine.registry().node(kind).map(|n| n.signature()) {
             if sig.output(&o.port).is_none() {
                 let names: Vec<&str> = sig.outputs.iter().map(|p| p.name.as_str()).collect();
-                let hint = mesoflow_graph::nearest(&o.port, names.iter().copied())
-                    .map(|s| format!(" (did you mean `{s}`?)"))
-                    .unwrap_or_default();
+                let hint = mesoflow_graph::did_you_mean(&o.port, names.iter().copied());
                 return Err(invalid(format!(
                     "--output {o}: `{}` ({kind}) has no output `{}`{hint}; it has {}",
                     o.node,

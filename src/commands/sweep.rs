@@ -170,9 +170,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
                     })
                     .chain(["seconds"])
                     .collect();
-                let hint = mesoflow_graph::nearest(&m.port, names.iter().copied())
-                    .map(|s| format!(" (did you mean `{s}`?)"))
-                    .unwrap_or_default();
+                let hint = mesoflow_graph::did_you_mean(&m.port, names.iter().copied());
                 return Err(invalid(format!(
                     "--measure {m}: `{}` ({}) has no scalar output or timing `{}`{hint}; it has {}",
                     m.node,
