@@ -56,9 +56,11 @@ pub enum NormalSource {
 pub struct Params {
     /// Where the per-pixel normal comes from.
     pub normals: NormalSource,
-    /// Photometric stereo: share of each pixel's darkest lights left out (shadows).
+    /// Photometric stereo: share of each pixel's darkest lights left out (shadows), in [0, 1).
+    #[schemars(range(min = 0.0), extend("exclusiveMaximum" = 1.0))]
     pub drop_dark: f64,
-    /// Photometric stereo: share of each pixel's brightest lights left out (highlights).
+    /// Photometric stereo: share of each pixel's brightest lights left out (highlights), in [0, 1).
+    #[schemars(range(min = 0.0), extend("exclusiveMaximum" = 1.0))]
     pub drop_bright: f64,
     /// K-means clusters for the starting points.
     #[schemars(range(min = 1, max = 1024))]
@@ -129,8 +131,7 @@ impl Node for FitWard {
     fn timings(&self) -> &'static [(&'static str, &'static str)] {
         &[("pixels_per_second", "fit speed")]
     }
-    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let btf = inputs.get::<Btf>("btf")?;
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         if p.weights.iter().any(|w| !(w.is_finite() && *w >= 0.0)) {
             return Err(NodeError::param(
                 "weights",
@@ -142,6 +143,11 @@ impl Node for FitWard {
                 return Err(NodeError::param(name, "must be in [0, 1)"));
             }
         }
+        Ok(())
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let btf = inputs.get::<Btf>("btf")?;
         let start = Instant::now();
         let fit = fit(ctx, btf, p)?;
         if fit.normal_fallbacks > 0 {

@@ -86,11 +86,15 @@ impl Node for Capture {
         }
     }
 
-    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let hf = inputs.get::<HeightField>("height")?;
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         for (name, set) in [("views", &p.views), ("lights", &p.lights)] {
             set.validate().map_err(|e| NodeError::param(name, e))?;
         }
+        Ok(())
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let hf = inputs.get::<HeightField>("height")?;
         let albedo = albedo_planes(inputs.opt::<Image>("albedo")?, hf, p.albedo)?;
         let width = p.resolution.map_or(hf.width, |r| r as usize);
         let height = ((width * hf.height) as f64 / hf.width as f64)
@@ -303,6 +307,8 @@ mod tests {
         if let Some(a) = albedo {
             inputs = inputs.with("albedo", std::sync::Arc::new(a));
         }
+        // As the engine does: the parameter checks, then the run.
+        Capture.check(p)?;
         let out = Capture.run(&NodeContext::detached(None), p, &inputs)?;
         Ok(out
             .get("btf")

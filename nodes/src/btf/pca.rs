@@ -168,19 +168,7 @@ impl Node for Pca {
         }
     }
 
-    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let btf = inputs.get::<Btf>("btf")?;
-        let t = btf.width * btf.height;
-        if let Some(bad) = btf.first_non_finite() {
-            let pair = bad / (3 * t);
-            return Err(NodeError::input(
-                "btf",
-                format!(
-                    "value {} (direction pair {pair}) is not finite",
-                    btf.data[bad]
-                ),
-            ));
-        }
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         let budgets = [p.rank.is_some(), p.max_rmse.is_some(), p.energy.is_some()];
         if budgets.iter().filter(|b| **b).count() > 1 {
             return Err(NodeError::param(
@@ -192,6 +180,22 @@ impl Node for Pca {
             return Err(NodeError::param(
                 "chroma_rank",
                 "only applies with \"color\": \"ycbcr\"",
+            ));
+        }
+        Ok(())
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let btf = inputs.get::<Btf>("btf")?;
+        let t = btf.width * btf.height;
+        if let Some(bad) = btf.first_non_finite() {
+            let pair = bad / (3 * t);
+            return Err(NodeError::input(
+                "btf",
+                format!(
+                    "value {} (direction pair {pair}) is not finite",
+                    btf.data[bad]
+                ),
             ));
         }
         let plans = plan(btf, p);
@@ -499,6 +503,8 @@ mod tests {
     }
 
     fn pca(btf: &Btf, p: Params) -> Result<Outputs, NodeError> {
+        // As the engine does: the parameter checks, then the run.
+        Pca.check(&p)?;
         Pca.run(
             &NodeContext::detached(None),
             &p,

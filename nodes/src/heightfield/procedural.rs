@@ -91,6 +91,10 @@ impl Node for Procedural {
         }
     }
 
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        weave_count(p)
+    }
+
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         let hf = generate(ctx, p)?;
         let n = hf.width;
@@ -106,8 +110,8 @@ impl Node for Procedural {
     }
 }
 
-/// The tile `run` outputs, for callers that want the `HeightField` itself (tests, benches).
-pub fn generate(ctx: &NodeContext, p: &Params) -> Result<HeightField, NodeError> {
+/// A plain weave tiles only with an even thread count.
+fn weave_count(p: &Params) -> Result<(), NodeError> {
     if p.pattern == Pattern::Weave && !p.count.is_multiple_of(2) {
         return Err(NodeError::param(
             "count",
@@ -117,6 +121,12 @@ pub fn generate(ctx: &NodeContext, p: &Params) -> Result<HeightField, NodeError>
             ),
         ));
     }
+    Ok(())
+}
+
+/// The tile `run` outputs, for callers that want the `HeightField` itself (tests, benches).
+pub fn generate(ctx: &NodeContext, p: &Params) -> Result<HeightField, NodeError> {
+    weave_count(p)?;
     let n = p.size as usize;
     let mut data = vec![0f32; n * n];
     let rows_done = std::sync::atomic::AtomicU64::new(0);

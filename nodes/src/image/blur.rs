@@ -11,7 +11,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// Standard deviation in pixels (0 = copy).
+    /// Standard deviation in pixels (0 = copy), at most 1000.
+    #[schemars(range(min = 0.0, max = 1000.0))]
     pub sigma: f64,
 }
 
@@ -38,11 +39,15 @@ impl Node for Blur {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let img = inputs.get::<Image>("image")?;
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         if !(p.sigma.is_finite() && (0.0..=1000.0).contains(&p.sigma)) {
             return Err(NodeError::param("sigma", "must be in [0, 1000] pixels"));
         }
+        Ok(())
+    }
+
+    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let img = inputs.get::<Image>("image")?;
         Ok(Outputs::new().with("image", blur(img, p.sigma)))
     }
 }

@@ -61,29 +61,13 @@ impl Node for ImageWrite {
         }
     }
 
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        format_of(p).map(drop)
+    }
+
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let img = inputs.get::<Image>("image")?;
-        let extension = std::path::Path::new(&p.path)
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        let format = match (p.format, extension.as_deref()) {
-            (Format::Auto, Some("png")) => Format::Png,
-            (Format::Auto, Some("exr")) => Format::Exr,
-            (Format::Auto, other) => {
-                return Err(NodeError::param(
-                    "path",
-                    format!("cannot tell the format from extension {other:?}; use .png or .exr, or set `format`"),
-                ))
-            }
-            (f, _) => f,
-        };
-        if p.bits != 8 && p.bits != 16 {
-            return Err(NodeError::param(
-                "bits",
-                format!("PNG samples are 8 or 16 bits, got {}", p.bits),
-            ));
-        }
+        let format = format_of(p)?;
         let bytes = match format {
             Format::Exr => formats::encode_exr(img),
             _ => formats::encode_png(img, p.bits),
@@ -97,4 +81,30 @@ impl Node for ImageWrite {
             },
         ))
     }
+}
+
+/// The file format `p` asks for (from the extension when `auto`), and its sample size.
+fn format_of(p: &Params) -> Result<Format, NodeError> {
+    let extension = std::path::Path::new(&p.path)
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let format = match (p.format, extension.as_deref()) {
+        (Format::Auto, Some("png")) => Format::Png,
+        (Format::Auto, Some("exr")) => Format::Exr,
+        (Format::Auto, other) => {
+            return Err(NodeError::param(
+                "path",
+                format!("cannot tell the format from extension {other:?}; use .png or .exr, or set `format`"),
+            ))
+        }
+        (f, _) => f,
+    };
+    if p.bits != 8 && p.bits != 16 {
+        return Err(NodeError::param(
+            "bits",
+            format!("PNG samples are 8 or 16 bits, got {}", p.bits),
+        ));
+    }
+    Ok(format)
 }

@@ -92,10 +92,17 @@ impl Node for FitDipole {
         }
     }
 
-    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         if !(p.eta.is_finite() && p.eta > 0.0) {
             return Err(NodeError::param("eta", "must be a positive index ratio"));
         }
+        if p.model == Model::Montecarlo && p.photons < 1000 {
+            return Err(NodeError::param("photons", "at least 1000"));
+        }
+        Ok(())
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let value = inputs.value("measured")?;
         let measured = if let Some(prof) = value.as_any().downcast_ref::<DiffusionProfile>() {
             Measured::from_profile(prof)
@@ -128,9 +135,6 @@ impl Node for FitDipole {
         let table;
         let mut limit = None;
         let forward = if p.model == Model::Montecarlo {
-            if p.photons < 1000 {
-                return Err(NodeError::param("photons", "at least 1000"));
-            }
             // Walks are followed until α′^events < 1e-8 for the highest albedo the totals
             // suggest (PBD's inversion, moved a third of the way closer to 1 for safety).
             let alpha_hi = (0..3)

@@ -104,14 +104,18 @@ impl Node for Profile {
         }
     }
 
-    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let m = inputs.get::<ScatteringMaterial>("material")?;
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
         if p.model == Model::Montecarlo && p.photons < 1000 {
             return Err(NodeError::param(
                 "photons",
                 "at least 1000 photons per channel",
             ));
         }
+        Ok(())
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let m = inputs.get::<ScatteringMaterial>("material")?;
         let chunks = if p.model == Model::Montecarlo {
             3 * montecarlo::chunks(p.photons)
         } else {
