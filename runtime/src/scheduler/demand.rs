@@ -4,7 +4,7 @@
 //! every file. With `--verify-cache` a hit is still recomputed, so its inputs are demanded too.
 
 use super::plan::{writes_files, Plan};
-use super::{device_name, metrics, planned_device, Sink, Slot};
+use super::{metrics, Sink, Slot};
 use crate::cache::Timing;
 use crate::engine::{Engine, RunOptions};
 use crate::key::Key;
@@ -55,11 +55,8 @@ pub(crate) fn demand(
                 slot.report = Some(NodeReport {
                     id: cn.id.clone(),
                     kind: cn.kind.clone(),
-                    device: match &slot.device {
-                        Some(c) if c.gpu.is_some() => "gpu".into(),
-                        Some(_) => "cpu".into(),
-                        None => device_name(planned_device(spec.device, opts.device)).into(),
-                    },
+                    // Every keyed node has its device chosen (the path is part of the key).
+                    device: slot.device.as_ref().map_or("cpu", |c| c.path()).into(),
                     status,
                     seconds,
                     bytes: outputs.byte_size() as u64,

@@ -15,7 +15,18 @@ pub(crate) struct Choice {
     pub fallback: Option<String>,
 }
 
-pub(crate) fn planned(pref: DevicePreference, mode: DeviceMode) -> DevicePreference {
+impl Choice {
+    /// `"gpu"` or `"cpu"`: the path taken, as keys and reports name it.
+    pub fn path(&self) -> &'static str {
+        if self.gpu.is_some() {
+            "gpu"
+        } else {
+            "cpu"
+        }
+    }
+}
+
+fn planned(pref: DevicePreference, mode: DeviceMode) -> DevicePreference {
     if mode == DeviceMode::Cpu {
         DevicePreference::Cpu
     } else {

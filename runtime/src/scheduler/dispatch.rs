@@ -88,11 +88,11 @@ pub(crate) fn run_all(
             if let Some(why) = choice.as_ref().and_then(|c| c.fallback.clone()) {
                 sink.push(&cn.id, why);
             }
+            let device = choice.as_ref().map_or("cpu", |c| c.path());
             let gpu = choice.and_then(|c| c.gpu);
             if let Some(g) = &gpu {
                 adapter.get_or_insert_with(|| g.describe());
             }
-            let device = if gpu.is_some() { "gpu" } else { "cpu" };
             observer.node_started(&cn.id, &cn.kind, device);
             let task = Task {
                 idx: i,

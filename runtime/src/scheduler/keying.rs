@@ -39,32 +39,29 @@ pub(crate) fn key_all(
         let failed_input = plan.upstream[i]
             .iter()
             .find(|&&u| slots[u].as_ref().is_none_or(|s| s.key.is_none()));
-        let keyed =
-            match failed_input {
-                Some(&u) => Err((
-                    NodeStatus::Cancelled,
-                    format!("not run: input node `{}` failed", graph.nodes[u].id),
-                )),
-                None => {
-                    super::device::choose(engine, slot.node.spec().device, opts)
-                        .map_err(|e| (NodeStatus::Failed, e))
-                        .and_then(|choice| {
-                            let path = (slot.node.spec().device == DevicePreference::Gpu)
-                                .then(|| if choice.gpu.is_some() { "gpu" } else { "cpu" });
-                            prepare_and_key(
-                                &slot.node,
-                                cn,
-                                &slots,
-                                &plan.index,
-                                base_dir,
-                                path,
-                                &mut read_files,
-                            )
-                            .map(|(prepared, key)| (prepared, key, choice))
-                            .map_err(|e| (NodeStatus::Failed, e.to_string()))
-                        })
-                }
-            };
+        let keyed = match failed_input {
+            Some(&u) => Err((
+                NodeStatus::Cancelled,
+                format!("not run: input node `{}` failed", graph.nodes[u].id),
+            )),
+            None => super::device::choose(engine, slot.node.spec().device, opts)
+                .map_err(|e| (NodeStatus::Failed, e))
+                .and_then(|choice| {
+                    let path =
+                        (slot.node.spec().device == DevicePreference::Gpu).then(|| choice.path());
+                    prepare_and_key(
+                        &slot.node,
+                        cn,
+                        &slots,
+                        &plan.index,
+                        base_dir,
+                        path,
+                        &mut read_files,
+                    )
+                    .map(|(prepared, key)| (prepared, key, choice))
+                    .map_err(|e| (NodeStatus::Failed, e.to_string()))
+                }),
+        };
         match keyed {
             Ok((prepared, key, choice)) => {
                 slot.prepared = Some(Arc::new(prepared));

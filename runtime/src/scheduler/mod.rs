@@ -27,8 +27,6 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
-pub(crate) use device::planned as planned_device;
-
 /// Collects warnings and forwards progress to the observer.
 pub(crate) struct Sink {
     observer: Arc<dyn RunObserver>,
