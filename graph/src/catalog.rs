@@ -59,15 +59,24 @@ pub trait Catalog {
     fn signature(&self, kind: &str) -> Option<&KindSignature>;
     fn kinds(&self) -> Vec<&str>;
     /// Checks parameters that passed the schema against what the kind will really accept (its
-    /// typed parameter struct), so that `validate` refuses everything `run` would. `Err` names
-    /// the problem; the checker finds the parameter. Catalogs of plain signatures accept all.
+    /// typed parameter struct and its own checks), so that `validate` refuses everything `run`
+    /// would. Catalogs of plain signatures accept all.
     fn check_typed(
         &self,
         _kind: &str,
         _params: &serde_json::Map<String, serde_json::Value>,
-    ) -> Result<(), String> {
+    ) -> Result<(), TypedProblem> {
         Ok(())
     }
+}
+
+/// Why a kind refused its parameters: the parameter when the kind's check named it (a rule
+/// between parameters names the one to change), else only a message (a value the struct cannot
+/// hold, which the checker then traces to its parameter).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TypedProblem {
+    pub param: Option<String>,
+    pub message: String,
 }
 
 impl Catalog for Vec<KindSignature> {

@@ -192,15 +192,24 @@ pub fn check(
     })
 }
 
-/// What the schema cannot say: the catalog's typed check. On a failure, each parameter is tried
-/// alone (with the required ones) so the error names the parameter at fault.
+/// What the schema cannot say: the catalog's typed check. A problem that names its parameter is
+/// reported as it is; otherwise each parameter is tried alone (with the required ones) so the
+/// error names the parameter at fault.
 fn check_typed(
     catalog: &dyn Catalog,
     node: &str,
     sig: &crate::catalog::KindSignature,
     params: &Map<String, Value>,
 ) -> Option<GraphError> {
-    let message = catalog.check_typed(&sig.kind, params).err()?;
+    let problem = catalog.check_typed(&sig.kind, params).err()?;
+    if let Some(param) = problem.param {
+        return Some(GraphError::ParamInvalid {
+            node: node.into(),
+            param,
+            message: problem.message,
+        });
+    }
+    let message = problem.message;
     let required: Vec<&str> = sig
         .params
         .get("required")
@@ -217,7 +226,7 @@ fn check_typed(
         catalog
             .check_typed(&sig.kind, &alone)
             .err()
-            .map(|m| (name.clone(), m))
+            .map(|p| (name.clone(), p.message))
     });
     let (param, mut message) = culprit.unwrap_or(("params".into(), message));
     // serde's words ("did not match any variant of untagged enum …") say what failed, the schema

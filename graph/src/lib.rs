@@ -18,7 +18,7 @@ pub mod ports;
 pub mod schema;
 mod suggest;
 
-pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec};
+pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec, TypedProblem};
 pub use check::{check, CheckedGraph, CheckedNode, Edge};
 pub use edit::{parse_override, Override};
 pub use error::{GraphError, GraphErrors};

@@ -66,11 +66,24 @@ impl Catalog for Registry {
         &self,
         kind: &str,
         params: &serde_json::Map<String, serde_json::Value>,
-    ) -> Result<(), String> {
+    ) -> Result<(), mesoflow_graph::TypedProblem> {
+        use mesoflow_graph::TypedProblem;
         match self.nodes.get(kind) {
             Some(node) => node.prepare(params).map(|_| ()).map_err(|e| match e {
-                crate::NodeError::Param { param, message } if param == "params" => message,
-                other => other.to_string(),
+                // serde's refusal of the whole object: the checker finds the parameter.
+                crate::NodeError::Param { param, message } if param == "params" => TypedProblem {
+                    param: None,
+                    message,
+                },
+                // `Node::check` named it.
+                crate::NodeError::Param { param, message } => TypedProblem {
+                    param: Some(param),
+                    message,
+                },
+                other => TypedProblem {
+                    param: None,
+                    message: other.to_string(),
+                },
             }),
             None => Ok(()),
         }
