@@ -52,6 +52,15 @@ impl KindSignature {
     pub fn output(&self, name: &str) -> Option<&OutputSpec> {
         self.outputs.iter().find(|p| p.name == name)
     }
+
+    /// Parameters without a default (the schema's `required`).
+    pub fn required_params(&self) -> Vec<&str> {
+        self.params
+            .get("required")
+            .and_then(serde_json::Value::as_array)
+            .map(|r| r.iter().filter_map(serde_json::Value::as_str).collect())
+            .unwrap_or_default()
+    }
 }
 
 /// A set of node kinds, looked up by name.

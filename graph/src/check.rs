@@ -210,12 +210,7 @@ fn check_typed(
         });
     }
     let message = problem.message;
-    let required: Vec<&str> = sig
-        .params
-        .get("required")
-        .and_then(Value::as_array)
-        .map(|r| r.iter().filter_map(Value::as_str).collect())
-        .unwrap_or_default();
+    let required = sig.required_params();
     let culprit = params.iter().find_map(|(name, value)| {
         let mut alone: Map<String, Value> = params
             .iter()

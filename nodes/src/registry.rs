@@ -87,10 +87,7 @@ mod tests {
                 .as_object()
                 .cloned()
                 .unwrap_or_default();
-            let required: Vec<&str> = sig.params["required"]
-                .as_array()
-                .map(|a| a.iter().filter_map(Value::as_str).collect())
-                .unwrap_or_default();
+            let required = sig.required_params();
             let mut base = Map::new();
             for r in &required {
                 base.insert(r.to_string(), json!("x.png"));

@@ -52,12 +52,7 @@ fn describe(s: &KindSignature) -> String {
     }
     out.push_str("params:\n");
     let props = s.params.get("properties").and_then(Value::as_object);
-    let required: Vec<&str> = s
-        .params
-        .get("required")
-        .and_then(Value::as_array)
-        .map(|r| r.iter().filter_map(Value::as_str).collect())
-        .unwrap_or_default();
+    let required = s.required_params();
     for (name, schema) in props.into_iter().flatten() {
         let mut ty = mesoflow_graph::params::expected_text(&s.params, schema);
         let bound = |k: &str| schema.get(k).map(|v| v.to_string());

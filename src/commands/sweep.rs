@@ -137,6 +137,17 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         }
         graphs.push(load::checked(&args.graph, &file, engine.registry())?);
     }
+    // The first output of a node: how a node is asked for when what is measured is not an output.
+    let first_output = |kind: &str| {
+        engine
+            .registry()
+            .node(kind)
+            .and_then(|n| n.signature().outputs.first().map(|o| o.name.clone()))
+    };
+    // Ask for the measured outputs as well as the sinks, so a measure is reported even when a
+    // sink's cached result would otherwise make its node unnecessary. A timing is not an output:
+    // its node is asked for through its first output.
+    let mut outputs: Vec<PortRef> = Vec::new();
     for m in &measures {
         let Some(node) = graphs[0].index(&m.node).map(|i| &graphs[0].nodes[i]) else {
             return Err(invalid(format!(
@@ -150,8 +161,11 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         let timing =
             m.port == "seconds" || sig.is_some_and(|s| s.timings.iter().any(|t| t.name == m.port));
         match ty.as_deref() {
-            _ if timing => {}
-            Some("Scalar") => {}
+            Some("Scalar") => outputs.push(m.clone()),
+            _ if timing => outputs.extend(first_output(&node.kind).map(|port| PortRef {
+                node: m.node.clone(),
+                port,
+            })),
             Some(other) => {
                 return Err(invalid(format!(
                     "--measure {m}: `{}` is a {other}; a measure must be a scalar output",
@@ -181,40 +195,9 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             }
         }
     }
-    // Ask for the measured outputs as well as the sinks, so a measure is reported even when a
-    // sink's cached result would otherwise make its node unnecessary.
-    // A timing is not an output: its node is asked for through its first output.
-    let first_output = |node: &str| {
-        let kind = &graphs[0].nodes[graphs[0].index(node)?].kind;
-        engine
-            .registry()
-            .node(kind)
-            .and_then(|n| n.signature().outputs.first().map(|o| o.name.clone()))
-    };
-    let mut outputs: Vec<PortRef> = measures
-        .iter()
-        .filter_map(|m| {
-            let is_output = graphs[0]
-                .index(&m.node)
-                .and_then(|i| engine.registry().node(&graphs[0].nodes[i].kind))
-                .is_some_and(|n| n.signature().output(&m.port).is_some());
-            if is_output {
-                Some(m.clone())
-            } else {
-                first_output(&m.node).map(|port| PortRef {
-                    node: m.node.clone(),
-                    port,
-                })
-            }
-        })
-        .collect();
     for sink in graphs[0].sinks() {
         let kind = &graphs[0].nodes[graphs[0].index(sink).unwrap_or(0)].kind;
-        if let Some(port) = engine
-            .registry()
-            .node(kind)
-            .and_then(|n| n.signature().outputs.first().map(|o| o.name.clone()))
-        {
+        if let Some(port) = first_output(kind) {
             outputs.push(PortRef {
                 node: sink.to_string(),
                 port,

@@ -559,11 +559,11 @@ fn fit_pixels(
 ) -> Vec<([f64; WARD_PARAMS], f32, bool)> {
     let (w, h) = (btf.width, btf.height);
     let dims = btf.pairs.len() * 3;
-    let done = std::sync::atomic::AtomicU64::new(0);
+    let watch = crate::progress::Counter::new(ctx, h as u64);
     let rows: Vec<Vec<([f64; WARD_PARAMS], f32, bool)>> = (0..h)
         .into_par_iter()
         .map(|y| {
-            if ctx.is_cancelled() {
+            if watch.stopped() {
                 return Vec::new(); // the caller returns `Cancelled`
             }
             let row = (0..w)
@@ -594,8 +594,7 @@ fn fit_pixels(
                     (params, rms, ok)
                 })
                 .collect();
-            let d = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            ctx.progress(d, h as u64);
+            watch.add(1);
             row
         })
         .collect();
