@@ -147,12 +147,14 @@ pub(crate) fn run_all(
             continue;
         };
         let key = slot.key;
-        let written = match &done.result {
-            Ok(outputs) => write_artifacts(outputs, &opts.out_dir),
-            Err(_) => Ok(Vec::new()),
-        };
-        let report = match (done.result, written) {
-            (Ok(outputs), Ok(paths)) => {
+        // A file that cannot be written fails the node like an error inside it.
+        let result = done.result.and_then(|outputs| {
+            write_artifacts(&outputs, &opts.out_dir)
+                .map(|paths| (outputs, paths))
+                .map_err(NodeError::Failed)
+        });
+        let report = match result {
+            Ok((outputs, paths)) => {
                 files.extend(paths);
                 let status = match (&slot.expected, done.verified) {
                     (Some((_, s)), true) => *s,
@@ -183,16 +185,13 @@ pub(crate) fn run_all(
                 }
                 r
             }
-            (result, written) => {
-                let (status, message) = match (result, written) {
-                    (Err(NodeError::Cancelled), _) => {
-                        (NodeStatus::Cancelled, NodeError::Cancelled.to_string())
-                    }
-                    (Err(e), _) => (NodeStatus::Failed, e.to_string()),
-                    (Ok(_), Err(e)) => (NodeStatus::Failed, e),
-                    (Ok(_), Ok(_)) => (NodeStatus::Failed, "internal: unreachable".into()),
+            Err(e) => {
+                let status = if e == NodeError::Cancelled {
+                    NodeStatus::Cancelled
+                } else {
+                    NodeStatus::Failed
                 };
-                let mut r = failure(cn, &slot.node, status, message, key);
+                let mut r = failure(cn, &slot.node, status, e.to_string(), key);
                 r.seconds = done.timing.seconds;
                 r.device = done.device.into();
                 cancel_dependants(i, graph, &plan.upstream, compute, slots, observer);
