@@ -2,5 +2,6 @@
 
 pub mod blur;
 pub mod compare;
+pub mod flip;
 pub mod ramp;
 pub mod row;
