@@ -4,6 +4,7 @@
 
 pub mod brdf;
 pub mod btf;
+pub mod geometry;
 pub mod gpu;
 pub mod heightfield;
 pub mod image;

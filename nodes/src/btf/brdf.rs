@@ -1,6 +1,7 @@
 //! Reflectance models for synthetic capture, evaluated against a local normal (isotropic, so no
 //! tangent is needed). Values are BRDFs in sr⁻¹.
 
+use crate::geometry::dot;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
@@ -12,10 +13,6 @@ pub enum Model {
     Lambert,
     /// Isotropic Ward: ρd/π + ρs·exp(−tan²δ/α²) / (4π α² √(cosθi cosθo)).
     Ward,
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// The BRDF for unit vectors `wi` (to the light), `wo` (to the viewer) and normal `n`, given the

@@ -18,13 +18,14 @@
 //! A flat height field gives f = fv = 1, the homogeneous render; images, when given, are used as
 //! they are (RGB, direction-independent, periodic bilinear lookup) and take precedence.
 
+use crate::geometry::{dot, V3};
 use crate::heightfield::raycast::Caster;
 use crate::progress::Counter;
-use crate::render::camera::{dot, CameraParams, V3};
+use crate::render::camera::CameraParams;
 use crate::render::layers::Frag;
+use crate::render::light::{Light, LightParams};
 use crate::render::material::{texel_taps, Material, Source};
-use crate::render::render_mesh::LightParams;
-use crate::render::shade::{Light, Scene, ShadowMap, Surface};
+use crate::render::shade::{Scene, ShadowMap, Surface};
 use crate::sss::render::{self as sss_render, Weights};
 use crate::types::{Btf, BtfBasis, DiffusionProfile, HeightField, Image, Mesh, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
@@ -110,7 +111,7 @@ impl Node for QhRender {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "qh.render",
-            version: 1,
+            version: 2,
             doc: "Quasi-homogeneous material on a mesh (thesis eq. 5.60): local reflectance (BTF) plus the homogeneous diffusion gather scaled by mesostructure entrance and exiting functions (images, or from a height field).",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -207,7 +208,7 @@ pub fn render(
         return Err(NodeError::param("tiling", "must be positive"));
     }
     let l = &p.light;
-    let light = light(l)?;
+    let light = Light::new(l)?;
     let scene = Scene {
         mesh,
         material: lrf,
@@ -221,7 +222,7 @@ pub fn render(
     let shadow = if p.shadows {
         Some(sss_render::shadow_map(
             mesh,
-            &sss_render::Light::new(l)?,
+            &Light::new(l)?,
             p.shadow_resolution,
         )?)
     } else {
@@ -234,16 +235,6 @@ pub fn render(
         shadow,
     };
     sss_render::render_with(gpu, mesh, material, profile, &p.global(), &weights, watch)
-}
-
-fn light(p: &LightParams) -> Result<Light, NodeError> {
-    let direction = crate::render::camera::normalize(p.direction)
-        .ok_or_else(|| NodeError::param("light", "direction has zero length"))?;
-    Ok(Light {
-        direction,
-        position: p.position,
-        intensity: p.intensity,
-    })
 }
 
 struct Qh<'a> {
@@ -328,14 +319,7 @@ impl Weights for Qh<'_> {
         };
         // The local reflectance under the light, with shadows (as render.mesh shades).
         let light = &self.scene.light;
-        let (to_light, falloff) = match light.position {
-            Some(lp) => {
-                let v = crate::render::camera::sub(lp, s.p);
-                let r2 = dot(v, v).max(1e-12);
-                (crate::render::camera::normalize(v).unwrap_or(s.n), 1.0 / r2)
-            }
-            None => (light.direction, 1.0),
-        };
+        let (to_light, irradiance) = light.at(s.p);
         let wi = local(&s, to_light);
         let lit =
             wi[2] > 0.0 && wo[2] > 0.0 && self.shadow.as_ref().is_none_or(|m| m.lit(s.p, wi[2]));
@@ -343,7 +327,7 @@ impl Weights for Qh<'_> {
             self.scene
                 .material
                 .eval(s.uv[0], s.uv[1], wo, wi)
-                .map(|c| c * light.intensity * falloff)
+                .map(|c| c * irradiance)
         } else {
             [0.0; 3]
         };

@@ -3,10 +3,10 @@
 //! (`resolve.wgsl`). Shadows run the same two steps from the light first, into a depth buffer
 //! that stays on the GPU. Data layout and rules are those of the CPU path.
 
-use super::camera::{dot, sub, Camera};
+use super::camera::Camera;
 use super::material::{Material, Source};
-use super::render_mesh::bounding_sphere;
 use super::shade::Scene;
+use crate::geometry::{bounding_sphere, dot, sub};
 use crate::types::{Centring, ColorSpace};
 use mesoflow_runtime::{Gpu, NodeError};
 use wgpu::util::DeviceExt;

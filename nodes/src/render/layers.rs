@@ -4,7 +4,8 @@
 //! back face after it. Each is stored as a visibility sample: distance along the ray, triangle,
 //! and the barycentric weights of the triangle's corners 1 and 2.
 
-use super::camera::{cross, dot, sub, Camera, V3};
+use super::camera::Camera;
+use crate::geometry::{cross, dot, sub, V3};
 use crate::progress::Counter;
 use crate::types::Mesh;
 use rayon::prelude::*;

@@ -3,6 +3,7 @@
 pub mod camera;
 pub mod gpu_render;
 pub mod layers;
+pub mod light;
 pub mod material;
 pub mod render_mesh;
 pub mod shade;

@@ -7,10 +7,12 @@
 //! `gpu_ms` is the time between timestamps at the start of the first pass and the end of the
 //! last, where the adapter supports timestamp queries.
 
-use super::camera::{dot, normalize, sub, Camera, CameraParams};
+use super::camera::{Camera, CameraParams};
 use super::layers;
+use super::light::{Light, LightParams};
 use super::material::{Material, MdfLookup, Source};
-use super::shade::{Light, Scene, ShadowMap};
+use super::shade::{Scene, ShadowMap};
+use crate::geometry::{bounding_sphere, normalize, sub};
 use crate::progress::Counter;
 use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
 use mesoflow_graph::DevicePreference;
@@ -19,28 +21,6 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
-
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct LightParams {
-    /// Direction towards a directional light (world, need not be unit length).
-    pub direction: [f64; 3],
-    /// Position of a point light; when set the light is a point light with 1/r² falloff.
-    pub position: Option<[f64; 3]>,
-    /// Irradiance on a plane facing a directional light (or intensity of a point light).
-    #[schemars(range(min = 0.0))]
-    pub intensity: f64,
-}
-
-impl Default for LightParams {
-    fn default() -> Self {
-        LightParams {
-            direction: [0.6, 0.7, 0.9],
-            position: None,
-            intensity: 3.0,
-        }
-    }
-}
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -104,7 +84,7 @@ impl Node for RenderMesh {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "render.mesh",
-            version: 1,
+            version: 2,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -131,7 +111,7 @@ impl Node for RenderMesh {
                 ),
             ));
         }
-        light(&p.light)?;
+        Light::new(&p.light)?;
         for (name, v) in [
             ("tiling", p.tiling[0]),
             ("tiling", p.tiling[1]),
@@ -189,7 +169,7 @@ impl Node for RenderMesh {
         let mdf = inputs.opt::<Mdf>("mdf")?.filter(|_| p.use_mdf);
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let [w, h] = p.camera.resolution;
-        let light = light(&p.light)?;
+        let light = Light::new(&p.light)?;
         let degenerate = mesh.degenerate_triangles();
         if degenerate > 0 {
             ctx.warn(format!("{degenerate} zero-area triangles are skipped"));
@@ -242,37 +222,6 @@ impl Node for RenderMesh {
             )
             .with("coverage", Scalar(coverage)))
     }
-}
-
-fn light(p: &LightParams) -> Result<Light, NodeError> {
-    let direction = normalize(p.direction)
-        .ok_or_else(|| NodeError::param("light", "direction has zero length"))?;
-    if !(p.intensity >= 0.0 && p.intensity.is_finite()) {
-        return Err(NodeError::param(
-            "light",
-            "intensity must be finite and not negative",
-        ));
-    }
-    Ok(Light {
-        direction,
-        position: p.position,
-        intensity: p.intensity,
-    })
-}
-
-/// The mesh's bounding sphere (centre, radius).
-pub fn bounding_sphere(mesh: &Mesh) -> ([f64; 3], f64) {
-    let (lo, hi) = mesh.bounds();
-    let c = [0, 1, 2].map(|k| 0.5 * (lo[k] as f64 + hi[k] as f64));
-    let r = mesh
-        .positions
-        .iter()
-        .map(|q| {
-            let d = sub(q.map(|v| v as f64), c);
-            dot(d, d).sqrt()
-        })
-        .fold(0.0, f64::max);
-    (c, r.max(1e-9))
 }
 
 /// The shadow camera: orthographic along a directional light, a pinhole at a point light.
@@ -609,7 +558,7 @@ mod tests {
                 mesh: &mesh,
                 material: &material,
                 mdf: Some(MdfLookup::new(&mdf)),
-                light: light(&LightParams::default()).unwrap(),
+                light: Light::new(&LightParams::default()).unwrap(),
                 tiling: [1.0, 1.0],
                 shell: 0.1,
                 background: [0.0; 3],
@@ -747,7 +696,7 @@ mod tests {
                 mesh: &torus,
                 material: &material,
                 mdf: with_mdf.then(|| MdfLookup::new(&mdf)),
-                light: light(&p.light).unwrap(),
+                light: Light::new(&p.light).unwrap(),
                 tiling: p.tiling,
                 shell: p.shell,
                 background: p.background,

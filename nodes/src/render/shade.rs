@@ -17,20 +17,13 @@
 //! receiver's reference surface point (x, t_f): a caster shadows it only if it lies in front of
 //! the receiver's shell, so shadows between parts of the mesh and from silhouette mesostructure
 //! appear, while the self-shadowing inside a tile, already in the BTF, is not applied twice.
-use super::camera::{add, cross, dot, mul, normalize, sub, Camera, V3};
+use super::camera::Camera;
 use super::layers::{Frag, Layers};
+use super::light::Light;
 use super::material::{Material, MdfLookup};
+use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
 use crate::types::Mesh;
 use rayon::prelude::*;
-
-#[derive(Clone, Debug)]
-pub struct Light {
-    /// Unit direction towards a directional light.
-    pub direction: V3,
-    /// Position of a point light (then `direction` is unused).
-    pub position: Option<V3>,
-    pub intensity: f64,
-}
 
 /// A shadow map: distance along the light camera's ray to the displaced surface per texel.
 pub struct ShadowMap {
@@ -149,14 +142,7 @@ impl Scene<'_> {
     ) -> Option<[f64; 3]> {
         let (_, t_front, s, wo) = self.hit(layers, px, d)?;
         let p = add(o, mul(d, t_front));
-        let (to_light, falloff) = match self.light.position {
-            Some(lp) => {
-                let v = sub(lp, p);
-                let r2 = dot(v, v);
-                (normalize(v).unwrap_or(s.n), 1.0 / r2.max(1e-12))
-            }
-            None => (self.light.direction, 1.0),
-        };
+        let (to_light, irradiance) = self.light.at(p);
         let wi = Self::local(&s, to_light);
         if wi[2] <= 0.0 {
             return Some([0.0; 3]);
@@ -166,7 +152,7 @@ impl Scene<'_> {
             return Some([0.0; 3]);
         }
         let f = self.material.eval(s.uv[0], s.uv[1], wo, wi);
-        Some(f.map(|c| c * self.light.intensity * falloff))
+        Some(f.map(|c| c * irradiance))
     }
 }
 

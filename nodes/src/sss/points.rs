@@ -6,6 +6,7 @@
 //! 0.75 × spacing (dart throwing on a hash grid). The result is evenly spread without a grid's
 //! aliasing; its count is close to area / spacing², and each point gets area / count.
 
+use crate::geometry::{cross, length, sub};
 use crate::rng;
 use crate::types::Mesh;
 use std::collections::HashMap;
@@ -26,22 +27,6 @@ pub struct Samples {
     /// Area each point stands for (mesh area / count), world units².
     pub area: f64,
     pub total_area: f64,
-}
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn length(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
 }
 
 /// Total surface area of the mesh (world units²).

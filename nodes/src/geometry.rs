@@ -1,0 +1,46 @@
+//! Vector algebra on `[f64; 3]` for the renderers, the planner and the scattering code, and the
+//! one mesh measure they share (its bounding sphere).
+
+use crate::types::Mesh;
+
+pub type V3 = [f64; 3];
+
+pub fn sub(a: V3, b: V3) -> V3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+pub fn add(a: V3, b: V3) -> V3 {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+pub fn mul(a: V3, s: f64) -> V3 {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+pub fn dot(a: V3, b: V3) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+pub fn normalize(a: V3) -> Option<V3> {
+    let l = dot(a, a).sqrt();
+    (l > 1e-300 && l.is_finite()).then(|| mul(a, 1.0 / l))
+}
+pub fn length(a: V3) -> f64 {
+    dot(a, a).sqrt()
+}
+
+/// The mesh's bounding sphere (centre, radius): centred on its bounding box, radius at least
+/// 10⁻⁹ so that a single point still has a scale.
+pub fn bounding_sphere(mesh: &Mesh) -> (V3, f64) {
+    let (lo, hi) = mesh.bounds();
+    let c = [0, 1, 2].map(|k| 0.5 * (lo[k] as f64 + hi[k] as f64));
+    let r = mesh
+        .positions
+        .iter()
+        .map(|q| length(sub(q.map(|v| v as f64), c)))
+        .fold(0.0, f64::max);
+    (c, r.max(1e-9))
+}

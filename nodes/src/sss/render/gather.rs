@@ -1,0 +1,159 @@
+//! The per-pixel sums Σ Rd·E·ΔA: each pixel's shading point, then the octree gather on the CPU
+//! or the brute-force gather in workgroup tiles on the GPU.
+
+use super::setup::Setup;
+use crate::geometry::{normalize, V3};
+use crate::progress::Counter;
+use crate::render::camera::Camera;
+use crate::render::layers::{self, Frag};
+use crate::types::Mesh;
+use mesoflow_runtime::NodeError;
+use rayon::prelude::*;
+
+/// The shading point of each pixel: position (world), normal, view direction.
+pub(super) struct View {
+    pub(super) width: usize,
+    pub(super) height: usize,
+    pub(super) hits: Vec<Option<(V3, V3, V3, Frag)>>,
+}
+
+pub(super) fn surface(mesh: &Mesh, f: &Frag) -> (V3, V3) {
+    let [i0, i1, i2] = mesh.corners(f.tri as usize);
+    let w = [1.0 - f.b1 - f.b2, f.b1, f.b2];
+    let mut p = [0.0; 3];
+    let mut n = [0.0; 3];
+    for (j, i) in [i0, i1, i2].into_iter().enumerate() {
+        for k in 0..3 {
+            p[k] += w[j] * mesh.positions[i][k] as f64;
+            n[k] += w[j] * mesh.normals[i][k] as f64;
+        }
+    }
+    (p, normalize(n).unwrap_or([0.0, 0.0, 1.0]))
+}
+
+impl View {
+    pub(super) fn new(mesh: &Mesh, camera: &Camera) -> View {
+        let l = layers::trace(mesh, camera, 1, &Counter::none());
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let hits = (0..w * h)
+            .map(|px| {
+                l.front[px].map(|f| {
+                    let (p, n) = surface(mesh, &f);
+                    let (_, d) = camera.ray((px % w) as u32, (px / w) as u32);
+                    (p, n, d, f)
+                })
+            })
+            .collect();
+        View {
+            width: w,
+            height: h,
+            hits,
+        }
+    }
+}
+
+/// Per pixel Σ Rd·E·ΔA beyond the near disc (without the disc term), and the mean terms. Pixels
+/// go in blocks of [`BLOCK`], counted on `watch`; a stopped watch skips the remaining blocks.
+pub(super) fn gather_cpu(
+    setup: &Setup,
+    view: &View,
+    threshold: f64,
+    watch: &Counter,
+) -> (Vec<[f64; 3]>, f64) {
+    const BLOCK: usize = 1024;
+    let unit = setup.unit;
+    watch.grow(view.hits.len().div_ceil(BLOCK) as u64);
+    let results: Vec<([f64; 3], usize)> = view
+        .hits
+        .par_chunks(BLOCK)
+        .flat_map_iter(|block| {
+            let stopped = watch.stopped();
+            let sums: Vec<([f64; 3], usize)> = block
+                .iter()
+                .map(|h| match h {
+                    Some((p, ..)) if !stopped => {
+                        setup
+                            .octree
+                            .gather(p.map(|v| v * unit), setup.near, threshold, &|r| {
+                                setup.table.at(r)
+                            })
+                    }
+                    _ => ([0.0; 3], 0),
+                })
+                .collect();
+            watch.add(1);
+            sums
+        })
+        .collect();
+    let hit = view.hits.iter().filter(|h| h.is_some()).count().max(1);
+    let terms = results.iter().map(|r| r.1).sum::<usize>() as f64 / hit as f64;
+    (results.into_iter().map(|r| r.0).collect(), terms)
+}
+
+pub(super) fn gather_gpu(
+    gpu: &mesoflow_runtime::Gpu,
+    setup: &Setup,
+    view: &View,
+) -> Result<Vec<[f64; 3]>, NodeError> {
+    let unit = setup.unit;
+    let n = setup.table.rd[0].len();
+    let mut input: Vec<f32> = Vec::new();
+    for c in 0..3 {
+        input.extend(setup.table.rd[c].iter().map(|&v| v as f32));
+    }
+    let shade_offset = input.len();
+    for h in &view.hits {
+        match h {
+            Some((p, ..)) => {
+                input.extend([p[0] * unit, p[1] * unit, p[2] * unit, 1.0].map(|v| v as f32))
+            }
+            None => input.extend([0.0f32; 4]),
+        }
+    }
+    let point_offset = input.len();
+    for s in &setup.sources {
+        input.extend(
+            [
+                s.p[0], s.p[1], s.p[2], 0.0, s.power[0], s.power[1], s.power[2], 0.0,
+            ]
+            .map(|v| v as f32),
+        );
+    }
+    let mut params = Vec::with_capacity(48);
+    for v in [
+        view.width as u32,
+        view.height as u32,
+        setup.sources.len() as u32,
+        n as u32,
+        shade_offset as u32,
+        point_offset as u32,
+        0,
+        0,
+    ] {
+        params.extend_from_slice(&v.to_le_bytes());
+    }
+    for v in [
+        setup.table.ln_r0 as f32,
+        setup.table.inv_h as f32,
+        (setup.near * setup.near) as f32,
+        0.0,
+    ] {
+        params.extend_from_slice(&v.to_le_bytes());
+    }
+    let out = crate::gpu::compute_2d(
+        gpu,
+        &crate::gpu::Pass2d {
+            label: "sss.render",
+            shader: include_str!("render.wgsl"),
+            entry: "main",
+            params: &params,
+            input: &input,
+            output_len: 4 * view.width * view.height,
+            grid: (view.width as u32, view.height as u32),
+        },
+    )?;
+    Ok(out
+        .chunks_exact(4)
+        .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64])
+        .collect())
+}

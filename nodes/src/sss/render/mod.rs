@@ -1,0 +1,267 @@
+//! `sss.render`: a translucent mesh lit by one light, rendered with a diffusion profile the way
+//! Jensen & Buhler 2002 do it:
+//!
+//! 1. irradiance sample points over the mesh (`points.rs`: blue noise), spaced a quarter of the
+//!    smallest effective mean free path 1/σtr — no denser than the profile varies — with a cap on
+//!    their number and a floor of 64 points per mesh;
+//! 2. the transmitted irradiance E = Ft(θi)·I·cos θi at each, with shadows from a shadow map;
+//! 3. per pixel, the exitance M(xo) = E(xo)·P(ρ₀) + Σ_{‖xi−xo‖ ≥ ρ₀} Rd(‖xi − xo‖)·E(xi)·ΔA,
+//!    where P(ρ₀) is the profile's energy inside the disc of one sample's size around xo (there
+//!    the irradiance is taken as xo's own: the profile's peak is never sampled by the sparse
+//!    points). The sum runs over an octree with the `threshold` criterion on the CPU
+//!    (`octree.rs`; 0 = brute force) and brute force in workgroup tiles on the GPU;
+//! 4. radiance L = C·Ft(θo)·M with C = 1/(π(1 − Fdr,outside)) (seed 004's normalisation, so a
+//!    diffuse exitance M leaves as M), plus, when asked, the single-scattering radiance of a
+//!    locally flat semi-infinite medium (Hanrahan & Krueger 1993): α·Ft(θi)·Ft(θo)/η²·
+//!    p(ωi′·ωo′)·I cos θi/(cos θi′ + cos θo′), with the refracted directions.
+//!
+//! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
+
+use crate::geometry::V3;
+use crate::progress::Counter;
+use crate::render::camera::{Camera, CameraParams};
+use crate::render::layers::Frag;
+use crate::render::light::{Light, LightParams};
+use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial};
+use mesoflow_graph::DevicePreference;
+use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+mod gather;
+mod setup;
+mod shading;
+#[cfg(test)]
+mod tests;
+
+use gather::{gather_cpu, gather_gpu, View};
+pub use setup::shadow_map;
+use setup::Setup;
+use shading::finish;
+
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// Pinhole or orthographic camera (as `render.mesh`).
+    pub camera: CameraParams,
+    /// The directional light.
+    pub light: LightParams,
+    /// Millimetres per world unit of the mesh (10⁻⁹ to 10⁹: beyond, areas in mm² overflow the
+    /// f32 the GPU sums in).
+    #[schemars(range(min = 1e-9, max = 1e9))]
+    pub mm_per_unit: f64,
+    /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
+    pub spacing: Option<f64>,
+    /// Most irradiance samples (the spacing grows to respect it, with a warning).
+    #[schemars(range(min = 64))]
+    pub max_points: u32,
+    /// Octree criterion ΔA/d² under which a node is one source (CPU); 0 = brute force.
+    #[schemars(range(min = 0.0))]
+    pub threshold: f64,
+    /// Add single scattering (needs the material's σs, g).
+    pub single_scattering: bool,
+    /// Shadow-map the light, so that surface not lit directly receives only light transmitted through the material.
+    pub shadows: bool,
+    /// Shadow map size in texels (square).
+    #[schemars(range(min = 1, max = 16384))]
+    pub shadow_resolution: u32,
+    /// Linear RGB where the mesh is not hit.
+    pub background: [f64; 3],
+    /// Seed of the sample points.
+    pub seed: u64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            camera: CameraParams::default(),
+            light: LightParams::default(),
+            mm_per_unit: 10.0,
+            spacing: None,
+            max_points: 200_000,
+            threshold: 0.05,
+            single_scattering: false,
+            shadows: true,
+            shadow_resolution: 1024,
+            background: [0.0; 3],
+            seed: 1,
+        }
+    }
+}
+
+/// Samples per mesh at least, whatever the spacing.
+const MIN_POINTS: f64 = 64.0;
+
+pub struct Render;
+
+impl Node for Render {
+    type Params = Params;
+
+    fn spec(&self) -> NodeSpec {
+        NodeSpec {
+            kind: "sss.render",
+            version: 1,
+            doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
+            device: DevicePreference::Gpu,
+            inputs: vec![
+                Port::input("mesh", Mesh::TYPE, "the translucent object"),
+                Port::input("material", ScatteringMaterial::TYPE, "its medium (η, and σs, g for single scattering)"),
+                Port::input("profile", DiffusionProfile::TYPE, "its diffusion profile"),
+            ],
+            outputs: vec![
+                Port::output("image", Image::TYPE, "linear HDR radiance"),
+                Port::output("exitance", Image::TYPE, "diffuse exitance M per pixel (transmitted flux per area)"),
+                Port::output("points", "Scalar", "irradiance samples used"),
+                Port::output("spacing", "Scalar", "their spacing, mm"),
+                Port::output("terms", "Scalar", "mean profile evaluations per pixel"),
+            ],
+            disk_cache: true,
+        }
+    }
+
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        check_params(p)
+    }
+
+    fn timings(&self) -> &'static [(&'static str, &'static str)] {
+        &[("gather_seconds", "wall time of the per-pixel sums, s")]
+    }
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let mesh = inputs.get::<Mesh>("mesh")?;
+        let material = inputs.get::<ScatteringMaterial>("material")?;
+        let profile = inputs.get::<DiffusionProfile>("profile")?;
+        let watch = Counter::new(ctx, 0);
+        let r = render_with(ctx.gpu(), mesh, material, profile, p, &Homogeneous, &watch)?;
+        for w in r.warnings {
+            ctx.warn(w);
+        }
+        ctx.timing("gather_seconds", r.gather_seconds);
+        Ok(Outputs::new()
+            .with("image", r.image)
+            .with("exitance", r.exitance)
+            .with("points", Scalar(r.points as f64))
+            .with("spacing", Scalar(r.spacing))
+            .with("terms", Scalar(r.terms)))
+    }
+}
+
+pub struct Rendered {
+    pub image: Image,
+    pub exitance: Image,
+    pub points: usize,
+    /// Sample spacing, mm.
+    pub spacing: f64,
+    /// Mean profile evaluations per covered pixel.
+    pub terms: f64,
+    pub gather_seconds: f64,
+    pub warnings: Vec<String>,
+}
+
+/// Spatially varying factors a caller may add to the homogeneous render (quasi-homogeneous
+/// materials): a multiplier of the irradiance entering at each sample (the mesostructure
+/// entrance function), and per pixel a multiplier of the diffuse exitance leaving (the exiting
+/// function) plus a local radiance to add (the local reflectance term). Directions are world
+/// unit vectors: towards the light at the sample, towards the viewer at the pixel.
+pub trait Weights: Sync {
+    fn entrance(&self, at: &Frag, to_light: V3) -> [f64; 3];
+    fn pixel(&self, px: usize, at: &Frag, to_viewer: V3) -> ([f64; 3], [f64; 3]);
+}
+
+/// No mesostructure: the homogeneous render.
+pub struct Homogeneous;
+
+impl Weights for Homogeneous {
+    fn entrance(&self, _: &Frag, _: V3) -> [f64; 3] {
+        [1.0; 3]
+    }
+    fn pixel(&self, _: usize, _: &Frag, _: V3) -> ([f64; 3], [f64; 3]) {
+        ([1.0; 3], [0.0; 3])
+    }
+}
+
+/// The render on the GPU when one is given, else on the CPU.
+pub fn render(
+    gpu: Option<&mesoflow_runtime::Gpu>,
+    mesh: &Mesh,
+    material: &ScatteringMaterial,
+    profile: &DiffusionProfile,
+    p: &Params,
+) -> Result<Rendered, NodeError> {
+    render_with(
+        gpu,
+        mesh,
+        material,
+        profile,
+        p,
+        &Homogeneous,
+        &Counter::none(),
+    )
+}
+
+/// `render` with entrance, exiting and local terms.
+pub fn render_with(
+    gpu: Option<&mesoflow_runtime::Gpu>,
+    mesh: &Mesh,
+    material: &ScatteringMaterial,
+    profile: &DiffusionProfile,
+    p: &Params,
+    weights: &dyn Weights,
+    watch: &Counter,
+) -> Result<Rendered, NodeError> {
+    mesh.check().map_err(|e| NodeError::input("mesh", e))?;
+    if profile.radii.len() < 2 {
+        return Err(NodeError::input("profile", "fewer than two radii"));
+    }
+    check_params(p)?;
+    let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+    let light = Light::new(&p.light)?;
+    let mut warnings = Vec::new();
+    let setup = Setup::new(mesh, material, profile, p, &light, weights, &mut warnings)?;
+    let view = View::new(mesh, &camera);
+    let gather_start = Instant::now();
+    let (sums, terms) = match gpu {
+        Some(gpu) => (gather_gpu(gpu, &setup, &view)?, setup.sources.len() as f64),
+        None => gather_cpu(&setup, &view, p.threshold, watch),
+    };
+    if watch.stopped() {
+        return Err(NodeError::Cancelled);
+    }
+    let gather_seconds = gather_start.elapsed().as_secs_f64();
+    let (image, exitance) = finish(&setup, &view, &sums, p, material, &light, weights);
+    if image
+        .data
+        .iter()
+        .chain(&exitance.data)
+        .any(|v| !v.is_finite())
+    {
+        return Err(NodeError::Failed(
+            "a pixel is not finite: a bug, please report it with the graph".into(),
+        ));
+    }
+    Ok(Rendered {
+        image,
+        exitance,
+        points: setup.sources.len(),
+        spacing: setup.spacing_mm,
+        terms,
+        gather_seconds,
+        warnings,
+    })
+}
+
+/// The parameters' own rules: validated before any work (`Node::check`) and again by
+/// [`render_with`] for callers that skip the engine.
+pub fn check_params(p: &Params) -> Result<(), NodeError> {
+    if !(p.mm_per_unit > 0.0 && p.mm_per_unit.is_finite()) {
+        return Err(NodeError::param("mm_per_unit", "must be a positive length"));
+    }
+    if !(p.threshold >= 0.0 && p.threshold.is_finite()) {
+        return Err(NodeError::param(
+            "threshold",
+            "must be finite and not negative",
+        ));
+    }
+    Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+    Light::new(&p.light).map(drop)
+}

@@ -1,0 +1,235 @@
+//! What every pixel shares: the Rd table, the near-disc energy, the irradiance samples as
+//! octree sources (with the shadow map that decides which are lit).
+
+use super::{Params, Weights, MIN_POINTS};
+use crate::geometry::{bounding_sphere, dot, normalize, sub, V3};
+use crate::progress::Counter;
+use crate::render::camera::Camera;
+use crate::render::layers::{self, Frag};
+use crate::render::light::Light;
+use crate::render::shade::{shadow_bias, ShadowMap};
+use crate::sss::fresnel;
+use crate::sss::octree::{Octree, Source};
+use crate::sss::points;
+use crate::types::{DiffusionProfile, Mesh, ScatteringMaterial};
+use mesoflow_runtime::NodeError;
+use rayon::prelude::*;
+
+/// The log-uniform Rd table both gathers use, and P(ρ) for the near disc.
+pub(super) struct Table {
+    pub(super) ln_r0: f64,
+    pub(super) inv_h: f64,
+    pub(super) rd: [Vec<f64>; 3],
+}
+
+impl Table {
+    pub(super) fn new(p: &DiffusionProfile) -> Table {
+        let n = p.radii.len();
+        let (a, b) = (p.radii[0].ln(), p.radii[n - 1].ln());
+        let h = (b - a) / (n - 1) as f64;
+        // Resampled through log-linear interpolation: exact for sss.profile's log-uniform grid.
+        let rd = [0, 1, 2].map(|c| {
+            (0..n)
+                .map(|i| crate::sss::compare::sample(p, c, (a + h * i as f64).exp()))
+                .collect()
+        });
+        Table {
+            ln_r0: a,
+            inv_h: 1.0 / h,
+            rd,
+        }
+    }
+
+    pub(super) fn at(&self, r: f64) -> [f64; 3] {
+        let f = (r.max(1e-300).ln() - self.ln_r0) * self.inv_h;
+        let n = self.rd[0].len();
+        if f <= 0.0 {
+            return [0, 1, 2].map(|c| self.rd[c][0]);
+        }
+        let i = f.floor() as usize;
+        if i + 1 >= n {
+            return [0.0; 3];
+        }
+        let t = f - i as f64;
+        [0, 1, 2].map(|c| self.rd[c][i] * (1.0 - t) + self.rd[c][i + 1] * t)
+    }
+}
+
+/// Energy of the profile inside radius ρ per channel: total × CDF(ρ), linear in ln r.
+pub(super) fn disc_energy(p: &DiffusionProfile, rho: f64) -> [f64; 3] {
+    let radii = &p.radii;
+    [0, 1, 2].map(|c| {
+        let cdf = &p.cdf[c];
+        let i = radii.partition_point(|&r| r < rho);
+        let f = if i == 0 {
+            // Inside the first radius Rd is flat: the disc's share grows as ρ².
+            cdf[0] * (rho / radii[0]).powi(2)
+        } else if i >= radii.len() {
+            1.0
+        } else {
+            let t = (rho.ln() - radii[i - 1].ln()) / (radii[i].ln() - radii[i - 1].ln());
+            cdf[i - 1] * (1.0 - t) + cdf[i] * t
+        };
+        p.total[c] * f
+    })
+}
+
+/// Everything the pixels share: samples as sources (mm, E·ΔA), the table, the near disc.
+pub(super) struct Setup {
+    pub(super) table: Table,
+    pub(super) sources: Vec<Source>,
+    pub(super) octree: Octree,
+    /// ρ₀ in mm and P(ρ₀) per channel.
+    pub(super) near: f64,
+    pub(super) near_energy: [f64; 3],
+    pub(super) spacing_mm: f64,
+    pub(super) shadow: Option<ShadowMap>,
+    pub(super) eta: f64,
+    /// mm per world unit.
+    pub(super) unit: f64,
+}
+
+/// Transmittance into the medium from outside at cosine `cos` (1 − Fr seen from outside).
+pub(super) fn transmit_in(cos: f64, eta: f64) -> f64 {
+    1.0 - fresnel::reflectance_inside(cos, 1.0 / eta)
+}
+
+impl Setup {
+    pub(super) fn new(
+        mesh: &Mesh,
+        material: &ScatteringMaterial,
+        profile: &DiffusionProfile,
+        p: &Params,
+        light: &Light,
+        weights: &dyn Weights,
+        warnings: &mut Vec<String>,
+    ) -> Result<Setup, NodeError> {
+        let unit = p.mm_per_unit;
+        let area_mm2 = points::area(mesh) * unit * unit;
+        if area_mm2 <= 0.0 {
+            return Err(NodeError::input("mesh", "has no area"));
+        }
+        let finite_mfp = profile.mfp.iter().copied().filter(|m| m.is_finite());
+        let wanted = match p.spacing {
+            Some(s) if s > 0.0 && s.is_finite() => s,
+            Some(s) => {
+                return Err(NodeError::param(
+                    "spacing",
+                    format!("{s} is not a positive length (mm)"),
+                ))
+            }
+            // Without absorption 1/σtr is infinite: a tenth of the grid's extent instead.
+            None => {
+                0.25 * finite_mfp
+                    .fold(f64::INFINITY, f64::min)
+                    .min(0.1 * profile.radii.last().copied().unwrap_or(1.0))
+            }
+        };
+        let mut spacing = wanted;
+        let cap = (area_mm2 / p.max_points.max(64) as f64).sqrt();
+        if spacing < cap {
+            warnings.push(format!(
+                "max_points {} caps the irradiance samples: spacing {cap:.4} mm instead of the {wanted:.4} mm the profile asks for",
+                p.max_points
+            ));
+            spacing = cap;
+        }
+        let floor = (area_mm2 / MIN_POINTS).sqrt();
+        if spacing > floor {
+            warnings.push(format!(
+                "the mesh ({area_mm2:.3} mm²) is small against the sample spacing {spacing:.4} mm: using {MIN_POINTS} samples at {floor:.4} mm"
+            ));
+            spacing = floor;
+        }
+        let mut samples = points::sample(mesh, spacing / unit, p.seed);
+        // Dart throwing lands near, not exactly at, the count the spacing implies.
+        let most = p.max_points.max(64) as usize;
+        if samples.points.len() > most {
+            samples.points.truncate(most);
+            samples.area = samples.total_area / most as f64;
+        }
+        let area_each = samples.area * unit * unit;
+        let shadow = if p.shadows {
+            Some(shadow_map(mesh, light, p.shadow_resolution)?)
+        } else {
+            None
+        };
+        let sources: Vec<Source> = samples
+            .points
+            .par_iter()
+            .map(|s| {
+                let e = irradiance(light, shadow.as_ref(), s.p, s.n, material.eta);
+                let f = if e > 0.0 {
+                    let at = Frag {
+                        t: 0.0,
+                        tri: s.tri,
+                        b1: s.b1,
+                        b2: s.b2,
+                    };
+                    weights.entrance(&at, light.at(s.p).0)
+                } else {
+                    [0.0; 3]
+                };
+                Source {
+                    p: s.p.map(|v| v * unit),
+                    power: f.map(|f| f * e * area_each),
+                }
+            })
+            .collect();
+        let octree = Octree::build(sources.clone(), area_each);
+        let near = 2.0 * area_each.sqrt();
+        Ok(Setup {
+            table: Table::new(profile),
+            sources,
+            octree,
+            near,
+            near_energy: disc_energy(profile, near),
+            spacing_mm: spacing,
+            shadow,
+            eta: material.eta,
+            unit,
+        })
+    }
+}
+
+/// Transmitted irradiance at a surface point with normal n (world units).
+pub(super) fn irradiance(light: &Light, shadow: Option<&ShadowMap>, x: V3, n: V3, eta: f64) -> f64 {
+    let (l, e) = light.at(x);
+    let cos = dot(n, l);
+    if cos <= 0.0 {
+        return 0.0;
+    }
+    if let Some(s) = shadow {
+        if !s.lit(x, cos) {
+            return 0.0;
+        }
+    }
+    e * cos * transmit_in(cos, eta)
+}
+
+/// Nearest-surface depth map from the light (one ray-cast layer).
+pub fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, NodeError> {
+    let (c, r) = bounding_sphere(mesh);
+    let (dir, from) = match light.position {
+        Some(lp) => (
+            normalize(sub(c, lp)).ok_or_else(|| {
+                NodeError::param("light", "the point light is at the mesh's centre")
+            })?,
+            Some(lp),
+        ),
+        None => (light.direction.map(|v| -v), None),
+    };
+    let camera =
+        Camera::enclosing(c, r, dir, from, size).map_err(|e| NodeError::param("light", e))?;
+    let l = layers::trace(mesh, &camera, 1, &Counter::none());
+    let depth = l
+        .front
+        .iter()
+        .map(|f| f.map_or(f64::INFINITY, |f| f.t))
+        .collect();
+    Ok(ShadowMap {
+        bias: shadow_bias(r, size),
+        camera,
+        depth,
+    })
+}

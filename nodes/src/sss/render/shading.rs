@@ -1,0 +1,102 @@
+//! From gathered sums to pixels: the near disc, Fresnel transmittance out and normalisation, the
+//! caller's exiting and local terms, and single scattering.
+
+use super::gather::View;
+use super::setup::{irradiance, transmit_in, Setup};
+use super::{Params, Weights};
+use crate::geometry::{dot, sub, V3};
+use crate::render::light::Light;
+use crate::render::shade::ShadowMap;
+use crate::sss::diffusion::henyey_greenstein;
+use crate::sss::fresnel;
+use crate::types::{Image, ScatteringMaterial};
+use std::f64::consts::PI;
+
+/// Radiance and exitance images from the gathered sums.
+pub(super) fn finish(
+    setup: &Setup,
+    view: &View,
+    sums: &[[f64; 3]],
+    p: &Params,
+    material: &ScatteringMaterial,
+    light: &Light,
+    weights: &dyn Weights,
+) -> (Image, Image) {
+    let eta = setup.eta;
+    let fdr_out = 2.0 * fresnel::moment(1, 1.0 / eta);
+    let c_norm = 1.0 / (PI * (1.0 - fdr_out));
+    let mut radiance = Vec::with_capacity(3 * sums.len());
+    let mut exitance = Vec::with_capacity(3 * sums.len());
+    for (px, (h, s)) in view.hits.iter().zip(sums).enumerate() {
+        let Some((x, n, d, frag)) = h else {
+            radiance.extend(p.background.map(|v| v as f32));
+            exitance.extend([0.0f32; 3]);
+            continue;
+        };
+        let e0 = irradiance(light, setup.shadow.as_ref(), *x, *n, eta);
+        // The near disc's light enters through the same entrance function as the samples'.
+        let f0 = if e0 > 0.0 {
+            weights.entrance(frag, light.at(*x).0)
+        } else {
+            [0.0; 3]
+        };
+        let m = [0, 1, 2].map(|c| s[c] + e0 * f0[c] * setup.near_energy[c]);
+        let v = d.map(|c| -c);
+        let cos_o = dot(*n, v).clamp(0.0, 1.0);
+        let ft_o = transmit_in(cos_o, eta);
+        let single = if p.single_scattering {
+            single_scattering(material, light, setup.shadow.as_ref(), *x, *n, v)
+        } else {
+            [0.0; 3]
+        };
+        let (exit, local) = weights.pixel(px, frag, v);
+        radiance.extend(
+            [0, 1, 2].map(|c| (c_norm * ft_o * m[c] * exit[c] + single[c] + local[c]) as f32),
+        );
+        exitance.extend(m.map(|v| v as f32));
+    }
+    let image = |data| Image {
+        width: view.width,
+        height: view.height,
+        channels: 3,
+        data,
+    };
+    (image(radiance), image(exitance))
+}
+
+/// Hanrahan & Krueger's single scattering of a flat semi-infinite medium, per channel.
+pub(super) fn single_scattering(
+    m: &ScatteringMaterial,
+    light: &Light,
+    shadow: Option<&ShadowMap>,
+    x: V3,
+    n: V3,
+    v: V3,
+) -> [f64; 3] {
+    let (l, e) = light.at(x);
+    let (cos_i, cos_o) = (dot(n, l), dot(n, v));
+    if cos_i <= 0.0 || cos_o <= 0.0 || shadow.is_some_and(|s| !s.lit(x, cos_i)) {
+        return [0.0; 3];
+    }
+    let eta = m.eta;
+    let (ti, to) = (transmit_in(cos_i, eta), transmit_in(cos_o, eta));
+    if ti <= 0.0 || to <= 0.0 {
+        return [0.0; 3];
+    }
+    let refracted = |c: f64| (1.0 - (1.0 - c * c) / (eta * eta)).max(0.0).sqrt();
+    let (mi, mo) = (refracted(cos_i), refracted(cos_o));
+    if mi + mo <= 0.0 {
+        return [0.0; 3];
+    }
+    // Tangential parts of l and v, scaled by 1/η inside; propagation down in, up out.
+    let lt = sub(l, n.map(|k| k * cos_i));
+    let vt = sub(v, n.map(|k| k * cos_o));
+    let cos = -dot(lt, vt) / (eta * eta) - mi * mo;
+    let phase = henyey_greenstein(cos.clamp(-1.0, 1.0), m.g);
+    [0, 1, 2].map(|c| {
+        let s = m.sigma_s_prime[c] / (1.0 - m.g);
+        let t = s + m.sigma_a[c];
+        let albedo = if t > 0.0 { s / t } else { 0.0 };
+        albedo * ti * to / (eta * eta) * phase * e * cos_i / (mi + mo)
+    })
+}
