@@ -12,7 +12,7 @@
 
 use mesoflow_nodes::mesh::primitive;
 use mesoflow_nodes::render::camera::CameraParams;
-use mesoflow_nodes::render::render_mesh::LightParams;
+use mesoflow_nodes::render::light::LightParams;
 use mesoflow_nodes::sss::material::{self, Preset};
 use mesoflow_nodes::sss::montecarlo;
 use mesoflow_nodes::sss::profile::{self, Model};
