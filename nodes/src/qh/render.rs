@@ -21,7 +21,8 @@
 use crate::geometry::{dot, V3};
 use crate::heightfield::raycast::Caster;
 use crate::progress::Counter;
-use crate::render::camera::CameraParams;
+use crate::render::camera::{Camera, CameraParams};
+use crate::render::footprint;
 use crate::render::layers::Frag;
 use crate::render::light::{Light, LightParams};
 use crate::render::material::{texel_taps, Material, Source};
@@ -127,7 +128,10 @@ impl Node for QhRender {
                 Port::output("image", Image::TYPE, "linear HDR radiance, local + global"),
                 Port::output("global", Image::TYPE, "the global term's diffuse exitance before fv"),
                 Port::output("points", "Scalar", "irradiance samples"),
-            ],
+            ]
+            .into_iter()
+            .chain(footprint::output_ports(true))
+            .collect(),
             disk_cache: true,
         }
     }
@@ -145,6 +149,10 @@ impl Node for QhRender {
             }
         } else {
             return Err(NodeError::input("lrf", "expected a Btf or a BtfBasis"));
+        };
+        let texels = match &source {
+            Source::Raw(b) => [b.width, b.height],
+            Source::Basis { basis, .. } => [basis.width, basis.height],
         };
         let lrf = Material::new(source);
         let terms = Terms {
@@ -165,10 +173,18 @@ impl Node for QhRender {
         for w in r.warnings {
             ctx.warn(w);
         }
-        Ok(Outputs::new()
+        // The render's own footprint has no texture; the LRF's texels give the texel count.
+        let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+        let texture = footprint::Texture {
+            tiling: p.tiling,
+            texels,
+        };
+        let fp = footprint::footprint(mesh, &camera, Some(texture), p.mm_per_unit);
+        let out = Outputs::new()
             .with("image", r.image)
             .with("global", r.exitance)
-            .with("points", Scalar(r.points as f64)))
+            .with("points", Scalar(r.points as f64));
+        Ok(footprint::with_metrics(out, fp.as_ref()))
     }
 }
 

@@ -8,6 +8,7 @@
 //! last, where the adapter supports timestamp queries.
 
 use super::camera::{Camera, CameraParams};
+use super::footprint;
 use super::layers;
 use super::light::{Light, LightParams};
 use super::material::{Material, MdfLookup, Source};
@@ -31,6 +32,9 @@ pub struct Params {
     pub light: LightParams,
     /// Texture tiles per unit of texture coordinate, [along u, along v].
     pub tiling: [f64; 2],
+    /// Millimetres per world unit, for the footprint metric in mm (10⁻⁹ to 10⁹).
+    #[schemars(range(min = 1e-9, max = 1e9))]
+    pub mm_per_unit: f64,
     /// Shell thickness in world units: the depth the MDF's shell is mapped onto.
     #[schemars(range(min = 0.0))]
     pub shell: f64,
@@ -61,6 +65,7 @@ impl Default for Params {
             camera: CameraParams::default(),
             light: LightParams::default(),
             tiling: [4.0, 4.0],
+            mm_per_unit: 10.0,
             shell: 0.05,
             shadows: false,
             shadow_resolution: 1024,
@@ -92,10 +97,14 @@ impl Node for RenderMesh {
                 Port::any_of("btf", &[Btf::TYPE, BtfBasis::TYPE], "material: raw BTF or PCA basis"),
                 Port::optional("mdf", Mdf::TYPE, "mesostructure distance function of the same tile"),
             ],
-            outputs: vec![
-                Port::output("image", Image::TYPE, "linear HDR RGB"),
-                Port::output("coverage", "Scalar", "fraction of pixels showing mesostructure"),
-            ],
+            outputs: [
+                vec![
+                    Port::output("image", Image::TYPE, "linear HDR RGB"),
+                    Port::output("coverage", "Scalar", "fraction of pixels showing mesostructure"),
+                ],
+                footprint::output_ports(true),
+            ]
+            .concat(),
             disk_cache: true,
         }
     }
@@ -120,6 +129,9 @@ impl Node for RenderMesh {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(NodeError::param(name, "must be finite and not negative"));
             }
+        }
+        if !(1e-9..=1e9).contains(&p.mm_per_unit) {
+            return Err(NodeError::param("mm_per_unit", "must be in [1e-9, 1e9] mm"));
         }
         // Peeled layers hold a front and a back fragment per pixel and layer (40 bytes each,
         // twice while they are binned per tile): about 180 bytes per pixel and layer, for the
@@ -164,6 +176,10 @@ impl Node for RenderMesh {
             }
         } else {
             return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
+        };
+        let texels = match &source {
+            Source::Raw(b) => [b.width, b.height],
+            Source::Basis { basis, .. } => [basis.width, basis.height],
         };
         let material = Material::new(source);
         let mdf = inputs.opt::<Mdf>("mdf")?.filter(|_| p.use_mdf);
@@ -210,7 +226,12 @@ impl Node for RenderMesh {
         if let Some(gpu_ms) = gpu_ms {
             ctx.timing("gpu_ms", gpu_ms);
         }
-        Ok(Outputs::new()
+        let texture = footprint::Texture {
+            tiling: p.tiling,
+            texels,
+        };
+        let fp = footprint::footprint(mesh, &camera, Some(texture), p.mm_per_unit);
+        let out = Outputs::new()
             .with(
                 "image",
                 Image {
@@ -220,7 +241,8 @@ impl Node for RenderMesh {
                     data,
                 },
             )
-            .with("coverage", Scalar(coverage)))
+            .with("coverage", Scalar(coverage));
+        Ok(footprint::with_metrics(out, fp.as_ref()))
     }
 }
 

@@ -20,6 +20,7 @@
 use crate::geometry::V3;
 use crate::progress::Counter;
 use crate::render::camera::{Camera, CameraParams};
+use crate::render::footprint::{self, Footprint};
 use crate::render::layers::Frag;
 use crate::render::light::{Light, LightParams};
 use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial};
@@ -101,7 +102,7 @@ impl Node for Render {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.render",
-            version: 1,
+            version: 2,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -115,7 +116,10 @@ impl Node for Render {
                 Port::output("points", "Scalar", "irradiance samples used"),
                 Port::output("spacing", "Scalar", "their spacing, mm"),
                 Port::output("terms", "Scalar", "mean profile evaluations per pixel"),
-            ],
+            ]
+            .into_iter()
+            .chain(footprint::output_ports(false))
+            .collect(),
             disk_cache: true,
         }
     }
@@ -137,12 +141,13 @@ impl Node for Render {
             ctx.warn(w);
         }
         ctx.timing("gather_seconds", r.gather_seconds);
-        Ok(Outputs::new()
+        let out = Outputs::new()
             .with("image", r.image)
             .with("exitance", r.exitance)
             .with("points", Scalar(r.points as f64))
             .with("spacing", Scalar(r.spacing))
-            .with("terms", Scalar(r.terms)))
+            .with("terms", Scalar(r.terms));
+        Ok(footprint::with_metrics(out, r.footprint.as_ref()))
     }
 }
 
@@ -155,6 +160,8 @@ pub struct Rendered {
     /// Mean profile evaluations per covered pixel.
     pub terms: f64,
     pub gather_seconds: f64,
+    /// What one pixel covers on the surface (no texture: texels are the caller's).
+    pub footprint: Option<Footprint>,
     pub warnings: Vec<String>,
 }
 
@@ -246,6 +253,7 @@ pub fn render_with(
         spacing: setup.spacing_mm,
         terms,
         gather_seconds,
+        footprint: footprint::footprint(mesh, &camera, None, p.mm_per_unit),
         warnings,
     })
 }
