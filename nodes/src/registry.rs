@@ -17,6 +17,7 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::normals::Normals);
     r.register(crate::image::compare::Compare);
     r.register(crate::image::flip::Flip);
+    r.register(crate::render::scene_footprint::SceneFootprint);
     r.register(crate::image::row::Row);
     r.register(crate::image::blur::Blur);
     r.register(crate::image::ramp::Ramp);

@@ -64,6 +64,9 @@ pub struct Params {
     pub background: [f64; 3],
     /// Seed of the sample points.
     pub seed: u64,
+    /// The global term: `diffusion` (gathered profile) or `brdf` (its total reflectance, local;
+    /// for views where light scatters less far than a pixel covers).
+    pub mode: sss_render::Mode,
 }
 
 impl Default for Params {
@@ -81,6 +84,7 @@ impl Default for Params {
             shadow_resolution: r.shadow_resolution,
             background: r.background,
             seed: r.seed,
+            mode: r.mode,
         }
     }
 }
@@ -100,6 +104,7 @@ impl Params {
             shadow_resolution: self.shadow_resolution,
             background: self.background,
             seed: self.seed,
+            mode: self.mode,
         }
     }
 }

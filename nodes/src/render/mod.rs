@@ -7,4 +7,5 @@ pub mod layers;
 pub mod light;
 pub mod material;
 pub mod render_mesh;
+pub mod scene_footprint;
 pub mod shade;

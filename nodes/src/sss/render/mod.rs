@@ -71,6 +71,21 @@ pub struct Params {
     pub background: [f64; 3],
     /// Seed of the sample points.
     pub seed: u64,
+    /// `diffusion` (default): the profile gathered over irradiance samples. `brdf`: the
+    /// profile's total reflectance as a diffuse lobe with the Fresnel transmittances in and out,
+    /// no samples and no gather: right where light scatters less far than a pixel covers.
+    pub mode: Mode,
+}
+
+/// How subsurface transport is rendered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Mode {
+    /// Jensen & Buhler's gather of the diffusion profile.
+    #[default]
+    Diffusion,
+    /// The profile's total diffuse reflectance, local to each point.
+    Brdf,
 }
 
 impl Default for Params {
@@ -87,6 +102,7 @@ impl Default for Params {
             shadow_resolution: 1024,
             background: [0.0; 3],
             seed: 1,
+            mode: Mode::Diffusion,
         }
     }
 }
@@ -114,7 +130,7 @@ impl Node for Render {
                 Port::output("image", Image::TYPE, "linear HDR radiance"),
                 Port::output("exitance", Image::TYPE, "diffuse exitance M per pixel (transmitted flux per area)"),
                 Port::output("points", "Scalar", "irradiance samples used"),
-                Port::output("spacing", "Scalar", "their spacing, mm"),
+                Port::optional_output("spacing", "Scalar", "their spacing, mm (absent in `brdf` mode: no samples)"),
                 Port::output("terms", "Scalar", "mean profile evaluations per pixel"),
             ]
             .into_iter()
@@ -145,8 +161,11 @@ impl Node for Render {
             .with("image", r.image)
             .with("exitance", r.exitance)
             .with("points", Scalar(r.points as f64))
-            .with("spacing", Scalar(r.spacing))
             .with("terms", Scalar(r.terms));
+        let out = match r.spacing {
+            Some(s) => out.with("spacing", Scalar(s)),
+            None => out,
+        };
         Ok(footprint::with_metrics(out, r.footprint.as_ref()))
     }
 }
@@ -155,8 +174,8 @@ pub struct Rendered {
     pub image: Image,
     pub exitance: Image,
     pub points: usize,
-    /// Sample spacing, mm.
-    pub spacing: f64,
+    /// Sample spacing, mm (`None` in `brdf` mode).
+    pub spacing: Option<f64>,
     /// Mean profile evaluations per covered pixel.
     pub terms: f64,
     pub gather_seconds: f64,
@@ -224,12 +243,18 @@ pub fn render_with(
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     let light = Light::new(&p.light)?;
     let mut warnings = Vec::new();
-    let setup = Setup::new(mesh, material, profile, p, &light, weights, &mut warnings)?;
+    let setup = match p.mode {
+        Mode::Diffusion => Setup::new(mesh, material, profile, p, &light, weights, &mut warnings)?,
+        Mode::Brdf => Setup::local(mesh, material, profile, p, &light)?,
+    };
     let view = View::new(mesh, &camera);
     let gather_start = Instant::now();
-    let (sums, terms) = match gpu {
-        Some(gpu) => (gather_gpu(gpu, &setup, &view)?, setup.sources.len() as f64),
-        None => gather_cpu(&setup, &view, p.threshold, watch),
+    let (sums, terms) = match (p.mode, gpu) {
+        (Mode::Brdf, _) => (vec![[0.0; 3]; view.hits.len()], 0.0),
+        (Mode::Diffusion, Some(gpu)) => {
+            (gather_gpu(gpu, &setup, &view)?, setup.sources.len() as f64)
+        }
+        (Mode::Diffusion, None) => gather_cpu(&setup, &view, p.threshold, watch),
     };
     if watch.stopped() {
         return Err(NodeError::Cancelled);
@@ -250,7 +275,7 @@ pub fn render_with(
         image,
         exitance,
         points: setup.sources.len(),
-        spacing: setup.spacing_mm,
+        spacing: (p.mode == Mode::Diffusion).then_some(setup.spacing_mm),
         terms,
         gather_seconds,
         footprint: footprint::footprint(mesh, &camera, None, p.mm_per_unit),

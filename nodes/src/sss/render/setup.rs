@@ -192,6 +192,35 @@ impl Setup {
     }
 }
 
+impl Setup {
+    /// The `brdf` mode's setup: no samples; the whole profile's energy is the "near disc", so
+    /// each pixel's exitance is its own transmitted irradiance times the total reflectance.
+    pub(super) fn local(
+        mesh: &Mesh,
+        material: &ScatteringMaterial,
+        profile: &DiffusionProfile,
+        p: &Params,
+        light: &Light,
+    ) -> Result<Setup, NodeError> {
+        let shadow = if p.shadows {
+            Some(shadow_map(mesh, light, p.shadow_resolution)?)
+        } else {
+            None
+        };
+        Ok(Setup {
+            table: Table::new(profile),
+            sources: Vec::new(),
+            octree: Octree::build(Vec::new(), 0.0),
+            near: f64::INFINITY,
+            near_energy: profile.total,
+            spacing_mm: 0.0,
+            shadow,
+            eta: material.eta,
+            unit: p.mm_per_unit,
+        })
+    }
+}
+
 /// Transmitted irradiance at a surface point with normal n (world units).
 pub(super) fn irradiance(light: &Light, shadow: Option<&ShadowMap>, x: V3, n: V3, eta: f64) -> f64 {
     let (l, e) = light.at(x);

@@ -83,7 +83,7 @@ fn a_large_uniformly_lit_slab_gives_back_the_total_reflectance() {
             / 144.0;
         let ratio = mean / (et * profile.total[c]);
         eprintln!(
-            "channel {c}: M/(E·total) = {ratio:.4} with {} samples at {:.3} mm",
+            "channel {c}: M/(E·total) = {ratio:.4} with {} samples at {:?} mm",
             r.points, r.spacing
         );
         assert!((ratio - 1.0).abs() < 0.02, "channel {c}: {ratio}");
@@ -258,4 +258,66 @@ fn tiny_meshes_huge_and_tiny_mean_free_paths_stay_finite() {
         },
     );
     assert!(bad.is_err_and(|e| e.to_string().contains("spacing")));
+}
+
+#[test]
+fn brdf_mode_is_the_total_reflectance_with_fresnel_in_and_out() {
+    // The slab above in `brdf` mode: exitance = Ft(0°)·I·total exactly, with Ft(0°) from the
+    // normal-incidence Fresnel closed form 1 − ((η−1)/(η+1))²; radiance = exitance·Ft(0°)/
+    // (π(1 − Fdr)). No samples are taken. On the uniformly lit slab the diffusion gather gives
+    // the same exitance (the profile integrates to its total), within the 2% of the test above.
+    let m = medium();
+    let profile = profile_of(&m);
+    let p = Params {
+        camera: top_view(0.2),
+        light: LightParams {
+            direction: [0.0, 0.0, 1.0],
+            position: None,
+            intensity: 2.0,
+        },
+        shadows: false,
+        threshold: 0.0,
+        mode: Mode::Brdf,
+        ..Default::default()
+    };
+    let slab = mesh(Shape::Plane, 12.0);
+    let local = render(None, &slab, &m, &profile, &p).unwrap();
+    assert_eq!(local.points, 0);
+    assert!(local.spacing.is_none());
+    let ft0 = 1.0 - ((1.3f64 - 1.0) / (1.3 + 1.0)).powi(2);
+    let gathered = render(
+        None,
+        &slab,
+        &m,
+        &profile,
+        &Params {
+            mode: Mode::Diffusion,
+            ..p.clone()
+        },
+    )
+    .unwrap();
+    for c in 0..3 {
+        let want = ft0 * 2.0 * profile.total[c];
+        for px in local.exitance.data.chunks(3) {
+            assert!(
+                (px[c] as f64 - want).abs() < 1e-5 * want,
+                "{} vs {want}",
+                px[c]
+            );
+        }
+        let mean = |img: &Image| {
+            img.data
+                .iter()
+                .skip(c)
+                .step_by(3)
+                .map(|v| *v as f64)
+                .sum::<f64>()
+                / 144.0
+        };
+        let (a, b) = (mean(&local.exitance), mean(&gathered.exitance));
+        assert!(
+            (a - b).abs() < 0.02 * a,
+            "channel {c}: brdf {a} vs gather {b}"
+        );
+    }
 }

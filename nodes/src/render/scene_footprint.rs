@@ -1,0 +1,166 @@
+//! `scene.footprint`: what a renderer's camera shows of a mesh, without rendering — the nearest
+//! visible distance, the finest pixel footprint (mm, widened at grazing angles), the texels per
+//! pixel of a connected BTF, the shell's thickness in pixels, the longest effective mean free
+//! path of a connected diffusion profile in pixels, and with a viewer its pixels per degree.
+//! The planner runs it to decide each stage's model; users run it to see a view's scale.
+
+use super::camera::{Camera, CameraParams};
+use super::footprint::{footprint, Texture};
+use crate::image::flip::Viewer;
+use crate::types::{Btf, BtfBasis, DiffusionProfile, Mesh};
+use mesoflow_graph::DevicePreference;
+use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct Params {
+    /// The renderer's camera.
+    pub camera: CameraParams,
+    /// Texture tiles per unit of texture coordinate, [u, v] (as the renderer's).
+    pub tiling: [f64; 2],
+    /// Mesostructure shell thickness, world units (as `render.mesh`'s).
+    #[schemars(range(min = 0.0))]
+    pub shell: f64,
+    /// Millimetres per world unit (10⁻⁹ to 10⁹).
+    #[schemars(range(min = 1e-9, max = 1e9))]
+    pub mm_per_unit: f64,
+    /// Who looks at the image: gives the pixels per degree output.
+    pub viewer: Option<Viewer>,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            camera: CameraParams::default(),
+            tiling: [4.0, 4.0],
+            shell: 0.0,
+            mm_per_unit: 10.0,
+            viewer: None,
+        }
+    }
+}
+
+pub struct SceneFootprint;
+
+impl Node for SceneFootprint {
+    type Params = Params;
+
+    fn spec(&self) -> NodeSpec {
+        NodeSpec {
+            kind: "scene.footprint",
+            version: 1,
+            doc: "What a camera shows of a mesh, without rendering: nearest distance, finest pixel footprint (mm), texels per pixel of a BTF, shell thickness and mean free path in pixels, viewer's pixels per degree.",
+            device: DevicePreference::Cpu,
+            inputs: vec![
+                Port::input("mesh", Mesh::TYPE, "the rendered mesh"),
+                Port {
+                    required: false,
+                    ..Port::any_of("btf", &[Btf::TYPE, BtfBasis::TYPE], "its material, for the texel count of a tile")
+                },
+                Port::optional("profile", DiffusionProfile::TYPE, "its diffusion profile, for the mean free path"),
+            ],
+            outputs: vec![
+                Port::optional_output("nearest_distance", "Scalar", "distance to the nearest visible surface, world units"),
+                Port::optional_output("pixel_footprint_mm", "Scalar", "finest footprint of one pixel on the visible surface, mm"),
+                Port::optional_output("median_footprint_mm", "Scalar", "median footprint over the visible surface, mm"),
+                Port::optional_output("texels_per_pixel", "Scalar", "texels one pixel spans where the texture is seen finest (with `btf`)"),
+                Port::optional_output("shell_pixels", "Scalar", "the shell's thickness in pixels where it is seen largest"),
+                Port::optional_output("mfp_mm", "Scalar", "longest effective mean free path 1/σtr over the channels, mm (with `profile`; the 99.9% energy radius where there is no absorption)"),
+                Port::optional_output("mfp_pixels", "Scalar", "that length over the finest pixel footprint"),
+                Port::optional_output("ppd", "Scalar", "the viewer's pixels per degree (with `viewer`)"),
+                Port::output("visible_fraction", "Scalar", "fraction of the sampled rays that hit the mesh"),
+            ],
+            disk_cache: false,
+        }
+    }
+
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+        if !(1e-9..=1e9).contains(&p.mm_per_unit) {
+            return Err(NodeError::param("mm_per_unit", "must be in [1e-9, 1e9] mm"));
+        }
+        if !(p.shell >= 0.0 && p.shell.is_finite()) {
+            return Err(NodeError::param("shell", "must be finite and not negative"));
+        }
+        if p.tiling.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
+            return Err(NodeError::param("tiling", "must be positive"));
+        }
+        if let Some(v) = p.viewer {
+            if !(v.distance_m > 0.0
+                && v.width_m > 0.0
+                && v.distance_m.is_finite()
+                && v.width_m.is_finite())
+            {
+                return Err(NodeError::param(
+                    "viewer",
+                    "distance_m and width_m must be positive",
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let mesh = inputs.get::<Mesh>("mesh")?;
+        mesh.check().map_err(|e| NodeError::input("mesh", e))?;
+        let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
+        let texels = match inputs.value("btf").ok() {
+            None => None,
+            Some(v) => {
+                if let Some(b) = v.as_any().downcast_ref::<Btf>() {
+                    Some([b.width, b.height])
+                } else if let Some(b) = v.as_any().downcast_ref::<BtfBasis>() {
+                    Some([b.width, b.height])
+                } else {
+                    return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
+                }
+            }
+        };
+        let texture = texels.map(|texels| Texture {
+            tiling: p.tiling,
+            texels,
+        });
+        let profile = inputs.opt::<DiffusionProfile>("profile")?;
+        let mfp_mm = profile.map(scattering_length);
+        let fp = footprint(mesh, &camera, texture, p.mm_per_unit);
+        let mut out = Outputs::new().with(
+            "visible_fraction",
+            Scalar(fp.map_or(0.0, |f| f.visible_samples as f64 / f.samples.max(1) as f64)),
+        );
+        if let Some(f) = fp {
+            out = out
+                .with("nearest_distance", Scalar(f.nearest_distance))
+                .with("pixel_footprint_mm", Scalar(f.pixel_mm))
+                .with(
+                    "median_footprint_mm",
+                    Scalar(f.median_pixel_world * p.mm_per_unit),
+                )
+                .with("shell_pixels", Scalar(f.pixels(p.shell)));
+            if let Some(t) = f.texels_per_pixel {
+                out = out.with("texels_per_pixel", Scalar(t));
+            }
+            if let Some(l) = mfp_mm {
+                out = out.with("mfp_pixels", Scalar(l / f.pixel_mm));
+            }
+        }
+        if let Some(l) = mfp_mm {
+            out = out.with("mfp_mm", Scalar(l));
+        }
+        if let Some(v) = p.viewer {
+            out = out.with("ppd", Scalar(v.ppd(p.camera.resolution[0] as usize)));
+        }
+        Ok(out)
+    }
+}
+
+/// The longest effective mean free path over the channels, mm; where a channel has no
+/// absorption (1/σtr infinite) the radius holding 99.9% of the profile's energy stands in.
+pub fn scattering_length(p: &DiffusionProfile) -> f64 {
+    let extent = p.radii.last().copied().unwrap_or(0.0);
+    p.mfp
+        .iter()
+        .map(|m| if m.is_finite() { *m } else { extent })
+        .fold(0.0, f64::max)
+}
