@@ -53,6 +53,9 @@ pub enum Command {
     },
     /// Run a graph over a grid of parameter values; write sweep.csv and charts.
     Sweep(SweepArgs),
+    /// Choose each stage's cheapest model for a render's view and a FLIP budget; write the
+    /// planned graph and plan.json.
+    Plan(PlanArgs),
     /// Inspect or clear the disk cache.
     Cache {
         #[command(subcommand)]
@@ -141,6 +144,29 @@ pub struct SweepArgs {
     /// Output folder (default: out/<graph name>-sweep/).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    pub device: DeviceArg,
+    #[arg(long, short)]
+    pub quiet: bool,
+    #[command(flatten)]
+    pub cache: CacheOptions,
+}
+
+#[derive(Args)]
+pub struct PlanArgs {
+    pub graph: PathBuf,
+    /// The render node to plan (render.mesh, sss.render or qh.render).
+    #[arg(long, value_name = "ID")]
+    pub render: String,
+    /// The error the view may show: flip=B, the mean FLIP over the object's pixels (0 = the full
+    /// model; 1 or more = the cheapest).
+    #[arg(long, value_name = "flip=B")]
+    pub budget: String,
+    #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
+    pub set: Vec<String>,
+    /// The planned graph (default: <graph>.planned.json beside the graph; plan.json goes beside it).
+    #[arg(short = 'o', long = "output", value_name = "OUT.json")]
+    pub output: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
     #[arg(long, short)]

@@ -10,6 +10,7 @@ mod env;
 mod exit;
 mod interrupt;
 mod load;
+mod plan;
 mod progress;
 
 use clap::Parser;

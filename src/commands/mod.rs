@@ -2,6 +2,7 @@
 
 mod cache;
 mod info;
+mod plan;
 mod run;
 mod sweep;
 mod watch;
@@ -21,6 +22,7 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
             max_runs,
         } => watch::watch(&run, interval_ms, max_runs),
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::Plan(args) => plan::plan(&args),
         Command::Cache {
             action: CacheAction::Stats(a),
         } => cache::stats(&a),

@@ -46,6 +46,9 @@ pub struct Footprint {
     /// The median footprint over the visible samples, world units: what most of the object's
     /// pixels cover.
     pub median_pixel_world: f64,
+    /// Fraction of the visible samples that see a triangle from behind (its winding's normal
+    /// points away from the viewer): near 1 when the camera is inside a closed mesh.
+    pub backfacing_fraction: f64,
 }
 
 impl Footprint {
@@ -75,6 +78,7 @@ pub fn footprint(
     let mut nearest = f64::INFINITY;
     let mut finest_texels = f64::INFINITY;
     let mut all = Vec::new();
+    let mut backfacing = 0usize;
     let samples = l.width * l.height;
     for y in 0..l.height {
         for x in 0..l.width {
@@ -83,6 +87,7 @@ pub fn footprint(
             };
             let (_, dir) = coarse.ray(x as u32, y as u32);
             let (n, world_per_texel) = surface_scale(mesh, &f, texture);
+            backfacing += (dot(n, dir) > 0.0) as usize;
             let cos = dot(n, dir).abs().max(1.0 / MAX_WIDENING);
             let across = if camera.orthographic {
                 pixel
@@ -110,6 +115,7 @@ pub fn footprint(
         pixel_mm: finest * mm_per_unit,
         texels_per_pixel: finest_texels.is_finite().then_some(finest_texels),
         median_pixel_world: all[all.len() / 2],
+        backfacing_fraction: backfacing as f64 / all.len() as f64,
     })
 }
 

@@ -69,6 +69,9 @@ impl Node for SceneFootprint {
                 Port::optional_output("shell_pixels", "Scalar", "the shell's thickness in pixels where it is seen largest"),
                 Port::optional_output("mfp_mm", "Scalar", "longest effective mean free path 1/σtr over the channels, mm (with `profile`; the 99.9% energy radius where there is no absorption)"),
                 Port::optional_output("mfp_pixels", "Scalar", "that length over the finest pixel footprint"),
+                Port::optional_output("mfp_min_mm", "Scalar", "shortest effective mean free path over the channels, mm (with `profile`)"),
+                Port::optional_output("tile_texels", "Scalar", "texels along the shorter side of the BTF's tile (with `btf`)"),
+                Port::optional_output("backfacing_fraction", "Scalar", "fraction of the visible samples seeing a triangle from behind: near 1 with the camera inside a closed mesh"),
                 Port::optional_output("ppd", "Scalar", "the viewer's pixels per degree (with `viewer`)"),
                 Port::output("visible_fraction", "Scalar", "fraction of the sampled rays that hit the mesh"),
             ],
@@ -137,7 +140,8 @@ impl Node for SceneFootprint {
                     "median_footprint_mm",
                     Scalar(f.median_pixel_world * p.mm_per_unit),
                 )
-                .with("shell_pixels", Scalar(f.pixels(p.shell)));
+                .with("shell_pixels", Scalar(f.pixels(p.shell)))
+                .with("backfacing_fraction", Scalar(f.backfacing_fraction));
             if let Some(t) = f.texels_per_pixel {
                 out = out.with("texels_per_pixel", Scalar(t));
             }
@@ -147,6 +151,14 @@ impl Node for SceneFootprint {
         }
         if let Some(l) = mfp_mm {
             out = out.with("mfp_mm", Scalar(l));
+        }
+        if let Some(l) = profile.map(|p| p.mfp.iter().copied().fold(f64::INFINITY, f64::min)) {
+            if l.is_finite() {
+                out = out.with("mfp_min_mm", Scalar(l));
+            }
+        }
+        if let Some([w, h]) = texels {
+            out = out.with("tile_texels", Scalar(w.min(h) as f64));
         }
         if let Some(v) = p.viewer {
             out = out.with("ppd", Scalar(v.ppd(p.camera.resolution[0] as usize)));

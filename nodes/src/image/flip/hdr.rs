@@ -44,14 +44,20 @@ impl Exposures {
     /// From the reference alone. A median luminance of 0 (a render mostly background) is taken
     /// as f32's epsilon, as NVIDIA's implementation does, so the range reaches the darkest lit
     /// pixels. A black reference, which that implementation refuses, gets the single exposure 0.
-    pub fn from_reference(reference: &Rgb) -> Exposures {
+    ///
+    /// With `selected`, only those pixels' luminances set the range: the pixels a mask keeps,
+    /// so that a black background does not push the median to 0 and the range to +24 stops,
+    /// exposing shadows no viewer of the object would see.
+    pub fn from_reference(reference: &Rgb, selected: Option<&[bool]>) -> Exposures {
         let n = reference.width * reference.height;
         let mut lum: Vec<f64> = (0..n)
+            .filter(|i| selected.is_none_or(|s| s[*i]))
             .map(|i| luminance([0, 1, 2].map(|c| reference.planes[c][i] as f64)))
             .collect();
+        let n = lum.len();
         lum.sort_by(f64::total_cmp);
         let hi = lum.last().copied().unwrap_or(0.0);
-        if hi <= 0.0 {
+        if n == 0 || hi <= 0.0 {
             return Exposures {
                 start: 0.0,
                 stop: 0.0,
@@ -91,14 +97,16 @@ fn exposed(img: &Rgb, stops: f64) -> Rgb {
     }
 }
 
-/// Per-pixel HDR-FLIP error in [0, 1], and the exposures used. `progress` is told after each.
+/// Per-pixel HDR-FLIP error in [0, 1], and the exposures used (from the `selected` pixels of
+/// the reference, or all). `progress` is told after each exposure.
 pub fn hdr_flip_map(
     reference: &Rgb,
     test: &Rgb,
     ppd: f64,
+    selected: Option<&[bool]>,
     mut progress: impl FnMut(usize, usize),
 ) -> (Vec<f32>, Exposures) {
-    let ex = Exposures::from_reference(reference);
+    let ex = Exposures::from_reference(reference, selected);
     let mut out = vec![0f32; reference.width * reference.height];
     let stops = ex.stops();
     for (k, c) in stops.iter().enumerate() {
@@ -131,7 +139,7 @@ mod tests {
             height: 1,
             planes: [0, 1, 2].map(|_| vec![1.0, 4.0, 1.0, 4.0]),
         };
-        let ex = Exposures::from_reference(&img);
+        let ex = Exposures::from_reference(&img, None);
         let x = tone_map_inverse(TARGET);
         assert!((ex.start - (x / 4.0).log2()).abs() < 1e-9);
         assert!((ex.stop - (x / 4.0).log2()).abs() < 1e-9);
@@ -150,7 +158,7 @@ mod tests {
             height: 3,
             planes: [0, 1, 2].map(|_| vec![0.5; 9]),
         };
-        let (m, ex) = hdr_flip_map(&black, &grey, 67.0, |_, _| {});
+        let (m, ex) = hdr_flip_map(&black, &grey, 67.0, None, |_, _| {});
         assert_eq!(ex.count, 1);
         assert!(m.iter().all(|v| v.is_finite() && *v > 0.0));
     }

@@ -60,6 +60,9 @@ pub struct Params {
     pub viewer: Option<Viewer>,
     /// `hdr` (default: mesoflow images are linear radiance) or `ldr` (display values in [0, 1]).
     pub mode: Mode,
+    /// Measure only the pixels where either image is not black (mesoflow renders an object on a
+    /// black background, which would dilute the mean); with `mask`, the pixels both select.
+    pub object_only: bool,
 }
 
 impl Params {
@@ -80,7 +83,7 @@ impl Node for Flip {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "image.flip",
-            version: 1,
+            version: 2,
             doc: "FLIP perceived difference (LDR-FLIP, or HDR-FLIP for linear renders) at the viewer's pixels per degree: mean, p95 and max over the image or a mask, the error map and a magma preview.",
             device: DevicePreference::Cpu,
             inputs: vec![
@@ -141,7 +144,7 @@ impl Node for Flip {
         let e = evaluate(r, t, mask, p, |k, n| ctx.progress(k as u64, n as u64))?;
         if let Some(ex) = e.exposures.as_ref().filter(|ex| ex.count > 20) {
             ctx.warn(format!(
-                "HDR-FLIP took {} exposures ({:.1} to {:.1} stops): the reference's median luminance is near 0 (mostly background); a mask does not change the exposure range",
+                "HDR-FLIP took {} exposures ({:.1} to {:.1} stops): the reference's median luminance is near 0 (mostly background); `object_only` or a mask sets the range from the object's pixels",
                 ex.count, ex.start, ex.stop
             ));
         }
@@ -196,6 +199,17 @@ pub fn evaluate(
     }
     let clip = p.mode == Mode::Ldr;
     let (rr, tt) = (to_rgb("reference", r, clip)?, to_rgb("test", t, clip)?);
+    let lit = |img: &Image, i: usize| {
+        let c = img.channels.max(1);
+        img.data[i * c..(i + 1) * c].iter().any(|v| *v != 0.0)
+    };
+    let keep: Vec<bool> = (0..r.width * r.height)
+        .map(|i| {
+            mask.is_none_or(|m| m.data[i * m.channels.max(1)] > 0.0)
+                && (!p.object_only || lit(r, i) || lit(t, i))
+        })
+        .collect();
+    let restricted = mask.is_some() || p.object_only;
     let (map, exposures) = match p.mode {
         Mode::Ldr => {
             let mut progress = progress;
@@ -204,21 +218,26 @@ pub fn evaluate(
             (m, None)
         }
         Mode::Hdr => {
-            let (m, ex) = hdr::hdr_flip_map(&rr, &tt, ppd, progress);
+            let sel = restricted.then_some(keep.as_slice());
+            let (m, ex) = hdr::hdr_flip_map(&rr, &tt, ppd, sel, progress);
             (m, Some(ex))
         }
     };
-    let selected: Vec<f32> = match mask {
-        None => map.clone(),
-        Some(m) => map
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| m.data[i * m.channels.max(1)] > 0.0)
-            .map(|(_, v)| *v)
-            .collect(),
-    };
-    let stats = Stats::of(&selected).ok_or_else(|| {
-        NodeError::input("mask", "selects no pixel (first channel is 0 everywhere)")
+    let selected: Vec<f32> = map
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(v, _)| *v)
+        .collect();
+    let stats = Stats::of(&selected).ok_or_else(|| match mask {
+        Some(_) => NodeError::input(
+            "mask",
+            "selects no pixel (first channel is 0 everywhere, or nothing is seen there)",
+        ),
+        None => NodeError::param(
+            "object_only",
+            "both images are black everywhere: no object pixel to measure",
+        ),
     })?;
     Ok(Evaluation {
         map,
@@ -324,6 +343,41 @@ fn magma(v: f32) -> [f32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn object_only_ignores_the_black_background() {
+        // A 4×1 image whose object is the first pixel: with `object_only` the statistics are
+        // that pixel's error alone; without, the mean of all four (the filters spread some error
+        // onto the black pixels, so the two differ but neither is what the other measures).
+        let r = Image {
+            width: 4,
+            height: 1,
+            channels: 1,
+            data: vec![0.5, 0.0, 0.0, 0.0],
+        };
+        let t = Image {
+            data: vec![0.25, 0.0, 0.0, 0.0],
+            ..r.clone()
+        };
+        let all = evaluate(&r, &t, None, &Params::default(), |_, _| {}).unwrap();
+        let obj = Params {
+            object_only: true,
+            ..Default::default()
+        };
+        let only = evaluate(&r, &t, None, &obj, |_, _| {}).unwrap();
+        assert_eq!(only.stats.mean, all.map[0] as f64);
+        assert_eq!(only.stats.max, all.map[0] as f64);
+        let mean4 = all.map.iter().map(|v| *v as f64).sum::<f64>() / 4.0;
+        assert!((all.stats.mean - mean4).abs() < 1e-12);
+        let black = Image {
+            data: vec![0.0; 4],
+            ..r.clone()
+        };
+        assert!(evaluate(&black, &black, None, &obj, |_, _| {})
+            .unwrap_err()
+            .to_string()
+            .contains("object_only"));
+    }
 
     #[test]
     fn percentile_matches_numpy() {

@@ -1,0 +1,262 @@
+//! The planner's proof (`graphs/plan_verify.json`): for each camera distance and FLIP budget,
+//! plan the BTF view and the translucent view with `mesoflow plan`, run the planned graph, and
+//! record the measured FLIP of planned against full (over the pixels either shows the object
+//! in) and the render times. Writes `sweep.csv` and the charts `flip_vs_distance` and
+//! `speedup_vs_distance` (SVG and PNG) to the output folder and prints the misses.
+//!
+//! `cargo bench --bench plan_verify -- [--out DIR] [--width W]`
+
+#[path = "common/args.rs"]
+mod args;
+#[allow(dead_code)]
+#[path = "../src/chart.rs"]
+mod chart;
+
+use serde_json::Value;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const DISTANCES: [f64; 7] = [2.0, 3.0, 4.5, 7.0, 11.0, 17.0, 26.0];
+const BUDGETS: [f64; 3] = [0.02, 0.05, 0.1];
+const OBJECTS: [(&str, &str, &str); 2] = [
+    ("btf", "btf_full", "btf_view"),
+    ("sss", "sss_full", "sss_view"),
+];
+
+fn mesoflow(args: &[&str]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(args)
+        .output()
+        .expect("run mesoflow");
+    assert!(
+        out.status.success(),
+        "mesoflow {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn node<'a>(report: &'a Value, id: &str) -> &'a Value {
+    report["nodes"]
+        .as_array()
+        .and_then(|a| a.iter().find(|n| n["id"] == id))
+        .unwrap_or(&Value::Null)
+}
+
+struct Row {
+    distance: f64,
+    budget: f64,
+    object: &'static str,
+    flip: f64,
+    full_s: f64,
+    view_s: f64,
+    decisions: String,
+}
+
+fn main() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = PathBuf::from(args::arg("--out", "out/plan_verify".to_string()));
+    let width: u32 = args::arg("--width", 240);
+    let height = width * 3 / 4;
+    std::fs::create_dir_all(&out).unwrap();
+    let graph = root.join("graphs/plan_verify.json");
+    let cache = out.join("cache");
+    let target = [0.0, -0.1, 0.0];
+    let dir = {
+        let d = [0.0f64, 1.6, 2.7];
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        d.map(|v| v / l)
+    };
+    let mut rows = Vec::new();
+    for &d in &DISTANCES {
+        let eye: Vec<f64> = (0..3).map(|k| target[k] + d * dir[k]).collect();
+        let eye = format!("[{:.4},{:.4},{:.4}]", eye[0], eye[1], eye[2]);
+        let mut sets = Vec::new();
+        for id in ["btf_full", "btf_view", "sss_full", "sss_view"] {
+            sets.push(format!("{id}.camera.eye={eye}"));
+            sets.push(format!("{id}.camera.resolution=[{width},{height}]"));
+        }
+        for &b in &BUDGETS {
+            let case = out.join(format!("d{d}_b{b}"));
+            std::fs::create_dir_all(&case).unwrap();
+            let step = case.join("step.json");
+            let planned = case.join("planned.json");
+            let budget = format!("flip={b}");
+            let mut a: Vec<String> = vec![
+                "plan".into(),
+                graph.display().to_string(),
+                "--render".into(),
+                "btf_view".into(),
+                "--budget".into(),
+                budget.clone(),
+                "-o".into(),
+                step.display().to_string(),
+                "--quiet".into(),
+                "--cache-dir".into(),
+                cache.display().to_string(),
+            ];
+            for s in &sets {
+                a.push("--set".into());
+                a.push(s.clone());
+            }
+            mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
+            let btf_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
+            std::fs::rename(case.join("plan.json"), case.join("plan_btf.json")).unwrap();
+            mesoflow(&[
+                "plan",
+                step.to_str().unwrap(),
+                "--render",
+                "sss_view",
+                "--budget",
+                &budget,
+                "-o",
+                planned.to_str().unwrap(),
+                "--quiet",
+                "--cache-dir",
+                cache.to_str().unwrap(),
+            ]);
+            let sss_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
+            std::fs::rename(case.join("plan.json"), case.join("plan_sss.json")).unwrap();
+            let run_out = case.join("out");
+            // Ask for the measures, so that a run served wholly from the cache still reports them.
+            mesoflow(&[
+                "run",
+                planned.to_str().unwrap(),
+                "--output",
+                "btf_flip.mean",
+                "--output",
+                "sss_flip.mean",
+                "--output",
+                "btf_full.image",
+                "--output",
+                "sss_full.image",
+                "--output",
+                "btf_view.image",
+                "--output",
+                "sss_view.image",
+                "--quiet",
+                "--out-dir",
+                run_out.to_str().unwrap(),
+                "--cache-dir",
+                cache.to_str().unwrap(),
+            ]);
+            let report: Value = serde_json::from_str(
+                &std::fs::read_to_string(run_out.join("report.json")).unwrap(),
+            )
+            .unwrap();
+            for ((object, full, view), plan_text) in OBJECTS.iter().zip([&btf_plan, &sss_plan]) {
+                let plan: Value = serde_json::from_str(plan_text).unwrap();
+                let decisions = plan["decisions"]
+                    .as_array()
+                    .map(|a| {
+                        a.iter()
+                            .map(|d| {
+                                format!("{}:{}", d["stage"].as_str().unwrap_or(""), d["choice"])
+                            })
+                            .collect::<Vec<_>>()
+                            .join(" ")
+                    })
+                    .unwrap_or_default();
+                let flip = node(&report, &format!("{object}_flip"))["metrics"]["mean"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN);
+                let secs = |id: &str| {
+                    node(&report, id)["timings"]["seconds"]
+                        .as_f64()
+                        .unwrap_or(f64::NAN)
+                };
+                rows.push(Row {
+                    distance: d,
+                    budget: b,
+                    object,
+                    flip,
+                    full_s: secs(full),
+                    view_s: secs(view),
+                    decisions,
+                });
+            }
+            eprintln!("d = {d}, budget {b}: done");
+        }
+    }
+    let mut csv = String::from("distance,budget,object,flip_mean,within_budget,full_seconds,view_seconds,speedup,decisions\n");
+    for r in &rows {
+        let _ = writeln!(
+            csv,
+            "{},{},{},{:.6},{},{:.4},{:.4},{:.2},\"{}\"",
+            r.distance,
+            r.budget,
+            r.object,
+            r.flip,
+            r.flip <= r.budget,
+            r.full_s,
+            r.view_s,
+            r.full_s / r.view_s,
+            r.decisions.replace('"', "'")
+        );
+    }
+    std::fs::write(out.join("sweep.csv"), &csv).unwrap();
+    print!("{csv}");
+    let within = rows.iter().filter(|r| r.flip <= r.budget).count();
+    println!("within budget: {within} of {}", rows.len());
+    for r in rows.iter().filter(|r| r.flip > r.budget) {
+        println!(
+            "miss: {} at distance {} budget {}: FLIP {:.4} ({:.2}× the budget)",
+            r.object,
+            r.distance,
+            r.budget,
+            r.flip,
+            r.flip / r.budget
+        );
+    }
+    let series = |y: &dyn Fn(&Row) -> f64, with_budgets: bool| {
+        let mut v = Vec::new();
+        for (object, _, _) in OBJECTS {
+            for &b in &BUDGETS {
+                v.push(chart::Series {
+                    name: format!("{object}, budget {b}"),
+                    points: rows
+                        .iter()
+                        .filter(|r| r.object == object && r.budget == b)
+                        .map(|r| (r.distance, y(r)))
+                        .collect(),
+                });
+            }
+        }
+        if with_budgets {
+            for &b in &BUDGETS {
+                v.push(chart::Series {
+                    name: format!("budget {b}"),
+                    points: vec![(DISTANCES[0], b), (DISTANCES[DISTANCES.len() - 1], b)],
+                });
+            }
+        }
+        v
+    };
+    let charts = [
+        (
+            "flip_vs_distance",
+            "measured FLIP of the plan against budget",
+            "mean FLIP, planned vs full (object pixels)",
+            series(&|r: &Row| r.flip, true),
+        ),
+        (
+            "speedup_vs_distance",
+            "render time saved by the plan",
+            "render seconds, full / planned",
+            series(&|r: &Row| r.full_s / r.view_s, false),
+        ),
+    ];
+    for (name, title, y_label, series) in charts {
+        let c = chart::Chart {
+            title: title.into(),
+            x_label: "camera distance (world units)",
+            y_label,
+            series,
+            x_names: None,
+        };
+        if let Err(e) = chart::write(&out.join(name), &c) {
+            eprintln!("chart {name}: {e}");
+        }
+    }
+}
