@@ -27,6 +27,7 @@ use std::collections::{BTreeMap, BTreeSet};
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Scene {
     pub visible_fraction: f64,
+    pub camera_inside: bool,
     pub backfacing_fraction: Option<f64>,
     pub pixel_footprint_mm: Option<f64>,
     pub texels_per_pixel: Option<f64>,
@@ -42,6 +43,7 @@ impl Scene {
         let g = |k: &str| m.get(k).copied().filter(|v| v.is_finite());
         Scene {
             visible_fraction: g("visible_fraction").unwrap_or(0.0),
+            camera_inside: g("camera_inside").is_some_and(|v| v > 0.5),
             backfacing_fraction: g("backfacing_fraction"),
             pixel_footprint_mm: g("pixel_footprint_mm"),
             texels_per_pixel: g("texels_per_pixel"),
@@ -56,6 +58,7 @@ impl Scene {
     pub fn to_json(&self) -> Value {
         let mut o = Map::new();
         o.insert("visible_fraction".into(), json!(self.visible_fraction));
+        o.insert("camera_inside".into(), json!(self.camera_inside));
         for (k, v) in [
             ("backfacing_fraction", self.backfacing_fraction),
             ("pixel_footprint_mm", self.pixel_footprint_mm),
@@ -115,8 +118,8 @@ impl RenderKind {
 /// Why a plan cannot be made.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum PlanError {
-    #[error("the camera is inside the mesh ({0:.0}% of the visible surface is seen from behind): no footprint to plan from; move `eye` outside")]
-    CameraInside(f64),
+    #[error("the camera is inside the mesh: no footprint to plan from; move `eye` outside")]
+    CameraInside,
     #[error("budget {0}: a FLIP budget is a number ≥ 0")]
     Budget(f64),
 }
@@ -149,8 +152,8 @@ pub fn plan(
     if !(b.is_finite() && b >= 0.0) {
         return Err(PlanError::Budget(b));
     }
-    if let Some(f) = scene.backfacing_fraction.filter(|f| *f > 0.5) {
-        return Err(PlanError::CameraInside(100.0 * f));
+    if scene.camera_inside || scene.backfacing_fraction.is_some_and(|f| f > 0.5) {
+        return Err(PlanError::CameraInside);
     }
     let mut out = file.clone();
     let mut decisions = Vec::new();
@@ -571,7 +574,7 @@ mod tests {
         let f = graph();
         assert!(matches!(
             plan(&f, "r", RenderKind::Mesh, &s, None, 0.1),
-            Err(PlanError::CameraInside(_))
+            Err(PlanError::CameraInside)
         ));
         for b in [-1.0, f64::NAN] {
             assert!(matches!(

@@ -47,6 +47,19 @@ fn small(graph: &str) -> Vec<String> {
             ]));
             v
         }
+        "plan_verify" => {
+            let mut v: Vec<String> = vec![
+                "surface.size=16".into(),
+                format!("capture.views={DIRS}"),
+                format!("capture.lights={DIRS}"),
+                format!("mdf.views={DIRS}"),
+                "torus.segments=[32,16]".into(),
+                "sphere.segments=[32,16]".into(),
+            ];
+            v.extend(render(&["btf_full", "btf_view"]));
+            v.extend(sss(&["sss_full", "sss_view"]));
+            v
+        }
         "qh_fit" => vec![
             "measured.photons=20000".into(),
             "fit_mc.photons=40000".into(),

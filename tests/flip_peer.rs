@@ -157,6 +157,8 @@ fn flip_matches_nvidias_implementation() {
             ppd: Some(pair["ppd"].as_f64().unwrap()),
             viewer: None,
             mode,
+            // The peer has no mask: the whole image, exposures from every pixel.
+            object_only: false,
         };
         let e = evaluate(&reference, &test, None, &params, |_, _| {}).unwrap();
         let (mean, p95) = (

@@ -59,6 +59,51 @@ impl Footprint {
     }
 }
 
+/// Whether `p` lies inside the closed `mesh`: the parity of the crossings of three rays along
+/// skewed directions, by majority (a ray grazing an edge can miscount once).
+pub fn contains(mesh: &Mesh, p: V3) -> bool {
+    let dirs = [
+        [1.0, 0.013, 0.027],
+        [0.021, 1.0, -0.017],
+        [-0.011, 0.019, 1.0],
+    ];
+    let odd = dirs
+        .iter()
+        .filter(|d| {
+            let crossings = (0..mesh.triangles())
+                .filter(|&t| {
+                    let [a, b, c] = mesh.corners(t);
+                    let q = |i: usize| mesh.positions[i].map(|v| v as f64);
+                    ray_hits_triangle(p, **d, q(a), q(b), q(c))
+                })
+                .count();
+            crossings % 2 == 1
+        })
+        .count();
+    odd >= 2
+}
+
+/// Möller–Trumbore: does the ray from `o` along `d` cross triangle (a, b, c) at t > 0?
+fn ray_hits_triangle(o: V3, d: V3, a: V3, b: V3, c: V3) -> bool {
+    let (e1, e2) = (sub(b, a), sub(c, a));
+    let h = cross(d, e2);
+    let det = dot(e1, h);
+    if det.abs() < 1e-14 {
+        return false;
+    }
+    let s = sub(o, a);
+    let u = dot(s, h) / det;
+    if !(0.0..=1.0).contains(&u) {
+        return false;
+    }
+    let q = cross(s, e1);
+    let v = dot(d, q) / det;
+    if v < 0.0 || u + v > 1.0 {
+        return false;
+    }
+    dot(e2, q) / det > 0.0
+}
+
 /// The footprint of `camera`'s pixels on `mesh`; `None` when no ray hits it.
 pub fn footprint(
     mesh: &Mesh,
@@ -270,6 +315,23 @@ mod tests {
         assert!((at(60.0) / at(0.0) - 2.0).abs() < 1e-9);
         let w85 = 1.0 / 85f64.to_radians().cos();
         assert!((at(85.0) / at(0.0) - w85).abs() < 1e-9 * w85);
+    }
+
+    #[test]
+    fn points_inside_a_closed_mesh_are_found() {
+        let sphere = crate::mesh::primitive::build(&crate::mesh::primitive::Params {
+            shape: crate::mesh::primitive::Shape::Sphere,
+            size: 1.0,
+            segments: [24, 12],
+            ..Default::default()
+        })
+        .unwrap();
+        assert!(contains(&sphere, [0.1, 0.2, -0.1]));
+        assert!(!contains(&sphere, [0.0, 0.0, 3.0]));
+        assert!(
+            !contains(&square(), [0.0, 0.0, 0.5]),
+            "an open sheet has no inside"
+        );
     }
 
     #[test]

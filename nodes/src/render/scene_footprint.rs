@@ -74,6 +74,7 @@ impl Node for SceneFootprint {
                 Port::optional_output("backfacing_fraction", "Scalar", "fraction of the visible samples seeing a triangle from behind: near 1 with the camera inside a closed mesh"),
                 Port::optional_output("ppd", "Scalar", "the viewer's pixels per degree (with `viewer`)"),
                 Port::output("visible_fraction", "Scalar", "fraction of the sampled rays that hit the mesh"),
+                Port::output("camera_inside", "Scalar", "1 when the camera is inside the (closed) mesh, else 0"),
             ],
             disk_cache: false,
         }
@@ -128,10 +129,13 @@ impl Node for SceneFootprint {
         let profile = inputs.opt::<DiffusionProfile>("profile")?;
         let mfp_mm = profile.map(scattering_length);
         let fp = footprint(mesh, &camera, texture, p.mm_per_unit);
-        let mut out = Outputs::new().with(
-            "visible_fraction",
-            Scalar(fp.map_or(0.0, |f| f.visible_samples as f64 / f.samples.max(1) as f64)),
-        );
+        let inside = crate::render::footprint::contains(mesh, camera.eye);
+        let mut out = Outputs::new()
+            .with("camera_inside", Scalar(inside as u8 as f64))
+            .with(
+                "visible_fraction",
+                Scalar(fp.map_or(0.0, |f| f.visible_samples as f64 / f.samples.max(1) as f64)),
+            );
         if let Some(f) = fp {
             out = out
                 .with("nearest_distance", Scalar(f.nearest_distance))

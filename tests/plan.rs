@@ -1,0 +1,247 @@
+//! `mesoflow plan` end to end on `graphs/plan_verify.json` at a small size: the planned graph
+//! runs and renders from the same camera; budget 0 reproduces the full model exactly (FLIP 0);
+//! an enormous budget picks the cheapest model (never nothing); far views drop the MDF and take
+//! coarse levels; translucency becomes a BRDF when scattering is sub-pixel; a camera inside
+//! the object and bad arguments are clear errors.
+
+mod common;
+
+use common::{mesoflow, report, Run, Scratch};
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+
+const DIRS: &str = r#"{"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#;
+
+/// The verify graph at test size, with every view's camera at `eye`.
+fn sets(eye: [f64; 3]) -> Vec<String> {
+    let mut v = vec![
+        "surface.size=16".to_string(),
+        format!("capture.views={DIRS}"),
+        format!("capture.lights={DIRS}"),
+        format!("mdf.views={DIRS}"),
+        "torus.segments=[32,16]".into(),
+        "sphere.segments=[32,16]".into(),
+    ];
+    for id in ["btf_full", "btf_view", "sss_full", "sss_view"] {
+        v.push(format!(
+            "{id}.camera.eye=[{},{},{}]",
+            eye[0], eye[1], eye[2]
+        ));
+        v.push(format!("{id}.camera.resolution=[48,36]"));
+        v.push(format!("{id}.shadow_resolution=128"));
+    }
+    for id in ["sss_full", "sss_view"] {
+        v.push(format!("{id}.max_points=2000"));
+    }
+    v
+}
+
+fn graph() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/plan_verify.json")
+}
+
+struct Planned {
+    run: Run,
+    dir: PathBuf,
+}
+
+impl Planned {
+    fn graph(&self) -> Value {
+        serde_json::from_str(&std::fs::read_to_string(self.dir.join("planned.json")).unwrap())
+            .unwrap()
+    }
+    fn plan(&self) -> Value {
+        serde_json::from_str(&std::fs::read_to_string(self.dir.join("plan.json")).unwrap()).unwrap()
+    }
+}
+
+fn plan(
+    s: &Scratch,
+    name: &str,
+    graph: &Path,
+    render: &str,
+    budget: &str,
+    sets: &[String],
+) -> Planned {
+    let dir = s.path(name);
+    let out = dir.join("planned.json");
+    let cache = s.path("cache");
+    let mut args: Vec<String> = vec![
+        "plan".into(),
+        graph.display().to_string(),
+        "--render".into(),
+        render.into(),
+        "--budget".into(),
+        budget.into(),
+        "-o".into(),
+        out.display().to_string(),
+        "--quiet".into(),
+        "--cache-dir".into(),
+        cache.display().to_string(),
+    ];
+    for kv in sets {
+        args.push("--set".into());
+        args.push(kv.clone());
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    Planned {
+        run: mesoflow(&args, s.dir.path()),
+        dir,
+    }
+}
+
+fn run_planned(s: &Scratch, p: &Planned) -> Value {
+    let out = p.dir.join("out");
+    let r = mesoflow(
+        &[
+            "run",
+            p.dir.join("planned.json").to_str().unwrap(),
+            "--quiet",
+            "--out-dir",
+            out.to_str().unwrap(),
+            "--cache-dir",
+            s.path("cache").to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    report(&out)
+}
+
+fn metric(rep: &Value, id: &str, m: &str) -> f64 {
+    rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == id)
+        .unwrap_or_else(|| panic!("no node {id}"))["metrics"][m]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{id} has no {m}"))
+}
+
+fn decision<'a>(plan: &'a Value, stage: &str) -> &'a Value {
+    plan["decisions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|d| d["stage"] == stage)
+        .unwrap_or_else(|| panic!("no {stage} decision in {plan}"))
+}
+
+#[test]
+fn budget_zero_plans_the_full_model_and_reproduces_it_exactly() {
+    let s = Scratch::new();
+    let near = sets([0.0, 1.5, 2.7]);
+    let b = plan(&s, "btf", &graph(), "btf_view", "flip=0", &near);
+    assert_eq!(b.run.code, 0, "{}", b.run.stderr);
+    let both = plan(
+        &s,
+        "both",
+        &b.dir.join("planned.json"),
+        "sss_view",
+        "flip=0",
+        &[],
+    );
+    assert_eq!(both.run.code, 0, "{}", both.run.stderr);
+    assert_eq!(decision(&b.plan(), "btf")["choice"]["model"], "raw");
+    assert_eq!(decision(&b.plan(), "mdf")["choice"]["use_mdf"], true);
+    let g = both.graph();
+    assert_eq!(g["nodes"]["sss_view"]["params"]["threshold"], 0.0);
+    assert_eq!(g["nodes"]["skin_profile"]["params"]["model"], "pbd");
+    // The planned views are the full model: identical renders, FLIP exactly 0 (the same keys,
+    // so the same cached values).
+    let rep = run_planned(&s, &both);
+    assert_eq!(metric(&rep, "btf_flip", "mean"), 0.0);
+    assert_eq!(metric(&rep, "sss_flip", "mean"), 0.0);
+    // Plans carry reasons, and no predicted error (absent, never 0).
+    for d in b.plan()["decisions"].as_array().unwrap() {
+        assert!(!d["reason"].as_str().unwrap().is_empty());
+        assert!(d.get("predicted_error").is_none());
+    }
+}
+
+#[test]
+fn far_views_drop_the_mdf_and_coarsen_and_an_enormous_budget_is_the_cheapest() {
+    let s = Scratch::new();
+    // 40 units away the 48-pixel view shows the torus a few pixels wide: the 0.1-unit shell is
+    // far under half a pixel, and a pixel covers many texels.
+    let far = sets([0.0, 22.0, 40.0]);
+    let p = plan(&s, "far", &graph(), "btf_view", "flip=0.05", &far);
+    assert_eq!(p.run.code, 0, "{}", p.run.stderr);
+    let plan_doc = p.plan();
+    assert_eq!(decision(&plan_doc, "mdf")["choice"]["use_mdf"], false);
+    assert!(
+        decision(&plan_doc, "btf")["choice"]["level"]
+            .as_f64()
+            .unwrap()
+            >= 1.0
+    );
+    let g = p.graph();
+    assert!(g["nodes"]["btf_view"]["inputs"].get("mdf").is_none());
+    assert!(plan_doc["scene"]["shell_pixels"].as_f64().unwrap() < 0.5);
+    let rep = run_planned(&s, &p);
+    // The planned view renders from the same camera as the full one.
+    assert_eq!(
+        metric(&rep, "btf_view", "pixel_footprint_mm"),
+        metric(&rep, "btf_full", "pixel_footprint_mm")
+    );
+
+    let near = sets([0.0, 1.5, 2.7]);
+    let cheap = plan(&s, "cheap", &graph(), "btf_view", "flip=1e9", &near);
+    assert_eq!(cheap.run.code, 0, "{}", cheap.run.stderr);
+    let cheap_plan = cheap.plan();
+    let d = decision(&cheap_plan, "btf");
+    // A 16-texel tile: level 4 is one texel, the average BRDF, at rank 1.
+    assert_eq!(d["choice"]["level"], 4.0);
+    assert_eq!(d["choice"]["rank"], 1);
+    let sss = plan(&s, "cheap_sss", &graph(), "sss_view", "flip=1e9", &near);
+    assert_eq!(sss.run.code, 0, "{}", sss.run.stderr);
+    assert_eq!(sss.graph()["nodes"]["sss_view"]["params"]["mode"], "brdf");
+    let rep = run_planned(&s, &sss);
+    assert!(metric(&rep, "sss_flip", "mean").is_finite());
+}
+
+#[test]
+fn low_albedo_scattering_far_away_becomes_a_brdf_and_grazing_views_plan() {
+    let s = Scratch::new();
+    // Ketchup: its longest effective mean free path (red, σa 0.061 mm⁻¹) is about 5 mm; 45
+    // units away (900 mm at 20 mm per unit) a pixel of the 48-pixel view covers about 20 mm.
+    let mut far = sets([0.0, 22.0, 40.0]);
+    far.push("skin.preset=ketchup".into());
+    let p = plan(&s, "ketchup", &graph(), "sss_view", "flip=0.05", &far);
+    assert_eq!(p.run.code, 0, "{}", p.run.stderr);
+    assert_eq!(decision(&p.plan(), "sss")["choice"]["mode"], "brdf");
+    assert!(p.plan()["scene"]["mfp_pixels"].as_f64().unwrap() < 0.5);
+    run_planned(&s, &p);
+    // Grazing: the camera in the torus's plane, just above it.
+    let grazing = sets([0.0, 0.05, 3.0]);
+    let g = plan(&s, "grazing", &graph(), "btf_view", "flip=0.05", &grazing);
+    assert_eq!(g.run.code, 0, "{}", g.run.stderr);
+    run_planned(&s, &g);
+}
+
+#[test]
+fn a_camera_inside_and_bad_arguments_are_clear_errors() {
+    let s = Scratch::new();
+    // Inside the sphere (radius 0.8): everything visible is seen from behind.
+    let inside = sets([0.0, 0.1, 0.2]);
+    let p = plan(&s, "inside", &graph(), "sss_view", "flip=0.05", &inside);
+    assert_eq!(p.run.code, 1, "{}", p.run.stderr);
+    assert!(p.run.stderr.contains("inside"), "{}", p.run.stderr);
+    let small = sets([0.0, 1.5, 2.7]);
+    for (render, budget, code, text) in [
+        ("btf_veiw", "flip=0.05", 2, "btf_view"),
+        ("btf_flip", "flip=0.05", 2, "render.mesh"),
+        ("btf_view", "psnr=30", 2, "flip"),
+        ("btf_view", "flip=-1", 2, "≥ 0"),
+        ("btf_view", "flip=x", 2, "number"),
+    ] {
+        let r = plan(&s, "bad", &graph(), render, budget, &small);
+        assert_eq!(r.run.code, code, "{render} {budget}: {}", r.run.stderr);
+        assert!(
+            r.run.stderr.contains(text),
+            "{render} {budget}: {}",
+            r.run.stderr
+        );
+    }
+}
