@@ -49,6 +49,8 @@ struct Row {
     budget: f64,
     object: &'static str,
     flip: f64,
+    /// What the plan predicted (absent where it could not say).
+    predicted: Option<f64>,
     full_s: f64,
     view_s: f64,
     decisions: String,
@@ -171,6 +173,7 @@ fn main() {
                     budget: b,
                     object,
                     flip,
+                    predicted: plan["predicted_error"].as_f64(),
                     full_s: secs(full),
                     view_s: secs(view),
                     decisions,
@@ -179,15 +182,16 @@ fn main() {
             eprintln!("d = {d}, budget {b}: done");
         }
     }
-    let mut csv = String::from("distance,budget,object,flip_mean,within_budget,full_seconds,view_seconds,speedup,decisions\n");
+    let mut csv = String::from("distance,budget,object,flip_mean,predicted,within_budget,full_seconds,view_seconds,speedup,decisions\n");
     for r in &rows {
         let _ = writeln!(
             csv,
-            "{},{},{},{:.6},{},{:.4},{:.4},{:.2},\"{}\"",
+            "{},{},{},{:.6},{},{},{:.4},{:.4},{:.2},\"{}\"",
             r.distance,
             r.budget,
             r.object,
             r.flip,
+            r.predicted.map_or(String::new(), |p| format!("{p:.6}")),
             r.flip <= r.budget,
             r.full_s,
             r.view_s,
@@ -220,6 +224,7 @@ fn main() {
                         .filter(|r| r.object == object && r.budget == b)
                         .map(|r| (r.distance, y(r)))
                         .collect(),
+                    scatter: false,
                 });
             }
         }
@@ -228,6 +233,7 @@ fn main() {
                 v.push(chart::Series {
                     name: format!("budget {b}"),
                     points: vec![(DISTANCES[0], b), (DISTANCES[DISTANCES.len() - 1], b)],
+                    scatter: false,
                 });
             }
         }
@@ -247,10 +253,41 @@ fn main() {
             series(&|r: &Row| r.full_s / r.view_s, false),
         ),
     ];
+    let mut calibration: Vec<chart::Series> = OBJECTS
+        .iter()
+        .map(|(object, _, _)| chart::Series {
+            name: format!("{object}: measured against predicted"),
+            points: rows
+                .iter()
+                .filter(|r| r.object == *object)
+                .filter_map(|r| Some((r.predicted?, r.flip)))
+                .collect(),
+            scatter: true,
+        })
+        .collect();
+    let top = rows
+        .iter()
+        .flat_map(|r| [r.flip, r.predicted.unwrap_or(0.0)])
+        .fold(0.0, f64::max);
+    calibration.push(chart::Series {
+        name: "measured = predicted".into(),
+        points: vec![(0.0, 0.0), (top, top)],
+        scatter: false,
+    });
+    let charts = charts.into_iter().chain([(
+        "calibration",
+        "the plan's predicted FLIP against the measured",
+        "measured FLIP",
+        calibration,
+    )]);
     for (name, title, y_label, series) in charts {
         let c = chart::Chart {
             title: title.into(),
-            x_label: "camera distance (world units)",
+            x_label: if name == "calibration" {
+                "predicted FLIP"
+            } else {
+                "camera distance (world units)"
+            },
             y_label,
             series,
             x_names: None,

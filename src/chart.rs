@@ -9,6 +9,8 @@ use std::sync::OnceLock;
 pub struct Series {
     pub name: String,
     pub points: Vec<(f64, f64)>,
+    /// Points only, unjoined (a scatter of predicted against measured, say).
+    pub scatter: bool,
 }
 
 pub struct Chart<'a> {
@@ -91,6 +93,7 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(
                 .map(|s| Series {
                     name: s.name.clone(),
                     points: s.points.iter().map(|p| (p.0.log10(), p.1)).collect(),
+                    scatter: s.scatter,
                 })
                 .collect(),
             x_names: None,
@@ -143,7 +146,10 @@ fn draw_axes<DB: DrawingBackend>(
         let mut pts = s.points.clone();
         pts.sort_by(|a, b| a.0.total_cmp(&b.0));
         chart
-            .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))
+            .draw_series(LineSeries::new(
+                if s.scatter { Vec::new() } else { pts.clone() },
+                colour.stroke_width(2),
+            ))
             .map_err(e)?
             .label(s.name.clone())
             .legend(move |(x, y)| {

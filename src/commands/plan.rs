@@ -190,13 +190,18 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
             o.insert("stage".into(), json!(d.stage));
             o.insert("choice".into(), d.choice.clone());
             o.insert("reason".into(), json!(d.reason));
+            if let Some(e) = d.predicted_error {
+                o.insert("predicted_error".into(), json!(e));
+            }
             if let Some(c) = &d.predicted_cost {
                 o.insert("predicted_cost".into(), c.clone());
             }
             Value::Object(o)
         })
         .collect();
-    let doc = json!({
+    // Stage errors are taken to add; one unknown leaves the total unknown (absent).
+    let total: Option<f64> = planned.decisions.iter().map(|d| d.predicted_error).sum();
+    let mut doc = json!({
         "graph": args.graph.display().to_string(),
         "planned": out_path.display().to_string(),
         "render": args.render,
@@ -204,8 +209,11 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         "budget": { "flip": budget },
         "scene": scene.to_json(),
         "decisions": decisions,
-        "note": "no predicted error is given: the rules are not yet calibrated against measured FLIP; run graphs/plan_verify.json to measure it",
+        "calibration": "src/plan_calibration.json (benches/plan_calibrate.rs, a scene of its own); benches/plan_verify.rs measures the plan on graphs/plan_verify.json",
     });
+    if let Some(t) = total {
+        doc["predicted_error"] = json!(t);
+    }
     write(
         &plan_path,
         &(serde_json::to_string_pretty(&doc).unwrap_or_default() + "\n"),
@@ -213,6 +221,9 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     if !args.quiet {
         for d in &planned.decisions {
             println!("{:4} {} — {}", d.stage, d.choice, d.reason);
+        }
+        if let Some(t) = total {
+            println!("predicted FLIP {t:.4} (budget {budget})");
         }
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }

@@ -332,7 +332,11 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             series: groups
                 .into_iter()
                 // In sweep order (e.g. increasing rank), so a line traces one method's trade-off.
-                .map(|(name, points)| Series { name, points })
+                .map(|(name, points)| Series {
+                    name,
+                    points,
+                    scatter: false,
+                })
                 .collect(),
             x_names: None,
         };
@@ -482,7 +486,11 @@ fn chart_against<'a>(
         y_label: measure,
         series: groups
             .into_iter()
-            .map(|(name, points)| Series { name, points })
+            .map(|(name, points)| Series {
+                name,
+                points,
+                scatter: false,
+            })
             .collect(),
         x_names: (!numeric).then(|| varies[vi].values.iter().map(cell).collect()),
     }
@@ -521,7 +529,11 @@ fn chart_versus<'a>(
             .into_iter()
             .map(|(name, mut points)| {
                 points.sort_by(|p, q| p.0.total_cmp(&q.0));
-                Series { name, points }
+                Series {
+                    name,
+                    points,
+                    scatter: false,
+                }
             })
             .collect(),
         x_names: None,

@@ -71,6 +71,8 @@ impl Node for SceneFootprint {
                 Port::optional_output("mfp_pixels", "Scalar", "that length over the finest pixel footprint"),
                 Port::optional_output("mfp_min_mm", "Scalar", "shortest effective mean free path over the channels, mm (with `profile`)"),
                 Port::optional_output("tile_texels", "Scalar", "texels along the shorter side of the BTF's tile (with `btf`)"),
+                Port::optional_output("btf_floats", "Scalar", "numbers a raw BTF holds (texels × pairs × 3), for the planner's memory cost; absent for a PCA basis"),
+                Port::optional_output("btf_pairs", "Scalar", "direction pairs of the BTF (with `btf`)"),
                 Port::optional_output("backfacing_fraction", "Scalar", "fraction of the visible samples seeing a triangle from behind: near 1 with the camera inside a closed mesh"),
                 Port::optional_output("ppd", "Scalar", "the viewer's pixels per degree (with `viewer`)"),
                 Port::output("visible_fraction", "Scalar", "fraction of the sampled rays that hit the mesh"),
@@ -110,13 +112,17 @@ impl Node for SceneFootprint {
         let mesh = inputs.get::<Mesh>("mesh")?;
         mesh.check().map_err(|e| NodeError::input("mesh", e))?;
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
-        let texels = match inputs.value("btf").ok() {
-            None => None,
+        let (texels, floats, pairs) = match inputs.value("btf").ok() {
+            None => (None, None, None),
             Some(v) => {
                 if let Some(b) = v.as_any().downcast_ref::<Btf>() {
-                    Some([b.width, b.height])
+                    (
+                        Some([b.width, b.height]),
+                        Some(b.data.len() as f64),
+                        Some(b.pairs.len()),
+                    )
                 } else if let Some(b) = v.as_any().downcast_ref::<BtfBasis>() {
-                    Some([b.width, b.height])
+                    (Some([b.width, b.height]), None, Some(b.pairs.len()))
                 } else {
                     return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
                 }
@@ -163,6 +169,12 @@ impl Node for SceneFootprint {
         }
         if let Some([w, h]) = texels {
             out = out.with("tile_texels", Scalar(w.min(h) as f64));
+        }
+        if let Some(f) = floats {
+            out = out.with("btf_floats", Scalar(f));
+        }
+        if let Some(n) = pairs {
+            out = out.with("btf_pairs", Scalar(n as f64));
         }
         if let Some(v) = p.viewer {
             out = out.with("ppd", Scalar(v.ppd(p.camera.resolution[0] as usize)));

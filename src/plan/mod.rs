@@ -1,23 +1,25 @@
 //! The planner's decisions: from what a view shows (`scene.footprint`'s measurements) and a FLIP
-//! budget, the cheapest model per stage, each with its reason, as edits to the graph.
+//! budget B (the mean FLIP over the object's pixels), the cheapest model per stage, each with its
+//! reason, its predicted error and its predicted cost, as edits to the graph.
 //!
-//! The rules, per stage (budget B, the mean FLIP over the object's pixels):
-//! - B = 0 asks for the full model: raw BTF at λ = 0, the MDF, the diffusion gather by brute
-//!   force with the PBD profile.
-//! - B ≥ 1 (FLIP's whole range) allows the cheapest: the BTF's average BRDF, no MDF, the BRDF
-//!   approximation of subsurface scattering. Never nothing.
-//! - BTF level λ = ⌊log₂ texels-per-pixel⌋ (seed 003: the level a pixel's footprint covers),
-//!   capped at the tile's coarsest level, where the BTF is its average BRDF.
-//! - BTF rank: PCA in YCbCr with luma rank 8 and chroma rank 2 (the 8/2/2 split); rank 1 at the
-//!   cheapest. (A rank from the budget needs the measured error curve; a relative-RMSE rule
-//!   asked for 126 components on a 32² weave at B = 0.05, far more than FLIP can see.)
-//! - MDF: left out when the shell projects to under half a pixel.
-//! - Subsurface scattering: the BRDF approximation when the longest effective mean free path is
-//!   under half a pixel footprint; otherwise the sample spacing is no finer than half a footprint
-//!   (the profile's default of a quarter of the shortest mean free path, when that is coarser).
+//! - B = 0 asks for the full model: raw BTF at λ = 0, the MDF, the PBD profile gathered by brute
+//!   force. B ≥ 1 (FLIP's whole range) allows the cheapest: the BTF's average BRDF at rank 1, no
+//!   MDF, subsurface scattering as a BRDF. Never nothing.
+//! - Otherwise each stage takes its share of B (an equal split over the render's stages: BTF and
+//!   MDF for `render.mesh`, BTF and subsurface for `qh.render`, subsurface alone for
+//!   `sss.render`) and the cheapest candidate whose error, predicted by the measured model
+//!   ([`calibration`]), fits it:
+//!   - BTF: PCA in YCbCr at rank r (chroma r/4) and level λ, by memory; none fits → the raw BTF;
+//!   - MDF: left out when its predicted error fits (always when the shell projects under half a
+//!     pixel);
+//!   - subsurface: the BRDF approximation, or the gather with samples 8, 4 or 2 times the
+//!     default spacing apart, by render time; none fits → the default gather. Scattering under
+//!     half a pixel is always the BRDF approximation.
 //!
-//! These are rules, not yet fitted error models: the plan records no predicted error (absent,
-//! never 0) until a calibration sweep stands behind one.
+//! Stage errors are assumed to add; the verification sweep (benches/plan_verify.rs) measures
+//! how far that and the calibration carry to a scene that is not the calibration scene.
+
+pub mod calibration;
 
 use mesoflow_graph::GraphFile;
 use serde_json::{json, Map, Value};
@@ -32,6 +34,8 @@ pub struct Scene {
     pub pixel_footprint_mm: Option<f64>,
     pub texels_per_pixel: Option<f64>,
     pub tile_texels: Option<f64>,
+    pub btf_floats: Option<f64>,
+    pub btf_pairs: Option<f64>,
     pub shell_pixels: Option<f64>,
     pub mfp_mm: Option<f64>,
     pub mfp_min_mm: Option<f64>,
@@ -48,6 +52,8 @@ impl Scene {
             pixel_footprint_mm: g("pixel_footprint_mm"),
             texels_per_pixel: g("texels_per_pixel"),
             tile_texels: g("tile_texels"),
+            btf_floats: g("btf_floats"),
+            btf_pairs: g("btf_pairs"),
             shell_pixels: g("shell_pixels"),
             mfp_mm: g("mfp_mm"),
             mfp_min_mm: g("mfp_min_mm"),
@@ -64,6 +70,8 @@ impl Scene {
             ("pixel_footprint_mm", self.pixel_footprint_mm),
             ("texels_per_pixel", self.texels_per_pixel),
             ("tile_texels", self.tile_texels),
+            ("btf_floats", self.btf_floats),
+            ("btf_pairs", self.btf_pairs),
             ("shell_pixels", self.shell_pixels),
             ("mfp_mm", self.mfp_mm),
             ("mfp_min_mm", self.mfp_min_mm),
@@ -83,6 +91,9 @@ pub struct Decision {
     pub stage: &'static str,
     pub choice: Value,
     pub reason: String,
+    /// The FLIP the measured model predicts for this choice (0 for the full model's own
+    /// choice); absent where the model has nothing to say.
+    pub predicted_error: Option<f64>,
     /// What the choice costs where it can be said before running (texels, samples); absent
     /// otherwise.
     pub predicted_cost: Option<Value>,
@@ -105,6 +116,13 @@ impl RenderKind {
             _ => None,
         }
     }
+    /// Stages sharing the budget.
+    fn stages(self) -> f64 {
+        match self {
+            RenderKind::Sss => 1.0,
+            RenderKind::Mesh | RenderKind::Qh => 2.0,
+        }
+    }
     /// The port the BTF (or local reflectance) arrives on.
     pub fn btf_port(self) -> Option<&'static str> {
         match self {
@@ -122,6 +140,8 @@ pub enum PlanError {
     CameraInside,
     #[error("budget {0}: a FLIP budget is a number ≥ 0")]
     Budget(f64),
+    #[error("{0}")]
+    Calibration(String),
 }
 
 /// The chain a BTF reaches the renderer through.
@@ -155,6 +175,8 @@ pub fn plan(
     if scene.camera_inside || scene.backfacing_fraction.is_some_and(|f| f > 0.5) {
         return Err(PlanError::CameraInside);
     }
+    let model = calibration::Calibration::builtin().map_err(PlanError::Calibration)?;
+    let share = b / kind.stages();
     let mut out = file.clone();
     let mut decisions = Vec::new();
     let full = b == 0.0;
@@ -166,7 +188,7 @@ pub fn plan(
     };
 
     if let (Some(port), Some(chain)) = (kind.btf_port(), chain) {
-        let d = decide_btf(scene, full, cheapest, why_cheapest);
+        let d = decide_btf(&model, scene, full, cheapest, why_cheapest, share);
         apply_btf(&mut out, render, port, chain, &d.1);
         decisions.push(d.0);
     }
@@ -175,18 +197,33 @@ pub fn plan(
             .node(render)
             .is_some_and(|n| n.inputs.contains_key("mdf"));
         if connected {
-            let (keep, reason) = if full {
-                (true, "budget 0: the full model keeps the MDF".to_string())
+            let predicted_off = scene.shell_pixels.and_then(|px| model.mdf_off.at(px));
+            let (keep, reason, predicted) = if full {
+                (
+                    true,
+                    "budget 0: the full model keeps the MDF".to_string(),
+                    Some(0.0),
+                )
             } else if cheapest {
-                (false, why_cheapest.to_string())
+                (false, why_cheapest.to_string(), predicted_off.map(|p| p.0))
             } else {
-                match scene.shell_pixels {
-                    Some(px) if px < 0.5 => (
+                match (scene.shell_pixels, predicted_off) {
+                    (Some(px), _) if px < 0.5 => (
                         false,
                         format!("the shell projects to {px:.2} px, under half a pixel: no silhouette to see"),
+                        predicted_off.map(|p| p.0),
                     ),
-                    Some(px) => (true, format!("the shell projects to {px:.2} px: silhouettes show")),
-                    None => (true, "the shell's projection is unknown: kept".to_string()),
+                    (Some(px), Some((e, inside))) if e <= share => (
+                        false,
+                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}{}, within this stage's {share:.3}", range_note(inside)),
+                        Some(e),
+                    ),
+                    (Some(px), Some((e, inside))) => (
+                        true,
+                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}{}, over this stage's {share:.3}", range_note(inside)),
+                        Some(0.0),
+                    ),
+                    _ => (true, "the shell's projection is unknown: kept".to_string(), None),
                 }
             };
             if !keep {
@@ -195,23 +232,30 @@ pub fn plan(
                     n.params.insert("use_mdf".into(), json!(false));
                 }
             }
+            let time = scene
+                .shell_pixels
+                .and_then(|px| model.mdf_off_time.at(px))
+                .filter(|_| !keep)
+                .map(|(t, _)| json!({ "render_time_vs_full": t }));
             decisions.push(Decision {
                 stage: "mdf",
                 choice: json!({ "use_mdf": keep }),
                 reason,
-                predicted_cost: None,
+                predicted_error: predicted,
+                predicted_cost: time,
             });
         }
     }
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
+        let sss_share = if kind == RenderKind::Sss { b } else { share };
         decisions.push(decide_sss(
+            &model,
             &mut out,
             file,
             render,
             scene,
-            full,
-            cheapest,
-            why_cheapest,
+            (full, cheapest, why_cheapest),
+            sss_share,
         ));
     }
     prune(&mut out, file, render);
@@ -230,82 +274,120 @@ pub struct BtfModel {
     pub chroma_rank: u32,
 }
 
-/// The default YCbCr split: luma 8, chroma 2 each.
-const LUMA_RANK: u32 = 8;
-const CHROMA_RANK: u32 = 2;
+/// " (beyond the calibrated range: its nearest end)" where a prediction is extrapolated.
+fn range_note(inside: bool) -> &'static str {
+    if inside {
+        ""
+    } else {
+        " (beyond the calibrated range: its nearest end)"
+    }
+}
 
 fn decide_btf(
+    model: &calibration::Calibration,
     scene: &Scene,
     full: bool,
     cheapest: bool,
     why_cheapest: &str,
+    share: f64,
 ) -> (Decision, BtfModel) {
     let coarsest = scene.tile_texels.map_or(0.0, |t| t.max(1.0).log2().ceil());
-    if full {
-        let m = BtfModel {
-            raw: true,
-            level: 0.0,
-            rank: 0,
-            chroma_rank: 0,
-        };
-        return (
+    let raw = |reason: String, predicted: f64| {
+        (
             Decision {
                 stage: "btf",
                 choice: json!({ "model": "raw", "level": 0 }),
-                reason: "budget 0: the full model is the raw BTF at full resolution".into(),
-                predicted_cost: None,
+                reason,
+                predicted_error: Some(predicted),
+                predicted_cost: scene.btf_floats.map(|f| json!({ "floats": f })),
             },
-            m,
+            BtfModel {
+                raw: true,
+                level: 0.0,
+                rank: 0,
+                chroma_rank: 0,
+            },
+        )
+    };
+    if full {
+        return raw(
+            "budget 0: the full model is the raw BTF at full resolution".into(),
+            0.0,
         );
     }
-    let (level, level_reason) = if cheapest {
-        (coarsest, why_cheapest.to_string())
-    } else {
-        match scene.texels_per_pixel {
-            Some(t) if t >= 2.0 => {
-                let l = t.log2().floor().min(coarsest);
-                (
-                    l,
-                    format!(
-                        "{t:.2} texels per pixel: level ⌊log₂ {t:.2}⌋ = {l} is what a pixel covers"
-                    ),
-                )
-            }
-            Some(t) => (0.0, format!("{t:.2} texels per pixel: full resolution")),
-            None => (0.0, "texels per pixel unknown: full resolution".into()),
-        }
+    // Memory of a basis: per block of rank k, k maps at the level's resolution, a mean, and
+    // k basis vectors over the pairs.
+    let texels = scene.tile_texels.unwrap_or(64.0).powi(2);
+    let pairs = scene.btf_pairs.unwrap_or(0.0);
+    let floats = |r: u32, l: f64| {
+        let chroma = (r / 4).max(1) as f64;
+        let at = (texels / 4f64.powf(l)).max(1.0);
+        (r as f64 + 2.0 * chroma) * (at + pairs) + 3.0 * at
     };
-    let (rank, chroma_rank) = if cheapest {
-        (1, 1)
-    } else {
-        (LUMA_RANK, CHROMA_RANK)
+    let pca = |r: u32, l: f64, reason: String, predicted: Option<f64>| {
+        let chroma = (r / 4).max(1);
+        let average = l >= coarsest && coarsest > 0.0;
+        (
+            Decision {
+                stage: "btf",
+                choice: json!({ "model": "pca", "color": "ycbcr", "rank": r, "chroma_rank": chroma, "level": l }),
+                reason: format!(
+                    "{reason}{}",
+                    if average {
+                        "; at the coarsest level the BTF is its average BRDF"
+                    } else {
+                        ""
+                    }
+                ),
+                predicted_error: predicted,
+                predicted_cost: Some(json!({ "floats": floats(r, l) })),
+            },
+            BtfModel {
+                raw: false,
+                level: l,
+                rank: r,
+                chroma_rank: chroma,
+            },
+        )
     };
-    let average = level >= coarsest && coarsest > 0.0;
-    let reason = format!(
-        "{level_reason}; PCA in YCbCr at rank {rank}/{chroma_rank}/{chroma_rank}{}",
-        if average {
-            "; at the coarsest level the BTF is its average BRDF"
-        } else {
-            ""
-        }
-    );
-    let texels = scene
-        .tile_texels
-        .map(|t| json!({ "texels_across": (t / level.exp2()).max(1.0).floor() }));
-    (
-        Decision {
-            stage: "btf",
-            choice: json!({ "model": "pca", "color": "ycbcr", "rank": rank, "chroma_rank": chroma_rank, "level": level }),
-            reason,
-            predicted_cost: texels,
-        },
-        BtfModel {
-            raw: false,
-            level,
-            rank,
-            chroma_rank,
-        },
-    )
+    let tpp = scene.texels_per_pixel;
+    let predict = |o: &calibration::BtfOption| tpp.and_then(|t| o.flip.at(t));
+    if cheapest {
+        let worst = model
+            .btf
+            .iter()
+            .filter(|o| o.rank == 2 && o.level as f64 >= coarsest.min(5.0))
+            .find_map(predict)
+            .map(|p| p.0);
+        return pca(1, coarsest, why_cheapest.to_string(), worst);
+    }
+    let Some(t) = tpp else {
+        return raw("texels per pixel unknown: the raw BTF".into(), 0.0);
+    };
+    let best = model
+        .btf
+        .iter()
+        .filter(|o| o.level as f64 <= coarsest)
+        .filter_map(|o| predict(o).map(|p| (o, p)))
+        .filter(|(_, (e, _))| *e <= share)
+        .min_by(|a, b| {
+            floats(a.0.rank, a.0.level as f64).total_cmp(&floats(b.0.rank, b.0.level as f64))
+        });
+    match best {
+        Some((o, (e, inside))) => pca(
+            o.rank,
+            o.level as f64,
+            format!(
+                "{t:.2} texels per pixel: the least memory whose predicted FLIP ({e:.3}{}) fits this stage's {share:.3}",
+                range_note(inside)
+            ),
+            Some(e),
+        ),
+        None => raw(
+            format!("{t:.2} texels per pixel: no PCA rank and level is predicted within this stage's {share:.3}; the raw BTF"),
+            0.0,
+        ),
+    }
 }
 
 fn apply_btf(out: &mut GraphFile, render: &str, port: &str, chain: &BtfChain, m: &BtfModel) {
@@ -362,19 +444,24 @@ fn upsert(
 }
 
 fn decide_sss(
+    model: &calibration::Calibration,
     out: &mut GraphFile,
     file: &GraphFile,
     render: &str,
     scene: &Scene,
-    full: bool,
-    cheapest: bool,
-    why_cheapest: &str,
+    (full, cheapest, why_cheapest): (bool, bool, &str),
+    share: f64,
 ) -> Decision {
     let set = |out: &mut GraphFile, k: &str, v: Value| {
         if let Some(n) = out.node_mut(render) {
             n.params.insert(k.into(), v);
         }
     };
+    let mfp = scene.mfp_pixels;
+    let candidate = |o: calibration::SssOption| model.sss.iter().find(|c| c.option == o);
+    let brdf_error = mfp
+        .and_then(|m| candidate(calibration::SssOption::Brdf).and_then(|c| c.flip.at(m)))
+        .map(|p| p.0);
     if full {
         set(out, "mode", json!("diffusion"));
         set(out, "threshold", json!(0.0));
@@ -392,52 +479,89 @@ fn decide_sss(
             stage: "sss",
             choice: json!({ "mode": "diffusion", "threshold": 0.0, "profile": "pbd" }),
             reason: "budget 0: the full model gathers the PBD profile by brute force".into(),
+            predicted_error: Some(0.0),
             predicted_cost: None,
         };
     }
-    let brdf_reason = if cheapest {
-        Some(why_cheapest.to_string())
-    } else {
-        scene.mfp_pixels.filter(|p| *p < 0.5).map(|p| {
-            format!(
-                "the longest effective mean free path ({:.3} mm) is {p:.2} of a pixel footprint: scattering stays inside a pixel",
-                scene.mfp_mm.unwrap_or(f64::NAN)
-            )
-        })
-    };
-    if let Some(reason) = brdf_reason {
+    let brdf = |out: &mut GraphFile, reason: String, predicted: Option<f64>| {
         set(out, "mode", json!("brdf"));
-        return Decision {
+        Decision {
             stage: "sss",
             choice: json!({ "mode": "brdf" }),
             reason,
+            predicted_error: predicted,
             predicted_cost: Some(json!({ "samples": 0 })),
-        };
-    }
-    set(out, "mode", json!("diffusion"));
-    let default = scene.mfp_min_mm.map(|m| 0.25 * m);
-    let pixel = scene.pixel_footprint_mm.map(|f| 0.5 * f);
-    let (choice, reason) = match (default, pixel) {
-        (Some(d), Some(px)) if px > d => {
-            set(out, "spacing", json!(px));
-            (
-                json!({ "mode": "diffusion", "spacing_mm": px }),
-                format!("scattering spans {:.2} px: gathered, with samples every half pixel footprint ({px:.4} mm) rather than every quarter mean free path ({d:.4} mm)", scene.mfp_pixels.unwrap_or(f64::NAN)),
-            )
         }
-        _ => (
-            json!({ "mode": "diffusion" }),
-            format!(
-                "scattering spans {:.2} px: gathered at the profile's own spacing (a quarter of the shortest mean free path)",
-                scene.mfp_pixels.unwrap_or(f64::NAN)
-            ),
-        ),
     };
-    Decision {
-        stage: "sss",
-        choice,
-        reason,
-        predicted_cost: None,
+    if cheapest {
+        return brdf(out, why_cheapest.to_string(), brdf_error);
+    }
+    if let Some(p) = mfp.filter(|p| *p < 0.5) {
+        return brdf(
+            out,
+            format!(
+                "the longest effective mean free path ({:.3} mm) is {p:.2} of a pixel footprint: scattering stays inside a pixel",
+                scene.mfp_mm.unwrap_or(f64::NAN)
+            ),
+            brdf_error,
+        );
+    }
+    // The cheapest calibrated candidate (by render time) predicted within the budget.
+    let best = mfp.and_then(|m| {
+        model
+            .sss
+            .iter()
+            .filter_map(|c| Some((c, c.flip.at(m)?, c.time.at(m)?.0)))
+            .filter(|(_, (e, _), _)| *e <= share)
+            .min_by(|a, b| a.2.total_cmp(&b.2))
+    });
+    let default_spacing = scene.mfp_min_mm.map(|m| 0.25 * m);
+    match (best, default_spacing) {
+        (Some((c, (e, inside), time)), _) if c.option == calibration::SssOption::Brdf => {
+            let mut d = brdf(
+                out,
+                format!(
+                    "scattering spans {:.2} px; the BRDF approximation is predicted at FLIP {e:.3}{}, within {share:.3}",
+                    mfp.unwrap_or(f64::NAN),
+                    range_note(inside)
+                ),
+                Some(e),
+            );
+            d.predicted_cost = Some(json!({ "samples": 0, "render_time_vs_full": time }));
+            d
+        }
+        (Some((c, (e, inside), time)), Some(spacing)) => {
+            let calibration::SssOption::Gather { factor } = c.option else {
+                unreachable!("the BRDF candidate is handled above")
+            };
+            set(out, "mode", json!("diffusion"));
+            set(out, "spacing", json!(factor * spacing));
+            set(out, "threshold", json!(0.05));
+            Decision {
+                stage: "sss",
+                choice: json!({ "mode": "diffusion", "spacing_mm": factor * spacing, "threshold": 0.05 }),
+                reason: format!(
+                    "scattering spans {:.2} px; samples {factor}× the default spacing apart are predicted at FLIP {e:.3}{}, within {share:.3}",
+                    mfp.unwrap_or(f64::NAN),
+                    range_note(inside)
+                ),
+                predicted_error: Some(e),
+                predicted_cost: Some(json!({ "render_time_vs_full": time })),
+            }
+        }
+        _ => {
+            set(out, "mode", json!("diffusion"));
+            Decision {
+                stage: "sss",
+                choice: json!({ "mode": "diffusion" }),
+                reason: format!(
+                    "scattering spans {:.2} px; no cheaper candidate is predicted within {share:.3}: the graph's own gather",
+                    mfp.unwrap_or(f64::NAN)
+                ),
+                predicted_error: None,
+                predicted_cost: None,
+            }
+        }
     }
 }
 
@@ -514,6 +638,8 @@ mod tests {
             pixel_footprint_mm: Some(0.1),
             texels_per_pixel: Some(tpp),
             tile_texels: Some(64.0),
+            btf_pairs: Some(1600.0),
+            btf_floats: Some(64.0 * 64.0 * 1600.0 * 3.0),
             shell_pixels: Some(shell_px),
             ..Default::default()
         }
@@ -526,6 +652,10 @@ mod tests {
         plan(&f, "r", RenderKind::Mesh, s, Some(&chain), b).unwrap()
     }
 
+    fn decision<'a>(p: &'a Plan, stage: &str) -> &'a Decision {
+        p.decisions.iter().find(|d| d.stage == stage).unwrap()
+    }
+
     #[test]
     fn budget_zero_is_the_full_model() {
         let p = run(&scene(10.0, 0.1), 0.0);
@@ -534,15 +664,50 @@ mod tests {
         assert_eq!(r.inputs["mdf"], "mdf.mdf");
         // The user's PCA fed only the render: disconnected, it is pruned.
         assert!(p.file.node("pca").is_none());
+        assert!(p.decisions.iter().all(|d| d.predicted_error == Some(0.0)));
     }
 
     #[test]
-    fn far_views_get_a_coarse_level_and_no_mdf() {
-        // 10 texels per pixel: ⌊log₂ 10⌋ = 3; a 0.2 px shell is invisible.
+    fn every_choice_is_predicted_within_its_share_or_is_the_full_models() {
+        // Over views near to far and budgets small to large: a stage either keeps the full
+        // model's choice or takes one whose predicted error fits its half of the budget.
+        for tpp in [0.2, 1.0, 3.0, 10.0] {
+            for shell in [0.3, 1.0, 4.0, 20.0] {
+                for b in [0.01, 0.05, 0.2, 0.6] {
+                    let p = run(&scene(tpp, shell), b);
+                    for d in &p.decisions {
+                        let full = d.choice.get("model") == Some(&json!("raw"))
+                            || d.choice.get("use_mdf") == Some(&json!(true));
+                        let e = d.predicted_error.unwrap_or(f64::INFINITY);
+                        assert!(
+                            full || e <= b / 2.0 || (d.stage == "mdf" && shell < 0.5),
+                            "tpp {tpp}, shell {shell} px, budget {b}: {d:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_larger_budget_never_costs_more_memory() {
+        for tpp in [0.3, 2.0, 8.0] {
+            let mut last = f64::INFINITY;
+            for b in [0.0, 0.02, 0.05, 0.1, 0.2, 0.4, 0.8, 2.0] {
+                let p = run(&scene(tpp, 1.0), b);
+                let floats = decision(&p, "btf").predicted_cost.as_ref().unwrap()["floats"]
+                    .as_f64()
+                    .unwrap();
+                assert!(floats <= last, "tpp {tpp}, budget {b}: {floats} > {last}");
+                last = floats;
+            }
+        }
+    }
+
+    #[test]
+    fn sub_pixel_shells_drop_the_mdf_and_its_tabulation() {
         let p = run(&scene(10.0, 0.2), 0.05);
-        assert_eq!(p.file.node("plan_lod").unwrap().params["level"], json!(3.0));
         let r = p.file.node("r").unwrap();
-        assert_eq!(r.inputs["btf"], "plan_lod.basis");
         assert!(!r.inputs.contains_key("mdf"));
         assert!(
             p.file.node("mdf").is_none(),
@@ -552,25 +717,19 @@ mod tests {
     }
 
     #[test]
-    fn near_views_keep_full_resolution_and_the_mdf() {
-        let p = run(&scene(0.3, 3.0), 0.05);
-        assert_eq!(p.file.node("plan_lod").unwrap().params["level"], json!(0.0));
-        assert_eq!(p.file.node("r").unwrap().inputs["mdf"], "mdf.mdf");
-    }
-
-    #[test]
     fn an_enormous_budget_picks_the_cheapest_never_nothing() {
         let p = run(&scene(0.3, 3.0), 1e9);
         // 64 texels: level 6 is one texel, the average BRDF; rank 1.
         assert_eq!(p.file.node("plan_lod").unwrap().params["level"], json!(6.0));
         assert_eq!(p.file.node("plan_pca").unwrap().params["rank"], json!(1));
         assert_eq!(p.file.node("r").unwrap().inputs["btf"], "plan_lod.basis");
+        assert!(!p.file.node("r").unwrap().inputs.contains_key("mdf"));
     }
 
     #[test]
     fn a_camera_inside_and_a_bad_budget_are_errors() {
         let mut s = scene(1.0, 1.0);
-        s.backfacing_fraction = Some(0.9);
+        s.camera_inside = true;
         let f = graph();
         assert!(matches!(
             plan(&f, "r", RenderKind::Mesh, &s, None, 0.1),
@@ -605,16 +764,21 @@ mod tests {
         };
         let p = plan(&f, "r", RenderKind::Sss, &s, None, 0.05).unwrap();
         assert_eq!(p.file.node("r").unwrap().params["mode"], json!("brdf"));
-        // Nearer, scattering spans pixels: gathered, samples every half footprint.
+        // Nearer, scattering spans many pixels: gathered, and what is chosen is predicted
+        // within the budget or is the graph's own gather.
         let near = Scene {
-            pixel_footprint_mm: Some(0.4),
-            mfp_pixels: Some(1.25),
+            pixel_footprint_mm: Some(0.01),
+            mfp_pixels: Some(50.0),
             ..s.clone()
         };
         let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.05).unwrap();
-        let r = p.file.node("r").unwrap();
-        assert_eq!(r.params["mode"], json!("diffusion"));
-        assert_eq!(r.params["spacing"], json!(0.2));
+        let d = &p.decisions[0];
+        assert_eq!(
+            p.file.node("r").unwrap().params["mode"],
+            json!("diffusion"),
+            "{d:?}"
+        );
+        assert!(d.predicted_error.is_none_or(|e| e <= 0.05), "{d:?}");
         // Budget 0: brute force, PBD.
         let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.0).unwrap();
         assert_eq!(p.file.node("r").unwrap().params["threshold"], json!(0.0));

@@ -1,0 +1,235 @@
+//! The planner's measured error model. On a calibration scene that is not the verification
+//! scene (a sphere with a bumps mesostructure, a marble torus, seen from the side), for camera
+//! distances from near to far, renders every candidate model of each stage beside the full
+//! model and records its FLIP (over the object's pixels) against what the view shows:
+//! - BTF: PCA rank r (YCbCr, chroma r/4) at level λ, against texels per pixel;
+//! - MDF left out, against the shell's thickness in pixels;
+//! - subsurface scattering as a BRDF, or gathered (octree, threshold 0.05) with samples k times
+//!   the profile's default spacing apart, against the longest mean free path in pixels.
+//!
+//! Each candidate's render time is recorded too. Writes `calibration.json` (what
+//! `src/plan_calibration.json` holds) to the output folder.
+//!
+//! `cargo bench --bench plan_calibrate -- [--out DIR] [--width W]`
+
+#[path = "common/args.rs"]
+mod args;
+
+use serde_json::{json, Map, Value};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// From where the sphere still shows its silhouette (nearer, it fills the view and the MDF
+/// changes nothing) to where it is a few dozen pixels across.
+const DISTANCES: [f64; 8] = [2.2, 3.2, 4.6, 6.8, 10.0, 15.0, 22.0, 32.0];
+const RANKS: [u32; 5] = [2, 4, 8, 16, 32];
+const LEVELS: [u32; 6] = [0, 1, 2, 3, 4, 5];
+/// Sample spacings of the gathered candidates, as multiples of the profile's default (a quarter
+/// of the shortest effective mean free path).
+const SPACINGS: [f64; 3] = [2.0, 4.0, 8.0];
+
+fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
+    let height = width * 3 / 4;
+    let camera =
+        json!({ "eye": eye, "target": [0.0, 0.0, 0.0], "fov": 40, "resolution": [width, height] });
+    let views =
+        json!({ "thetas": [0, 20, 40, 60, 80], "phis": [0, 45, 90, 135, 180, 225, 270, 315] });
+    let mut n = Map::new();
+    n.insert("surface".into(), json!({ "kind": "heightfield.procedural", "params": { "pattern": "bumps", "size": 64, "count": 4, "depth": 5.0 } }));
+    n.insert("capture".into(), json!({ "kind": "btf.capture", "inputs": { "height": "surface.height" },
+        "params": { "views": views, "lights": views, "brdf": "ward", "albedo": [0.3, 0.5, 0.7], "specular": 0.12, "roughness": 0.2 } }));
+    n.insert("mdf".into(), json!({ "kind": "mdf.tabulate", "inputs": { "height": "surface.height" },
+        "params": { "views": { "thetas": [0, 15, 30, 45, 60, 70, 80, 85, 88], "phis": [0, 30, 60, 90, 120, 150, 180, 210, 240, 270, 300, 330] } } }));
+    n.insert("ball".into(), json!({ "kind": "mesh.primitive", "params": { "shape": "sphere", "size": 1.0, "segments": [96, 48] } }));
+    let render = |btf: &str, mdf: bool| {
+        let mut inputs = json!({ "mesh": "ball.mesh", "btf": btf });
+        if mdf {
+            inputs["mdf"] = json!("mdf.mdf");
+        }
+        json!({ "kind": "render.mesh", "inputs": inputs, "params": {
+            "camera": camera, "light": { "direction": [-0.4, 0.8, 0.6], "intensity": 3.0 },
+            "tiling": [8, 4], "shell": 0.06, "mm_per_unit": 25.0, "use_mdf": mdf, "shadows": true, "shadow_resolution": 512 } })
+    };
+    n.insert("btf_full".into(), render("capture.btf", true));
+    n.insert(
+        "btf_scene".into(),
+        json!({ "kind": "scene.footprint", "inputs": { "mesh": "ball.mesh", "btf": "capture.btf" },
+        "params": { "camera": camera, "tiling": [8, 4], "shell": 0.06, "mm_per_unit": 25.0 } }),
+    );
+    let flip = |a: &str, b: &str| json!({ "kind": "image.flip", "inputs": { "reference": format!("{a}.image"), "test": format!("{b}.image") }, "params": { "object_only": true } });
+    for r in RANKS {
+        n.insert(
+            format!("pca_{r}"),
+            json!({ "kind": "btf.pca", "inputs": { "btf": "capture.btf" },
+            "params": { "color": "ycbcr", "rank": r, "chroma_rank": (r / 4).max(1) } }),
+        );
+        for l in LEVELS {
+            n.insert(format!("lod_{r}_{l}"), json!({ "kind": "btf.lod", "inputs": { "basis": format!("pca_{r}.basis") }, "params": { "level": l } }));
+            n.insert(
+                format!("btf_{r}_{l}"),
+                render(&format!("lod_{r}_{l}.basis"), true),
+            );
+            n.insert(
+                format!("flip_btf_{r}_{l}"),
+                flip("btf_full", &format!("btf_{r}_{l}")),
+            );
+        }
+    }
+    n.insert("btf_nomdf".into(), render("capture.btf", false));
+    n.insert("flip_nomdf".into(), flip("btf_full", "btf_nomdf"));
+
+    n.insert("ring".into(), json!({ "kind": "mesh.primitive", "params": { "shape": "torus", "size": 0.9, "minor": 0.35, "segments": [64, 32] } }));
+    n.insert(
+        "marble".into(),
+        json!({ "kind": "sss.material", "params": { "preset": "marble" } }),
+    );
+    n.insert("marble_profile".into(), json!({ "kind": "sss.profile", "inputs": { "material": "marble.material" }, "params": { "model": "pbd" } }));
+    let sss = |extra: Value| {
+        let mut params = json!({ "camera": camera, "light": { "direction": [-0.4, 0.8, 0.6], "intensity": 5.0 },
+            "mm_per_unit": 10.0, "threshold": 0.0, "max_points": 20000, "shadow_resolution": 512 });
+        for (k, v) in extra.as_object().unwrap() {
+            params[k] = v.clone();
+        }
+        json!({ "kind": "sss.render", "inputs": { "mesh": "ring.mesh", "material": "marble.material", "profile": "marble_profile.profile" }, "params": params })
+    };
+    n.insert("sss_full".into(), sss(json!({})));
+    n.insert("sss_scene".into(), json!({ "kind": "scene.footprint", "inputs": { "mesh": "ring.mesh", "profile": "marble_profile.profile" },
+        "params": { "camera": camera, "mm_per_unit": 10.0 } }));
+    n.insert("sss_brdf".into(), sss(json!({ "mode": "brdf" })));
+    n.insert("flip_sss_brdf".into(), flip("sss_full", "sss_brdf"));
+    n
+}
+
+fn mesoflow(args: &[&str]) -> std::process::Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+        .args(args)
+        .output()
+        .expect("run mesoflow");
+    assert!(
+        out.status.success(),
+        "mesoflow {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+fn run(graph: &Map<String, Value>, dir: &Path, cache: &Path) -> Value {
+    std::fs::create_dir_all(dir).unwrap();
+    let file = dir.join("graph.json");
+    let doc = json!({ "mesoflow": 1, "nodes": graph });
+    std::fs::write(&file, serde_json::to_string_pretty(&doc).unwrap()).unwrap();
+    let out = dir.join("out");
+    mesoflow(&[
+        "run",
+        file.to_str().unwrap(),
+        "--quiet",
+        "--out-dir",
+        out.to_str().unwrap(),
+        "--cache-dir",
+        cache.to_str().unwrap(),
+    ]);
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+fn node<'a>(report: &'a Value, id: &str) -> &'a Value {
+    report["nodes"]
+        .as_array()
+        .and_then(|a| a.iter().find(|n| n["id"] == id))
+        .unwrap_or(&Value::Null)
+}
+
+fn metric(report: &Value, id: &str, m: &str) -> Option<f64> {
+    node(report, id)["metrics"][m].as_f64()
+}
+
+fn seconds(report: &Value, id: &str) -> Option<f64> {
+    node(report, id)["timings"]["seconds"].as_f64()
+}
+
+fn main() {
+    let out = PathBuf::from(args::arg("--out", "out/plan_calibrate".to_string()));
+    let width: u32 = args::arg("--width", 240);
+    let cache = out.join("cache");
+    let dir = {
+        let d = [1.0f64, 0.35, 0.7];
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        d.map(|v| v / l)
+    };
+    let mut btf: Vec<Value> = Vec::new();
+    let mut mdf: Vec<Value> = Vec::new();
+    let mut sss: Vec<Value> = Vec::new();
+    for &d in &DISTANCES {
+        let eye = dir.map(|v| v * d);
+        let mut g = scene(width, eye);
+        // Spacings are multiples of the default, a quarter of the shortest mean free path.
+        let probe = run(
+            &{
+                let mut p = g.clone();
+                p.retain(|k, _| {
+                    ["ring", "marble", "marble_profile", "sss_scene"].contains(&k.as_str())
+                });
+                p
+            },
+            &out.join(format!("d{d}/probe")),
+            &cache,
+        );
+        let default_spacing = 0.25 * metric(&probe, "sss_scene", "mfp_min_mm").unwrap_or(f64::NAN);
+        for k in SPACINGS {
+            let id = format!("sss_k{}", (k * 10.0) as u32);
+            let spacing = k * default_spacing;
+            g.insert(id.clone(), {
+                let mut v = g["sss_full"].clone();
+                v["params"]["spacing"] = json!(spacing);
+                v["params"]["threshold"] = json!(0.05);
+                v
+            });
+            g.insert(
+                format!("flip_{id}"),
+                json!({ "kind": "image.flip", "inputs": { "reference": "sss_full.image", "test": format!("{id}.image") }, "params": { "object_only": true } }),
+            );
+        }
+        let rep = run(&g, &out.join(format!("d{d}")), &cache);
+        let tpp = metric(&rep, "btf_scene", "texels_per_pixel");
+        let shell = metric(&rep, "btf_scene", "shell_pixels");
+        let mfp = metric(&rep, "sss_scene", "mfp_pixels");
+        let full_s = seconds(&rep, "btf_full");
+        for r in RANKS {
+            for l in LEVELS {
+                btf.push(json!({
+                    "distance": d, "texels_per_pixel": tpp, "rank": r, "level": l,
+                    "flip": metric(&rep, &format!("flip_btf_{r}_{l}"), "mean"),
+                    "seconds": seconds(&rep, &format!("btf_{r}_{l}")), "full_seconds": full_s,
+                }));
+            }
+        }
+        mdf.push(json!({
+            "distance": d, "shell_pixels": shell, "flip": metric(&rep, "flip_nomdf", "mean"),
+            "seconds": seconds(&rep, "btf_nomdf"), "full_seconds": full_s,
+        }));
+        let sss_full_s = seconds(&rep, "sss_full");
+        sss.push(json!({
+            "distance": d, "mfp_pixels": mfp, "option": "brdf",
+            "flip": metric(&rep, "flip_sss_brdf", "mean"),
+            "seconds": seconds(&rep, "sss_brdf"), "full_seconds": sss_full_s,
+        }));
+        for k in SPACINGS {
+            sss.push(json!({
+                "distance": d, "mfp_pixels": mfp, "option": "gather", "spacing_factor": k,
+                "flip": metric(&rep, &format!("flip_sss_k{}", (k * 10.0) as u32), "mean"),
+                "seconds": seconds(&rep, &format!("sss_k{}", (k * 10.0) as u32)), "full_seconds": sss_full_s,
+            }));
+        }
+        eprintln!("distance {d}: texels/pixel {tpp:?}, shell {shell:?} px, mfp {mfp:?} px");
+    }
+    let doc = json!({
+        "about": "FLIP (mean over the object's pixels, HDR, 67 ppd) of each candidate model against the full model on the calibration scene of benches/plan_calibrate.rs (a bumps BTF on a sphere, a marble torus), by camera distance, with what the view shows there. Made by `cargo bench --bench plan_calibrate`; the planner interpolates it.",
+        "width": width,
+        "btf": btf,
+        "mdf_off": mdf,
+        "sss": sss,
+    });
+    let text = serde_json::to_string_pretty(&doc).unwrap() + "\n";
+    std::fs::write(out.join("calibration.json"), &text).unwrap();
+    println!("wrote {}", out.join("calibration.json").display());
+}

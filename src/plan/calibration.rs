@@ -1,0 +1,191 @@
+//! The planner's measured error model: the FLIP of each candidate model against the full model,
+//! measured by `benches/plan_calibrate.rs` on its own calibration scene (not the verification
+//! scene) over camera distances, as curves over what a view shows — texels per pixel for the
+//! BTF, the shell's thickness in pixels for the MDF, the longest mean free path in pixels for
+//! subsurface scattering — with the candidates' render times relative to the full model's.
+//! A view between two calibrated distances is interpolated linearly in log₂ of the quantity;
+//! beyond the calibrated range the nearest end stands in (and the reason says so).
+
+use serde_json::Value;
+
+/// FLIP (and time ratio) against log₂ of what the view shows, sorted.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Curve {
+    points: Vec<(f64, f64)>,
+}
+
+impl Curve {
+    fn new(mut points: Vec<(f64, f64)>) -> Curve {
+        points.retain(|(x, y)| x.is_finite() && y.is_finite());
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Curve { points }
+    }
+
+    /// The value at `x` (not its log), and whether `x` lies inside the calibrated range.
+    pub fn at(&self, x: f64) -> Option<(f64, bool)> {
+        let (first, last) = (self.points.first()?, self.points.last()?);
+        let lx = x.max(1e-300).log2();
+        if lx <= first.0 {
+            return Some((first.1, lx == first.0));
+        }
+        if lx >= last.0 {
+            return Some((last.1, lx == last.0));
+        }
+        let i = self.points.partition_point(|p| p.0 <= lx);
+        let (a, b) = (self.points[i - 1], self.points[i]);
+        let t = (lx - a.0) / (b.0 - a.0);
+        Some((a.1 + t * (b.1 - a.1), true))
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct BtfOption {
+    pub rank: u32,
+    pub level: u32,
+    pub flip: Curve,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SssOption {
+    Brdf,
+    /// Gathered with samples `factor` times the profile's default spacing apart.
+    Gather {
+        factor: f64,
+    },
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct SssCandidate {
+    pub option: SssOption,
+    pub flip: Curve,
+    /// Render time over the full model's.
+    pub time: Curve,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Calibration {
+    pub btf: Vec<BtfOption>,
+    pub mdf_off: Curve,
+    pub mdf_off_time: Curve,
+    pub sss: Vec<SssCandidate>,
+}
+
+/// The table `benches/plan_calibrate.rs` wrote, compiled in.
+const TABLE: &str = include_str!("../plan_calibration.json");
+
+impl Calibration {
+    pub fn builtin() -> Result<Calibration, String> {
+        let doc: Value =
+            serde_json::from_str(TABLE).map_err(|e| format!("calibration table: {e}"))?;
+        Calibration::from_json(&doc)
+    }
+
+    pub fn from_json(doc: &Value) -> Result<Calibration, String> {
+        let rows = |k: &str| -> Result<&Vec<Value>, String> {
+            doc[k]
+                .as_array()
+                .ok_or_else(|| format!("calibration table: no `{k}`"))
+        };
+        let num = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        let mut btf: Vec<BtfOption> = Vec::new();
+        for r in rows("btf")? {
+            let (rank, level) = (num(r, "rank") as u32, num(r, "level") as u32);
+            let point = (num(r, "texels_per_pixel").log2(), num(r, "flip"));
+            match btf.iter_mut().find(|o| o.rank == rank && o.level == level) {
+                Some(o) => o.flip.points.push(point),
+                None => btf.push(BtfOption {
+                    rank,
+                    level,
+                    flip: Curve {
+                        points: vec![point],
+                    },
+                }),
+            }
+        }
+        for o in &mut btf {
+            o.flip = Curve::new(std::mem::take(&mut o.flip.points));
+        }
+        let mdf = rows("mdf_off")?;
+        let mdf_off = Curve::new(
+            mdf.iter()
+                .map(|r| (num(r, "shell_pixels").log2(), num(r, "flip")))
+                .collect(),
+        );
+        let mdf_off_time = Curve::new(
+            mdf.iter()
+                .map(|r| {
+                    (
+                        num(r, "shell_pixels").log2(),
+                        num(r, "seconds") / num(r, "full_seconds"),
+                    )
+                })
+                .collect(),
+        );
+        let mut sss: Vec<SssCandidate> = Vec::new();
+        for r in rows("sss")? {
+            let option = match r["option"].as_str() {
+                Some("brdf") => SssOption::Brdf,
+                _ => SssOption::Gather {
+                    factor: num(r, "spacing_factor"),
+                },
+            };
+            let x = num(r, "mfp_pixels").log2();
+            let (f, t) = (
+                (x, num(r, "flip")),
+                (x, num(r, "seconds") / num(r, "full_seconds")),
+            );
+            match sss.iter_mut().find(|c| c.option == option) {
+                Some(c) => {
+                    c.flip.points.push(f);
+                    c.time.points.push(t);
+                }
+                None => sss.push(SssCandidate {
+                    option,
+                    flip: Curve { points: vec![f] },
+                    time: Curve { points: vec![t] },
+                }),
+            }
+        }
+        for c in &mut sss {
+            c.flip = Curve::new(std::mem::take(&mut c.flip.points));
+            c.time = Curve::new(std::mem::take(&mut c.time.points));
+        }
+        if btf.is_empty() || sss.is_empty() {
+            return Err("calibration table: no BTF or subsurface candidates".into());
+        }
+        Ok(Calibration {
+            btf,
+            mdf_off,
+            mdf_off_time,
+            sss,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_builtin_table_loads_and_covers_every_stage() {
+        let c = Calibration::builtin().unwrap();
+        assert!(c.btf.len() >= 20);
+        assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
+        assert!(c.mdf_off.points.len() >= 6);
+        assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
+        // Errors are FLIP values: in [0, 1].
+        for o in &c.btf {
+            assert!(o.flip.points.iter().all(|p| (0.0..=1.0).contains(&p.1)));
+        }
+    }
+
+    #[test]
+    fn curves_interpolate_in_log_and_hold_their_ends() {
+        // Points at x = 1 and x = 4 (log₂ 0 and 2): x = 2 is halfway.
+        let c = Curve::new(vec![(0.0, 0.1), (2.0, 0.3)]);
+        assert!((c.at(2.0).unwrap().0 - 0.2).abs() < 1e-12);
+        assert_eq!(c.at(0.5).unwrap(), (0.1, false));
+        assert_eq!(c.at(100.0).unwrap(), (0.3, false));
+        assert!(Curve::default().at(1.0).is_none());
+    }
+}
