@@ -3,7 +3,8 @@
 //! distances from near to far, renders every candidate model of each stage beside the full
 //! model and records its FLIP (over the object's pixels) against what the view shows:
 //! - BTF: PCA rank r (YCbCr, chroma r/4) at level λ, against texels per pixel;
-//! - MDF left out, against the shell's thickness in pixels;
+//! - MDF left out, against the shell's thickness in pixels, with the fraction of the object's
+//!   pixels on a silhouette (the only pixels the MDF changes);
 //! - subsurface scattering as a BRDF, or gathered (octree, threshold 0.05) with samples k times
 //!   the profile's default spacing apart, against the longest mean free path in pixels.
 //!
@@ -192,6 +193,7 @@ fn main() {
         let rep = run(&g, &out.join(format!("d{d}")), &cache);
         let tpp = metric(&rep, "btf_scene", "texels_per_pixel");
         let shell = metric(&rep, "btf_scene", "shell_pixels");
+        let silhouette = metric(&rep, "btf_scene", "silhouette_fraction");
         let mfp = metric(&rep, "sss_scene", "mfp_pixels");
         let full_s = seconds(&rep, "btf_full");
         for r in RANKS {
@@ -204,7 +206,8 @@ fn main() {
             }
         }
         mdf.push(json!({
-            "distance": d, "shell_pixels": shell, "flip": metric(&rep, "flip_nomdf", "mean"),
+            "distance": d, "shell_pixels": shell, "silhouette_fraction": silhouette,
+            "flip": metric(&rep, "flip_nomdf", "mean"),
             "seconds": seconds(&rep, "btf_nomdf"), "full_seconds": full_s,
         }));
         let sss_full_s = seconds(&rep, "sss_full");

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 const DISTANCES: [f64; 7] = [2.0, 3.0, 4.5, 7.0, 11.0, 17.0, 26.0];
-const BUDGETS: [f64; 3] = [0.02, 0.05, 0.1];
+const BUDGETS: [f64; 4] = [0.02, 0.05, 0.1, 0.25];
 const OBJECTS: [(&str, &str, &str); 2] = [
     ("btf", "btf_full", "btf_view"),
     ("sss", "sss_full", "sss_view"),

@@ -3,10 +3,20 @@
 //! scene) over camera distances, as curves over what a view shows — texels per pixel for the
 //! BTF, the shell's thickness in pixels for the MDF, the longest mean free path in pixels for
 //! subsurface scattering — with the candidates' render times relative to the full model's.
+//! Leaving the MDF out changes only a band along silhouettes and inner contours, as wide as the
+//! shell projects (at least a pixel), so its error is kept per band pixel — FLIP over
+//! [`band_fraction`] — and scaled by the view's own band: the calibration sphere has far fewer
+//! contours than a torus seen from above.
 //! A view between two calibrated distances is interpolated linearly in log₂ of the quantity;
 //! beyond the calibrated range the nearest end stands in (and the reason says so).
 
 use serde_json::Value;
+
+/// The fraction of an object's pixels an MDF changes: its contour pixels, each widened to the
+/// shell's projected thickness (at least one pixel).
+pub fn band_fraction(silhouette_fraction: f64, shell_pixels: f64) -> f64 {
+    (silhouette_fraction * shell_pixels.max(1.0)).clamp(1e-6, 1.0)
+}
 
 /// FLIP (and time ratio) against log₂ of what the view shows, sorted.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -65,7 +75,8 @@ pub struct SssCandidate {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration {
     pub btf: Vec<BtfOption>,
-    pub mdf_off: Curve,
+    /// FLIP of leaving the MDF out per unit of [`band_fraction`].
+    pub mdf_off_per_contour: Curve,
     pub mdf_off_time: Curve,
     pub sss: Vec<SssCandidate>,
 }
@@ -106,9 +117,13 @@ impl Calibration {
             o.flip = Curve::new(std::mem::take(&mut o.flip.points));
         }
         let mdf = rows("mdf_off")?;
-        let mdf_off = Curve::new(
+        let mdf_off_per_contour = Curve::new(
             mdf.iter()
-                .map(|r| (num(r, "shell_pixels").log2(), num(r, "flip")))
+                .map(|r| {
+                    let shell = num(r, "shell_pixels");
+                    let band = band_fraction(num(r, "silhouette_fraction"), shell);
+                    (shell.log2(), num(r, "flip") / band)
+                })
                 .collect(),
         );
         let mdf_off_time = Curve::new(
@@ -155,7 +170,7 @@ impl Calibration {
         }
         Ok(Calibration {
             btf,
-            mdf_off,
+            mdf_off_per_contour,
             mdf_off_time,
             sss,
         })
@@ -171,7 +186,7 @@ mod tests {
         let c = Calibration::builtin().unwrap();
         assert!(c.btf.len() >= 20);
         assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
-        assert!(c.mdf_off.points.len() >= 6);
+        assert!(c.mdf_off_per_contour.points.len() >= 6);
         assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
         // Errors are FLIP values: in [0, 1].
         for o in &c.btf {

@@ -37,6 +37,7 @@ pub struct Scene {
     pub btf_floats: Option<f64>,
     pub btf_pairs: Option<f64>,
     pub shell_pixels: Option<f64>,
+    pub silhouette_fraction: Option<f64>,
     pub mfp_mm: Option<f64>,
     pub mfp_min_mm: Option<f64>,
     pub mfp_pixels: Option<f64>,
@@ -55,6 +56,7 @@ impl Scene {
             btf_floats: g("btf_floats"),
             btf_pairs: g("btf_pairs"),
             shell_pixels: g("shell_pixels"),
+            silhouette_fraction: g("silhouette_fraction"),
             mfp_mm: g("mfp_mm"),
             mfp_min_mm: g("mfp_min_mm"),
             mfp_pixels: g("mfp_pixels"),
@@ -73,6 +75,7 @@ impl Scene {
             ("btf_floats", self.btf_floats),
             ("btf_pairs", self.btf_pairs),
             ("shell_pixels", self.shell_pixels),
+            ("silhouette_fraction", self.silhouette_fraction),
             ("mfp_mm", self.mfp_mm),
             ("mfp_min_mm", self.mfp_min_mm),
             ("mfp_pixels", self.mfp_pixels),
@@ -197,7 +200,16 @@ pub fn plan(
             .node(render)
             .is_some_and(|n| n.inputs.contains_key("mdf"));
         if connected {
-            let predicted_off = scene.shell_pixels.and_then(|px| model.mdf_off.at(px));
+            let predicted_off =
+                scene
+                    .shell_pixels
+                    .zip(scene.silhouette_fraction)
+                    .and_then(|(px, contour)| {
+                        model.mdf_off_per_contour.at(px).map(|(e, inside)| {
+                            let band = calibration::band_fraction(contour, px);
+                            ((e * band).min(1.0), inside)
+                        })
+                    });
             let (keep, reason, predicted) = if full {
                 (
                     true,
@@ -641,6 +653,7 @@ mod tests {
             btf_pairs: Some(1600.0),
             btf_floats: Some(64.0 * 64.0 * 1600.0 * 3.0),
             shell_pixels: Some(shell_px),
+            silhouette_fraction: Some(0.1),
             ..Default::default()
         }
     }

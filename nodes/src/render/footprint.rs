@@ -49,6 +49,10 @@ pub struct Footprint {
     /// Fraction of the visible samples that see a triangle from behind (its winding's normal
     /// points away from the viewer): near 1 when the camera is inside a closed mesh.
     pub backfacing_fraction: f64,
+    /// Fraction of the visible full-resolution pixels on a silhouette: next to a pixel that
+    /// misses the mesh or sees a surface more than 10% farther or nearer (an inner contour). The
+    /// MDF changes only these pixels.
+    pub silhouette_fraction: f64,
 }
 
 impl Footprint {
@@ -152,6 +156,27 @@ pub fn footprint(
         return None;
     }
     all.sort_by(f64::total_cmp);
+    let depth = |x: usize, y: usize| l.front[y * l.width + x].map(|f| f.t);
+    let mut edge = 0usize;
+    for y in 0..l.height {
+        for x in 0..l.width {
+            let Some(t) = depth(x, y) else { continue };
+            let neighbours = [
+                (x > 0).then(|| (x - 1, y)),
+                (x + 1 < l.width).then(|| (x + 1, y)),
+                (y > 0).then(|| (x, y - 1)),
+                (y + 1 < l.height).then(|| (x, y + 1)),
+            ];
+            let contour = neighbours
+                .into_iter()
+                .flatten()
+                .any(|(nx, ny)| depth(nx, ny).is_none_or(|tn| (tn - t).abs() > 0.1 * t));
+            edge += contour as usize;
+        }
+    }
+    // Contours are lines: their share of an object's pixels falls as the resolution rises, by
+    // the ratio of sample spacing to pixel size.
+    let per_sample = coarse.height as f64 / camera.height as f64;
     Some(Footprint {
         visible_samples: all.len(),
         samples,
@@ -161,6 +186,7 @@ pub fn footprint(
         texels_per_pixel: finest_texels.is_finite().then_some(finest_texels),
         median_pixel_world: all[all.len() / 2],
         backfacing_fraction: backfacing as f64 / all.len() as f64,
+        silhouette_fraction: (edge as f64 / all.len() as f64 * per_sample).min(1.0),
     })
 }
 
@@ -267,6 +293,13 @@ mod tests {
         assert!((f.pixel_mm - 0.2).abs() < 1e-10);
         assert!((f.texels_per_pixel.unwrap() - 5.12).abs() < 1e-9);
         assert!((f.nearest_distance - 3.0).abs() < 1e-9);
+        // The square spans 50 of the 100 rows and columns: its outline is 4·50 − 4 = 196 of
+        // its 2500 pixels (counted by hand).
+        assert!(
+            (f.silhouette_fraction - 196.0 / 2500.0).abs() < 1e-9,
+            "{}",
+            f.silhouette_fraction
+        );
     }
 
     #[test]
