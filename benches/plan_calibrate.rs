@@ -5,6 +5,8 @@
 //! - BTF: PCA rank r (YCbCr, chroma r/4) at level λ, against texels per pixel;
 //! - MDF left out, against the shell's thickness in pixels, with the fraction of the object's
 //!   pixels on a silhouette (the only pixels the MDF changes);
+//! - shadow maps at the planner's resolution (four texels per pixel the object spans), for both
+//!   renderers, against the object's size in pixels;
 //! - subsurface scattering as a BRDF, or gathered (octree, threshold 0.05) with samples k times
 //!   the profile's default spacing apart, against the longest mean free path in pixels.
 //!
@@ -101,6 +103,13 @@ fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     n
 }
 
+/// The planner's shadow-map rule (`src/plan/mod.rs`, kept in step): four texels per pixel the
+/// object spans, a power of two, at least 64 and at most the graph's own.
+fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
+    let want = (4.0 * object_pixels).max(64.0).min(graph as f64);
+    (want as u32).next_power_of_two().min(graph)
+}
+
 fn mesoflow(args: &[&str]) -> std::process::Output {
     let out = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
         .args(args)
@@ -160,6 +169,8 @@ fn main() {
     let mut btf: Vec<Value> = Vec::new();
     let mut mdf: Vec<Value> = Vec::new();
     let mut sss: Vec<Value> = Vec::new();
+    let mut shadows: Vec<Value> = Vec::new();
+    let mut shadow_sizes: Vec<(&str, f64, u32)> = Vec::new();
     for &d in &DISTANCES {
         let eye = dir.map(|v| v * d);
         let mut g = scene(width, eye);
@@ -168,14 +179,35 @@ fn main() {
             &{
                 let mut p = g.clone();
                 p.retain(|k, _| {
-                    ["ring", "marble", "marble_profile", "sss_scene"].contains(&k.as_str())
+                    ["ring", "marble", "marble_profile", "sss_scene", "ball"].contains(&k.as_str())
                 });
+                p.insert(
+                    "ball_scene".into(),
+                    json!({ "kind": "scene.footprint", "inputs": { "mesh": "ball.mesh" },
+                        "params": { "camera": p["sss_scene"]["params"]["camera"].clone(), "mm_per_unit": 25.0 } }),
+                );
                 p
             },
             &out.join(format!("d{d}/probe")),
             &cache,
         );
         let default_spacing = 0.25 * metric(&probe, "sss_scene", "mfp_min_mm").unwrap_or(f64::NAN);
+        // Shadow maps at the planner's rule: four texels per pixel the object spans.
+        for (id, full, scene_id) in [
+            ("btf_shadow", "btf_full", "ball_scene"),
+            ("sss_shadow", "sss_full", "sss_scene"),
+        ] {
+            let px = metric(&probe, scene_id, "object_pixels").unwrap_or(f64::NAN);
+            let size = shadow_resolution(px, 512);
+            let mut v = g[full].clone();
+            v["params"]["shadow_resolution"] = json!(size);
+            g.insert(id.into(), v);
+            g.insert(
+                format!("flip_{id}"),
+                json!({ "kind": "image.flip", "inputs": { "reference": format!("{full}.image"), "test": format!("{id}.image") }, "params": { "object_only": true } }),
+            );
+            shadow_sizes.push((id, px, size));
+        }
         for k in SPACINGS {
             let id = format!("sss_k{}", (k * 10.0) as u32);
             let spacing = k * default_spacing;
@@ -210,6 +242,21 @@ fn main() {
             "flip": metric(&rep, "flip_nomdf", "mean"),
             "seconds": seconds(&rep, "btf_nomdf"), "full_seconds": full_s,
         }));
+        for (id, px, size) in shadow_sizes.drain(..) {
+            let full = if id == "btf_shadow" {
+                "btf_full"
+            } else {
+                "sss_full"
+            };
+            shadows.push(json!({
+                "distance": d, "renderer": if id == "btf_shadow" { "mesh" } else { "sss" },
+                "object_pixels": px, "resolution": size, "full_resolution": 512,
+                "flip": metric(&rep, &format!("flip_{id}"), "mean"),
+                "seconds": seconds(&rep, id), "full_seconds": seconds(&rep, full),
+                "frame_ms": node(&rep, id)["timings"]["frame_ms"].as_f64(),
+                "full_frame_ms": node(&rep, full)["timings"]["frame_ms"].as_f64(),
+            }));
+        }
         let sss_full_s = seconds(&rep, "sss_full");
         sss.push(json!({
             "distance": d, "mfp_pixels": mfp, "option": "brdf",
@@ -231,6 +278,7 @@ fn main() {
         "btf": btf,
         "mdf_off": mdf,
         "sss": sss,
+        "shadows": shadows,
     });
     let text = serde_json::to_string_pretty(&doc).unwrap() + "\n";
     std::fs::write(out.join("calibration.json"), &text).unwrap();

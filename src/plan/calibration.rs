@@ -72,8 +72,20 @@ pub struct SssCandidate {
     pub time: Curve,
 }
 
+/// Shadow maps at the planner's resolution, per renderer family.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Shadows {
+    /// FLIP against the object's size in pixels.
+    pub flip: Curve,
+    /// Frame (or render) time over the full model's.
+    pub time: Curve,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration {
+    /// `render.mesh` (and `qh.render`'s local term) and `sss.render`.
+    pub shadows_mesh: Shadows,
+    pub shadows_sss: Shadows,
     pub btf: Vec<BtfOption>,
     /// FLIP of leaving the MDF out per unit of [`band_fraction`].
     pub mdf_off_per_contour: Curve,
@@ -165,10 +177,35 @@ impl Calibration {
             c.flip = Curve::new(std::mem::take(&mut c.flip.points));
             c.time = Curve::new(std::mem::take(&mut c.time.points));
         }
+        let shadows = |family: &str| -> Result<Shadows, String> {
+            let rows: Vec<&Value> = rows("shadows")?
+                .iter()
+                .filter(|r| r["renderer"] == family)
+                .collect();
+            let time = |r: &Value| match (r["frame_ms"].as_f64(), r["full_frame_ms"].as_f64()) {
+                (Some(a), Some(b)) => a / b,
+                _ => num(r, "seconds") / num(r, "full_seconds"),
+            };
+            Ok(Shadows {
+                flip: Curve::new(
+                    rows.iter()
+                        .map(|r| (num(r, "object_pixels").log2(), num(r, "flip")))
+                        .collect(),
+                ),
+                time: Curve::new(
+                    rows.iter()
+                        .map(|r| (num(r, "object_pixels").log2(), time(r)))
+                        .collect(),
+                ),
+            })
+        };
+        let (shadows_mesh, shadows_sss) = (shadows("mesh")?, shadows("sss")?);
         if btf.is_empty() || sss.is_empty() {
             return Err("calibration table: no BTF or subsurface candidates".into());
         }
         Ok(Calibration {
+            shadows_mesh,
+            shadows_sss,
             btf,
             mdf_off_per_contour,
             mdf_off_time,
@@ -188,6 +225,7 @@ mod tests {
         assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
         assert!(c.mdf_off_per_contour.points.len() >= 6);
         assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
+        assert!(c.shadows_mesh.flip.points.len() >= 6 && c.shadows_sss.flip.points.len() >= 6);
         // Errors are FLIP values: in [0, 1].
         for o in &c.btf {
             assert!(o.flip.points.iter().all(|p| (0.0..=1.0).contains(&p.1)));

@@ -38,6 +38,7 @@ pub struct Scene {
     pub btf_pairs: Option<f64>,
     pub shell_pixels: Option<f64>,
     pub silhouette_fraction: Option<f64>,
+    pub object_pixels: Option<f64>,
     pub mfp_mm: Option<f64>,
     pub mfp_min_mm: Option<f64>,
     pub mfp_pixels: Option<f64>,
@@ -57,6 +58,7 @@ impl Scene {
             btf_pairs: g("btf_pairs"),
             shell_pixels: g("shell_pixels"),
             silhouette_fraction: g("silhouette_fraction"),
+            object_pixels: g("object_pixels"),
             mfp_mm: g("mfp_mm"),
             mfp_min_mm: g("mfp_min_mm"),
             mfp_pixels: g("mfp_pixels"),
@@ -76,6 +78,7 @@ impl Scene {
             ("btf_pairs", self.btf_pairs),
             ("shell_pixels", self.shell_pixels),
             ("silhouette_fraction", self.silhouette_fraction),
+            ("object_pixels", self.object_pixels),
             ("mfp_mm", self.mfp_mm),
             ("mfp_min_mm", self.mfp_min_mm),
             ("mfp_pixels", self.mfp_pixels),
@@ -269,6 +272,11 @@ pub fn plan(
             (full, cheapest, why_cheapest),
             sss_share,
         ));
+    }
+    if let Some(d) = decide_shadows(
+        &model, &mut out, file, render, kind, scene, full, cheapest, b,
+    ) {
+        decisions.push(d);
     }
     prune(&mut out, file, render);
     Ok(Plan {
@@ -577,6 +585,77 @@ fn decide_sss(
     }
 }
 
+/// The shadow map no finer than the screen: four texels per pixel the object spans, a power of
+/// two, at least 64 and at most the graph's own (`benches/plan_calibrate.rs` keeps the same
+/// rule).
+pub fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
+    let want = (4.0 * object_pixels).max(64.0).min(graph as f64);
+    (want as u32).next_power_of_two().min(graph)
+}
+
+/// Shadow maps: the renderer's resolution lowered to what the view shows, when the measured
+/// model predicts the change within a tenth of the budget (it is meant to be invisible).
+#[allow(clippy::too_many_arguments)]
+fn decide_shadows(
+    model: &calibration::Calibration,
+    out: &mut GraphFile,
+    file: &GraphFile,
+    render: &str,
+    kind: RenderKind,
+    scene: &Scene,
+    full: bool,
+    cheapest: bool,
+    b: f64,
+) -> Option<Decision> {
+    let node = file.node(render)?;
+    let defaults = match kind {
+        RenderKind::Mesh => (false, 1024),
+        RenderKind::Sss | RenderKind::Qh => (true, 1024),
+    };
+    let on = node
+        .params
+        .get("shadows")
+        .and_then(Value::as_bool)
+        .unwrap_or(defaults.0);
+    if !on || full {
+        return None;
+    }
+    let current = node
+        .params
+        .get("shadow_resolution")
+        .and_then(Value::as_u64)
+        .map_or(defaults.1, |v| v as u32);
+    let px = scene.object_pixels?;
+    let size = shadow_resolution(px, current);
+    if size >= current {
+        return None;
+    }
+    let curves = match kind {
+        RenderKind::Sss => &model.shadows_sss,
+        RenderKind::Mesh | RenderKind::Qh => &model.shadows_mesh,
+    };
+    let (e, inside) = curves.flip.at(px)?;
+    if !cheapest && e > 0.1 * b {
+        return None;
+    }
+    if let Some(n) = out.node_mut(render) {
+        n.params.insert("shadow_resolution".into(), json!(size));
+    }
+    Some(Decision {
+        stage: "shadows",
+        choice: json!({ "shadow_resolution": size }),
+        reason: format!(
+            "the object spans {px:.0} px: a {size}² shadow map (not {current}²) has four texels per pixel; predicted FLIP {e:.4}{}",
+            range_note(inside)
+        ),
+        predicted_error: Some(e),
+        predicted_cost: curves
+            .time
+            .at(px)
+            .map(|(t, _)| json!({ "render_time_vs_full": t })),
+    })
+}
+
 /// Removes the nodes the plan disconnected: those that fed something in `before` and feed
 /// nothing now, unless they write files (a writer is a result in itself). Repeats until stable.
 fn prune(out: &mut GraphFile, before: &GraphFile, render: &str) {
@@ -715,6 +794,16 @@ mod tests {
                 last = floats;
             }
         }
+    }
+
+    #[test]
+    fn shadow_maps_match_the_object_on_screen() {
+        // Worked by hand: 23 px → 92 → 128; 10 px → 64 (the floor); 300 px → 1200 → the graph's
+        // 512; never above the graph's own.
+        assert_eq!(shadow_resolution(23.0, 512), 128);
+        assert_eq!(shadow_resolution(10.0, 512), 64);
+        assert_eq!(shadow_resolution(300.0, 512), 512);
+        assert_eq!(shadow_resolution(10.0, 32), 32);
     }
 
     #[test]

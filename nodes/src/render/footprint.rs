@@ -10,7 +10,7 @@
 
 use super::camera::Camera;
 use super::layers::{self, Frag};
-use crate::geometry::{cross, dot, length, mul, normalize, sub, V3};
+use crate::geometry::{bounding_sphere, cross, dot, length, mul, normalize, sub, V3};
 use crate::progress::Counter;
 use crate::types::Mesh;
 use mesoflow_runtime::{Outputs, Port, Scalar};
@@ -53,6 +53,9 @@ pub struct Footprint {
     /// misses the mesh or sees a surface more than 10% farther or nearer (an inner contour). The
     /// MDF changes only these pixels.
     pub silhouette_fraction: f64,
+    /// The mesh's bounding sphere's diameter in pixels, at its centre's distance: how many texels
+    /// a shadow map of it needs to be no coarser than the screen.
+    pub object_pixels: f64,
 }
 
 impl Footprint {
@@ -187,6 +190,15 @@ pub fn footprint(
         median_pixel_world: all[all.len() / 2],
         backfacing_fraction: backfacing as f64 / all.len() as f64,
         silhouette_fraction: (edge as f64 / all.len() as f64 * per_sample).min(1.0),
+        object_pixels: {
+            let (centre, radius) = bounding_sphere(mesh);
+            let at = if camera.orthographic {
+                pixel
+            } else {
+                dot(sub(centre, camera.eye), camera.forward).max(1e-9) * pixel
+            };
+            2.0 * radius / at
+        },
     })
 }
 

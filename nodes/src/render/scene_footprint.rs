@@ -73,6 +73,7 @@ impl Node for SceneFootprint {
                 Port::optional_output("tile_texels", "Scalar", "texels along the shorter side of the BTF's tile (with `btf`)"),
                 Port::optional_output("btf_floats", "Scalar", "numbers a raw BTF holds (texels × pairs × 3), for the planner's memory cost; absent for a PCA basis"),
                 Port::optional_output("btf_pairs", "Scalar", "direction pairs of the BTF (with `btf`)"),
+                Port::optional_output("object_pixels", "Scalar", "the mesh's bounding sphere's diameter in pixels: the texels a shadow map of it needs"),
                 Port::optional_output("silhouette_fraction", "Scalar", "fraction of the object's pixels on a silhouette or inner contour: the pixels an MDF changes"),
                 Port::optional_output("backfacing_fraction", "Scalar", "fraction of the visible samples seeing a triangle from behind: near 1 with the camera inside a closed mesh"),
                 Port::optional_output("ppd", "Scalar", "the viewer's pixels per degree (with `viewer`)"),
@@ -153,7 +154,8 @@ impl Node for SceneFootprint {
                 )
                 .with("shell_pixels", Scalar(f.pixels(p.shell)))
                 .with("backfacing_fraction", Scalar(f.backfacing_fraction))
-                .with("silhouette_fraction", Scalar(f.silhouette_fraction));
+                .with("silhouette_fraction", Scalar(f.silhouette_fraction))
+                .with("object_pixels", Scalar(f.object_pixels));
             if let Some(t) = f.texels_per_pixel {
                 out = out.with("texels_per_pixel", Scalar(t));
             }
