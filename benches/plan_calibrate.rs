@@ -17,10 +17,12 @@
 
 #[path = "common/args.rs"]
 mod args;
+#[path = "common/cli.rs"]
+mod cli;
 
+use cli::{mesoflow, node};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// From where the sphere still shows its silhouette (nearer, it fills the view and the MDF
 /// changes nothing) to where it is a few dozen pixels across.
@@ -110,20 +112,6 @@ fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
     (want as u32).next_power_of_two().min(graph)
 }
 
-fn mesoflow(args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
-        .args(args)
-        .output()
-        .expect("run mesoflow");
-    assert!(
-        out.status.success(),
-        "mesoflow {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    out
-}
-
 fn run(graph: &Map<String, Value>, dir: &Path, cache: &Path) -> Value {
     std::fs::create_dir_all(dir).unwrap();
     let file = dir.join("graph.json");
@@ -140,13 +128,6 @@ fn run(graph: &Map<String, Value>, dir: &Path, cache: &Path) -> Value {
         cache.to_str().unwrap(),
     ]);
     serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
-}
-
-fn node<'a>(report: &'a Value, id: &str) -> &'a Value {
-    report["nodes"]
-        .as_array()
-        .and_then(|a| a.iter().find(|n| n["id"] == id))
-        .unwrap_or(&Value::Null)
 }
 
 fn metric(report: &Value, id: &str, m: &str) -> Option<f64> {

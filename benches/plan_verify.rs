@@ -11,11 +11,13 @@ mod args;
 #[allow(dead_code)]
 #[path = "../src/chart.rs"]
 mod chart;
+#[path = "common/cli.rs"]
+mod cli;
 
+use cli::{mesoflow, node};
 use serde_json::Value;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 const DISTANCES: [f64; 7] = [2.0, 3.0, 4.5, 7.0, 11.0, 17.0, 26.0];
 const BUDGETS: [f64; 4] = [0.02, 0.05, 0.1, 0.25];
@@ -23,26 +25,6 @@ const OBJECTS: [(&str, &str, &str); 2] = [
     ("btf", "btf_full", "btf_view"),
     ("sss", "sss_full", "sss_view"),
 ];
-
-fn mesoflow(args: &[&str]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
-        .args(args)
-        .output()
-        .expect("run mesoflow");
-    assert!(
-        out.status.success(),
-        "mesoflow {}: {}",
-        args.join(" "),
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
-fn node<'a>(report: &'a Value, id: &str) -> &'a Value {
-    report["nodes"]
-        .as_array()
-        .and_then(|a| a.iter().find(|n| n["id"] == id))
-        .unwrap_or(&Value::Null)
-}
 
 struct Row {
     distance: f64,

@@ -51,14 +51,9 @@ fn top_view(half: f64) -> CameraParams {
     }
 }
 
-#[test]
-fn a_large_uniformly_lit_slab_gives_back_the_total_reflectance() {
-    // A slab lit from straight above: the exitance is E_t · ∫Rd 2πr dr = E_t · total, with
-    // E_t = Ft(0°)·I the transmitted irradiance (the 2%). 1/σtr ≤ 2.5 mm and the
-    // profile's 99.9% radius is ~30 mm: the 120 mm slab (12 units of 10 mm) has room.
-    let m = medium();
-    let profile = profile_of(&m);
-    let p = Params {
+/// The slab tests' view: from above, lit straight down with irradiance 2, brute force.
+fn slab_view() -> Params {
+    Params {
         camera: top_view(0.2),
         light: LightParams {
             direction: [0.0, 0.0, 1.0],
@@ -68,7 +63,17 @@ fn a_large_uniformly_lit_slab_gives_back_the_total_reflectance() {
         shadows: false,
         threshold: 0.0,
         ..Default::default()
-    };
+    }
+}
+
+#[test]
+fn a_large_uniformly_lit_slab_gives_back_the_total_reflectance() {
+    // A slab lit from straight above: the exitance is E_t · ∫Rd 2πr dr = E_t · total, with
+    // E_t = Ft(0°)·I the transmitted irradiance (the 2%). 1/σtr ≤ 2.5 mm and the
+    // profile's 99.9% radius is ~30 mm: the 120 mm slab (12 units of 10 mm) has room.
+    let m = medium();
+    let profile = profile_of(&m);
+    let p = slab_view();
     let r = render(None, &mesh(Shape::Plane, 12.0), &m, &profile, &p).unwrap();
     let et = 2.0 * transmit_in(1.0, 1.3);
     for c in 0..3 {
@@ -269,16 +274,8 @@ fn brdf_mode_is_the_total_reflectance_with_fresnel_in_and_out() {
     let m = medium();
     let profile = profile_of(&m);
     let p = Params {
-        camera: top_view(0.2),
-        light: LightParams {
-            direction: [0.0, 0.0, 1.0],
-            position: None,
-            intensity: 2.0,
-        },
-        shadows: false,
-        threshold: 0.0,
         mode: Mode::Brdf,
-        ..Default::default()
+        ..slab_view()
     };
     let slab = mesh(Shape::Plane, 12.0);
     let local = render(None, &slab, &m, &profile, &p).unwrap();
