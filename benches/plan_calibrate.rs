@@ -1,5 +1,5 @@
 //! The planner's measured error model. On a calibration scene that is not the verification
-//! scene (a sphere with a bumps mesostructure, a marble torus, seen from the side), for camera
+//! scene (a sphere with a bumps mesostructure, a marble and a ketchup torus, seen from the side), for camera
 //! distances from near to far, renders every candidate model of each stage beside the full
 //! model and records its FLIP (over the object's pixels) against what the view shows:
 //! - BTF: PCA rank r (YCbCr, chroma r/4) at level λ, against texels per pixel;
@@ -7,8 +7,9 @@
 //!   pixels on a silhouette (the only pixels the MDF changes);
 //! - shadow maps at the planner's resolution (four texels per pixel the object spans), for both
 //!   renderers, against the object's size in pixels;
-//! - subsurface scattering as a BRDF, or gathered (octree, threshold 0.05) with samples k times
-//!   the profile's default spacing apart, against the longest mean free path in pixels.
+//! - subsurface scattering as a BRDF, or gathered (octree, threshold 0.05) with samples k pixel
+//!   footprints apart (never closer than the profile's default), against the longest mean free
+//!   path in pixels.
 //!
 //! Each candidate's render time is recorded too. Writes `calibration.json` (what
 //! `src/plan_calibration.json` holds) to the output folder.
@@ -26,12 +27,12 @@ use std::path::{Path, PathBuf};
 
 /// From where the sphere still shows its silhouette (nearer, it fills the view and the MDF
 /// changes nothing) to where it is a few dozen pixels across.
-const DISTANCES: [f64; 8] = [2.2, 3.2, 4.6, 6.8, 10.0, 15.0, 22.0, 32.0];
+const DISTANCES: [f64; 10] = [2.2, 3.2, 4.6, 6.8, 10.0, 15.0, 22.0, 32.0, 45.0, 64.0];
 const RANKS: [u32; 5] = [2, 4, 8, 16, 32];
 const LEVELS: [u32; 6] = [0, 1, 2, 3, 4, 5];
-/// Sample spacings of the gathered candidates, as multiples of the profile's default (a quarter
-/// of the shortest effective mean free path).
-const SPACINGS: [f64; 3] = [2.0, 4.0, 8.0];
+/// Sample spacings of the gathered candidates, in pixel footprints (never finer than the
+/// profile's default, a quarter of the shortest effective mean free path).
+const SPACINGS: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
 
 fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     let height = width * 3 / 4;
@@ -84,25 +85,41 @@ fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     n.insert("flip_nomdf".into(), flip("btf_full", "btf_nomdf"));
 
     n.insert("ring".into(), json!({ "kind": "mesh.primitive", "params": { "shape": "torus", "size": 0.9, "minor": 0.35, "segments": [64, 32] } }));
-    n.insert(
-        "marble".into(),
-        json!({ "kind": "sss.material", "params": { "preset": "marble" } }),
-    );
-    n.insert("marble_profile".into(), json!({ "kind": "sss.profile", "inputs": { "material": "marble.material" }, "params": { "model": "pbd" } }));
-    let sss = |extra: Value| {
-        let mut params = json!({ "camera": camera, "light": { "direction": [-0.4, 0.8, 0.6], "intensity": 5.0 },
-            "mm_per_unit": 10.0, "threshold": 0.0, "max_points": 20000, "shadow_resolution": 512 });
-        for (k, v) in extra.as_object().unwrap() {
-            params[k] = v.clone();
-        }
-        json!({ "kind": "sss.render", "inputs": { "mesh": "ring.mesh", "material": "marble.material", "profile": "marble_profile.profile" }, "params": params })
-    };
-    n.insert("sss_full".into(), sss(json!({})));
-    n.insert("sss_scene".into(), json!({ "kind": "scene.footprint", "inputs": { "mesh": "ring.mesh", "profile": "marble_profile.profile" },
-        "params": { "camera": camera, "mm_per_unit": 10.0 } }));
-    n.insert("sss_brdf".into(), sss(json!({ "mode": "brdf" })));
-    n.insert("flip_sss_brdf".into(), flip("sss_full", "sss_brdf"));
+    // Two media on the torus: marble scatters far (its longest mean free path ~8.5 mm), ketchup
+    // near (~4.8 mm, and far less in green and blue), so the views cover scattering from a few
+    // pixels to hundreds.
+    for (p, preset) in MEDIA {
+        n.insert(
+            format!("{p}_material"),
+            json!({ "kind": "sss.material", "params": { "preset": preset } }),
+        );
+        n.insert(format!("{p}_profile"), json!({ "kind": "sss.profile", "inputs": { "material": format!("{p}_material.material") }, "params": { "model": "pbd" } }));
+        n.insert(format!("{p}_full"), sss_render(p, &camera, json!({})));
+        n.insert(format!("{p}_scene"), json!({ "kind": "scene.footprint", "inputs": { "mesh": "ring.mesh", "profile": format!("{p}_profile.profile") },
+            "params": { "camera": camera, "mm_per_unit": 20.0 } }));
+        n.insert(
+            format!("{p}_brdf"),
+            sss_render(p, &camera, json!({ "mode": "brdf" })),
+        );
+        n.insert(
+            format!("flip_{p}_brdf"),
+            flip(&format!("{p}_full"), &format!("{p}_brdf")),
+        );
+    }
     n
+}
+
+/// The translucent calibration media: node-id prefix and preset.
+const MEDIA: [(&str, &str); 2] = [("sss", "marble"), ("sss2", "ketchup")];
+
+/// A render of medium `p` on the torus, with `extra` parameters.
+fn sss_render(p: &str, camera: &Value, extra: Value) -> Value {
+    let mut params = json!({ "camera": camera, "light": { "direction": [-0.4, 0.8, 0.6], "intensity": 5.0 },
+        "mm_per_unit": 20.0, "threshold": 0.0, "max_points": 20000, "shadow_resolution": 512 });
+    for (k, v) in extra.as_object().into_iter().flatten() {
+        params[k] = v.clone();
+    }
+    json!({ "kind": "sss.render", "inputs": { "mesh": "ring.mesh", "material": format!("{p}_material.material"), "profile": format!("{p}_profile.profile") }, "params": params })
 }
 
 /// The planner's shadow-map rule (`src/plan/mod.rs`, kept in step): four texels per pixel the
@@ -160,7 +177,16 @@ fn main() {
             &{
                 let mut p = g.clone();
                 p.retain(|k, _| {
-                    ["ring", "marble", "marble_profile", "sss_scene", "ball"].contains(&k.as_str())
+                    k == "ring"
+                        || k == "ball"
+                        || MEDIA.iter().any(|(m, _)| {
+                            [
+                                format!("{m}_material"),
+                                format!("{m}_profile"),
+                                format!("{m}_scene"),
+                            ]
+                            .contains(k)
+                        })
                 });
                 p.insert(
                     "ball_scene".into(),
@@ -172,7 +198,7 @@ fn main() {
             &out.join(format!("d{d}/probe")),
             &cache,
         );
-        let default_spacing = 0.25 * metric(&probe, "sss_scene", "mfp_min_mm").unwrap_or(f64::NAN);
+        let footprint = metric(&probe, "sss_scene", "pixel_footprint_mm").unwrap_or(f64::NAN);
         // Shadow maps at the planner's rule: four texels per pixel the object spans.
         for (id, full, scene_id) in [
             ("btf_shadow", "btf_full", "ball_scene"),
@@ -189,19 +215,18 @@ fn main() {
             );
             shadow_sizes.push((id, px, size));
         }
-        for k in SPACINGS {
-            let id = format!("sss_k{}", (k * 10.0) as u32);
-            let spacing = k * default_spacing;
-            g.insert(id.clone(), {
-                let mut v = g["sss_full"].clone();
+        for (p, _) in MEDIA {
+            let default_spacing =
+                0.25 * metric(&probe, &format!("{p}_scene"), "mfp_min_mm").unwrap_or(f64::NAN);
+            for k in SPACINGS {
+                let id = format!("{p}_k{}", (k * 10.0) as u32);
+                let spacing = (k * footprint).max(default_spacing);
+                let mut v = g[&format!("{p}_full")].clone();
                 v["params"]["spacing"] = json!(spacing);
                 v["params"]["threshold"] = json!(0.05);
-                v
-            });
-            g.insert(
-                format!("flip_{id}"),
-                json!({ "kind": "image.flip", "inputs": { "reference": "sss_full.image", "test": format!("{id}.image") }, "params": { "object_only": true } }),
-            );
+                g.insert(id.clone(), v);
+                g.insert(format!("flip_{id}"), json!({ "kind": "image.flip", "inputs": { "reference": format!("{p}_full.image"), "test": format!("{id}.image") }, "params": { "object_only": true } }));
+            }
         }
         let rep = run(&g, &out.join(format!("d{d}")), &cache);
         let tpp = metric(&rep, "btf_scene", "texels_per_pixel");
@@ -238,23 +263,27 @@ fn main() {
                 "full_frame_ms": node(&rep, full)["timings"]["frame_ms"].as_f64(),
             }));
         }
-        let sss_full_s = seconds(&rep, "sss_full");
-        sss.push(json!({
-            "distance": d, "mfp_pixels": mfp, "option": "brdf",
-            "flip": metric(&rep, "flip_sss_brdf", "mean"),
-            "seconds": seconds(&rep, "sss_brdf"), "full_seconds": sss_full_s,
-        }));
-        for k in SPACINGS {
+        for (p, preset) in MEDIA {
+            let mfp = metric(&rep, &format!("{p}_scene"), "mfp_pixels");
+            let full_s = seconds(&rep, &format!("{p}_full"));
             sss.push(json!({
-                "distance": d, "mfp_pixels": mfp, "option": "gather", "spacing_factor": k,
-                "flip": metric(&rep, &format!("flip_sss_k{}", (k * 10.0) as u32), "mean"),
-                "seconds": seconds(&rep, &format!("sss_k{}", (k * 10.0) as u32)), "full_seconds": sss_full_s,
+                "distance": d, "medium": preset, "mfp_pixels": mfp, "option": "brdf",
+                "flip": metric(&rep, &format!("flip_{p}_brdf"), "mean"),
+                "seconds": seconds(&rep, &format!("{p}_brdf")), "full_seconds": full_s,
             }));
+            for k in SPACINGS {
+                let id = format!("{p}_k{}", (k * 10.0) as u32);
+                sss.push(json!({
+                    "distance": d, "medium": preset, "mfp_pixels": mfp, "option": "gather", "spacing_footprints": k,
+                    "flip": metric(&rep, &format!("flip_{id}"), "mean"),
+                    "seconds": seconds(&rep, &id), "full_seconds": full_s,
+                }));
+            }
         }
         eprintln!("distance {d}: texels/pixel {tpp:?}, shell {shell:?} px, mfp {mfp:?} px");
     }
     let doc = json!({
-        "about": "FLIP (mean over the object's pixels, HDR, 67 ppd) of each candidate model against the full model on the calibration scene of benches/plan_calibrate.rs (a bumps BTF on a sphere, a marble torus), by camera distance, with what the view shows there. Made by `cargo bench --bench plan_calibrate`; the planner interpolates it.",
+        "about": "FLIP (mean over the object's pixels, HDR, 67 ppd) of each candidate model against the full model on the calibration scene of benches/plan_calibrate.rs (a bumps BTF on a sphere, a marble and a ketchup torus), by camera distance, with what the view shows there. Made by `cargo bench --bench plan_calibrate`; the planner interpolates it.",
         "width": width,
         "btf": btf,
         "mdf_off": mdf,

@@ -58,15 +58,18 @@ pub struct BtfOption {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SssOption {
     Brdf,
-    /// Gathered with samples `factor` times the profile's default spacing apart.
+    /// Gathered with samples `footprints` pixel footprints apart (never closer than the
+    /// profile's default spacing).
     Gather {
-        factor: f64,
+        footprints: f64,
     },
 }
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct SssCandidate {
     pub option: SssOption,
+    /// The calibration medium the curves were measured on.
+    pub medium: String,
     pub flip: Curve,
     /// Render time over the full model's.
     pub time: Curve,
@@ -97,6 +100,27 @@ pub struct Calibration {
 const TABLE: &str = include_str!("../plan_calibration.json");
 
 impl Calibration {
+    /// The subsurface candidates, each with the worse prediction of the calibration media whose
+    /// range holds `mfp_pixels` (error and time over the full model's): media that scatter
+    /// differently disagree, and the plan must hold for the one it resembles least.
+    pub fn sss_predictions(&self, mfp_pixels: f64) -> Vec<(SssOption, f64, f64)> {
+        let mut out: Vec<(SssOption, f64, f64)> = Vec::new();
+        for c in &self.sss {
+            let (Some((e, true)), Some((t, _))) = (c.flip.at(mfp_pixels), c.time.at(mfp_pixels))
+            else {
+                continue;
+            };
+            match out.iter_mut().find(|o| o.0 == c.option) {
+                Some(o) => {
+                    o.1 = o.1.max(e);
+                    o.2 = o.2.max(t);
+                }
+                None => out.push((c.option, e, t)),
+            }
+        }
+        out
+    }
+
     pub fn builtin() -> Result<Calibration, String> {
         let doc: Value =
             serde_json::from_str(TABLE).map_err(|e| format!("calibration table: {e}"))?;
@@ -153,7 +177,7 @@ impl Calibration {
             let option = match r["option"].as_str() {
                 Some("brdf") => SssOption::Brdf,
                 _ => SssOption::Gather {
-                    factor: num(r, "spacing_factor"),
+                    footprints: num(r, "spacing_footprints"),
                 },
             };
             let x = num(r, "mfp_pixels").log2();
@@ -161,13 +185,18 @@ impl Calibration {
                 (x, num(r, "flip")),
                 (x, num(r, "seconds") / num(r, "full_seconds")),
             );
-            match sss.iter_mut().find(|c| c.option == option) {
+            let medium = r["medium"].as_str().unwrap_or("").to_string();
+            match sss
+                .iter_mut()
+                .find(|c| c.option == option && c.medium == medium)
+            {
                 Some(c) => {
                     c.flip.points.push(f);
                     c.time.points.push(t);
                 }
                 None => sss.push(SssCandidate {
                     option,
+                    medium,
                     flip: Curve { points: vec![f] },
                     time: Curve { points: vec![t] },
                 }),

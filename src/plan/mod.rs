@@ -12,11 +12,13 @@
 //!   - BTF: PCA in YCbCr at rank r (chroma r/4) and level λ, by memory; none fits → the raw BTF;
 //!   - MDF: left out when its predicted error fits (always when the shell projects under half a
 //!     pixel);
-//!   - subsurface: the BRDF approximation, or the gather with samples 8, 4 or 2 times the
-//!     default spacing apart, by render time; none fits → the default gather. Scattering under
-//!     half a pixel is always the BRDF approximation.
+//!   - subsurface: the BRDF approximation, or the gather with samples 4, 2, 1 or ½ pixel
+//!     footprints apart (never closer than the default spacing), by render time; none fits →
+//!     the graph's own gather. Scattering under half a pixel is always the BRDF approximation.
 //!
-//! Stage errors are assumed to add; the verification sweep (benches/plan_verify.rs) measures
+//! A prediction beyond the calibrated range (a view nearer or farther than any calibrated one)
+//! is not trusted: there the stage keeps the graph's own model, except for the half-pixel rules
+//! and the cheapest plan. Stage errors are assumed to add; the verification sweep (benches/plan_verify.rs) measures
 //! how far that and the calibration carry to a scene that is not the calibration scene.
 
 pub mod calibration;
@@ -228,14 +230,19 @@ pub fn plan(
                         format!("the shell projects to {px:.2} px, under half a pixel: no silhouette to see"),
                         predicted_off.map(|p| p.0),
                     ),
-                    (Some(px), Some((e, inside))) if e <= share => (
+                    (Some(px), Some((e, true))) if e <= share => (
                         false,
-                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}{}, within this stage's {share:.3}", range_note(inside)),
+                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}, within this stage's {share:.3}"),
                         Some(e),
                     ),
-                    (Some(px), Some((e, inside))) => (
+                    (Some(px), Some((e, true))) => (
                         true,
-                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}{}, over this stage's {share:.3}", range_note(inside)),
+                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}, over this stage's {share:.3}"),
+                        Some(0.0),
+                    ),
+                    (Some(px), Some((_, false))) => (
+                        true,
+                        format!("the shell projects to {px:.2} px, beyond the calibrated range: the MDF is kept"),
                         Some(0.0),
                     ),
                     _ => (true, "the shell's projection is unknown: kept".to_string(), None),
@@ -389,7 +396,7 @@ fn decide_btf(
         .iter()
         .filter(|o| o.level as f64 <= coarsest)
         .filter_map(|o| predict(o).map(|p| (o, p)))
-        .filter(|(_, (e, _))| *e <= share)
+        .filter(|(_, (e, inside))| *inside && *e <= share)
         .min_by(|a, b| {
             floats(a.0.rank, a.0.level as f64).total_cmp(&floats(b.0.rank, b.0.level as f64))
         });
@@ -526,44 +533,44 @@ fn decide_sss(
             brdf_error,
         );
     }
-    // The cheapest calibrated candidate (by render time) predicted within the budget.
+    // The cheapest calibrated candidate (by render time) predicted within the budget, by the
+    // worse of the calibration media.
     let best = mfp.and_then(|m| {
         model
-            .sss
-            .iter()
-            .filter_map(|c| Some((c, c.flip.at(m)?, c.time.at(m)?.0)))
-            .filter(|(_, (e, _), _)| *e <= share)
+            .sss_predictions(m)
+            .into_iter()
+            .filter(|(_, e, _)| *e <= share)
             .min_by(|a, b| a.2.total_cmp(&b.2))
     });
     let default_spacing = scene.mfp_min_mm.map(|m| 0.25 * m);
-    match (best, default_spacing) {
-        (Some((c, (e, inside), time)), _) if c.option == calibration::SssOption::Brdf => {
+    match (best, default_spacing, scene.pixel_footprint_mm) {
+        (Some((calibration::SssOption::Brdf, e, time)), _, _) => {
             let mut d = brdf(
                 out,
                 format!(
-                    "scattering spans {:.2} px; the BRDF approximation is predicted at FLIP {e:.3}{}, within {share:.3}",
+                    "scattering spans {:.2} px; the BRDF approximation is predicted at FLIP {e:.3}, within {share:.3}",
                     mfp.unwrap_or(f64::NAN),
-                    range_note(inside)
                 ),
                 Some(e),
             );
             d.predicted_cost = Some(json!({ "samples": 0, "render_time_vs_full": time }));
             d
         }
-        (Some((c, (e, inside), time)), Some(spacing)) => {
-            let calibration::SssOption::Gather { factor } = c.option else {
-                unreachable!("the BRDF candidate is handled above")
-            };
+        (
+            Some((calibration::SssOption::Gather { footprints: k }, e, time)),
+            Some(default),
+            Some(footprint),
+        ) => {
+            let spacing = (k * footprint).max(default);
             set(out, "mode", json!("diffusion"));
-            set(out, "spacing", json!(factor * spacing));
+            set(out, "spacing", json!(spacing));
             set(out, "threshold", json!(0.05));
             Decision {
                 stage: "sss",
-                choice: json!({ "mode": "diffusion", "spacing_mm": factor * spacing, "threshold": 0.05 }),
+                choice: json!({ "mode": "diffusion", "spacing_mm": spacing, "threshold": 0.05 }),
                 reason: format!(
-                    "scattering spans {:.2} px; samples {factor}× the default spacing apart are predicted at FLIP {e:.3}{}, within {share:.3}",
+                    "scattering spans {:.2} px; samples {k} pixel footprints apart ({spacing:.3} mm, never closer than the default {default:.3} mm) are predicted at FLIP {e:.3} (the worse calibration medium), within {share:.3}",
                     mfp.unwrap_or(f64::NAN),
-                    range_note(inside)
                 ),
                 predicted_error: Some(e),
                 predicted_cost: Some(json!({ "render_time_vs_full": time })),
@@ -635,7 +642,7 @@ fn decide_shadows(
         RenderKind::Mesh | RenderKind::Qh => &model.shadows_mesh,
     };
     let (e, inside) = curves.flip.at(px)?;
-    if !cheapest && e > 0.1 * b {
+    if !cheapest && (!inside || e > 0.1 * b) {
         return None;
     }
     if let Some(n) = out.node_mut(render) {

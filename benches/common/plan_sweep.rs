@@ -1,0 +1,163 @@
+//! The planner's verification sweep, shared by `benches/plan_verify.rs` (which charts it) and
+//! `tests/plan_verify.rs` (which holds it to the budget): for each camera distance and FLIP
+//! budget, plan the BTF view and the translucent view of `graphs/plan_verify.json` with
+//! `mesoflow plan`, run the planned graph, and record the measured FLIP of planned against full
+//! (over the pixels either shows the object in), the prediction, and the render times (a frame's
+//! time for `render.mesh`, the node's for `sss.render`).
+
+use super::cli::{mesoflow, node};
+use serde_json::Value;
+use std::path::Path;
+
+pub const DISTANCES: [f64; 7] = [2.0, 3.0, 4.5, 7.0, 11.0, 17.0, 26.0];
+pub const BUDGETS: [f64; 4] = [0.02, 0.05, 0.1, 0.25];
+pub const OBJECTS: [(&str, &str, &str); 2] = [
+    ("btf", "btf_full", "btf_view"),
+    ("sss", "sss_full", "sss_view"),
+];
+
+pub struct Row {
+    pub distance: f64,
+    pub budget: f64,
+    pub object: &'static str,
+    pub flip: f64,
+    /// What the plan predicted (absent where it could not say).
+    pub predicted: Option<f64>,
+    pub full_s: f64,
+    pub view_s: f64,
+    pub decisions: String,
+}
+
+/// Runs the sweep at `width` pixels across (height 3/4 of it) into `out`, with its own cache.
+pub fn sweep(out: &Path, width: u32) -> Vec<Row> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let height = width * 3 / 4;
+    std::fs::create_dir_all(out).unwrap();
+    let graph = root.join("graphs/plan_verify.json");
+    let cache = out.join("cache");
+    let target = [0.0, -0.1, 0.0];
+    let dir = {
+        let d = [0.0f64, 1.6, 2.7];
+        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+        d.map(|v| v / l)
+    };
+    let mut rows = Vec::new();
+    for &d in &DISTANCES {
+        let eye: Vec<f64> = (0..3).map(|k| target[k] + d * dir[k]).collect();
+        let eye = format!("[{:.4},{:.4},{:.4}]", eye[0], eye[1], eye[2]);
+        let mut sets = Vec::new();
+        for id in ["btf_full", "btf_view", "sss_full", "sss_view"] {
+            sets.push(format!("{id}.camera.eye={eye}"));
+            sets.push(format!("{id}.camera.resolution=[{width},{height}]"));
+        }
+        for &b in &BUDGETS {
+            let case = out.join(format!("d{d}_b{b}"));
+            std::fs::create_dir_all(&case).unwrap();
+            let step = case.join("step.json");
+            let planned = case.join("planned.json");
+            let budget = format!("flip={b}");
+            let mut a: Vec<String> = vec![
+                "plan".into(),
+                graph.display().to_string(),
+                "--render".into(),
+                "btf_view".into(),
+                "--budget".into(),
+                budget.clone(),
+                "-o".into(),
+                step.display().to_string(),
+                "--quiet".into(),
+                "--cache-dir".into(),
+                cache.display().to_string(),
+            ];
+            for s in &sets {
+                a.push("--set".into());
+                a.push(s.clone());
+            }
+            mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
+            let btf_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
+            std::fs::rename(case.join("plan.json"), case.join("plan_btf.json")).unwrap();
+            mesoflow(&[
+                "plan",
+                step.to_str().unwrap(),
+                "--render",
+                "sss_view",
+                "--budget",
+                &budget,
+                "-o",
+                planned.to_str().unwrap(),
+                "--quiet",
+                "--cache-dir",
+                cache.to_str().unwrap(),
+            ]);
+            let sss_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
+            std::fs::rename(case.join("plan.json"), case.join("plan_sss.json")).unwrap();
+            let run_out = case.join("out");
+            // Ask for the measures, so that a run served wholly from the cache still reports them.
+            mesoflow(&[
+                "run",
+                planned.to_str().unwrap(),
+                "--output",
+                "btf_flip.mean",
+                "--output",
+                "sss_flip.mean",
+                "--output",
+                "btf_full.image",
+                "--output",
+                "sss_full.image",
+                "--output",
+                "btf_view.image",
+                "--output",
+                "sss_view.image",
+                "--quiet",
+                "--out-dir",
+                run_out.to_str().unwrap(),
+                "--cache-dir",
+                cache.to_str().unwrap(),
+            ]);
+            let report: Value = serde_json::from_str(
+                &std::fs::read_to_string(run_out.join("report.json")).unwrap(),
+            )
+            .unwrap();
+            for ((object, full, view), plan_text) in OBJECTS.iter().zip([&btf_plan, &sss_plan]) {
+                let plan: Value = serde_json::from_str(plan_text).unwrap();
+                let decisions = plan["decisions"]
+                    .as_array()
+                    .map(|a| {
+                        a.iter()
+                            .map(|d| {
+                                format!("{}:{}", d["stage"].as_str().unwrap_or(""), d["choice"])
+                            })
+                            .collect::<Vec<_>>()
+                            .join(" ")
+                    })
+                    .unwrap_or_default();
+                let flip = node(&report, &format!("{object}_flip"))["metrics"]["mean"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN);
+                // Render time: a frame's time where the renderer measures one (`render.mesh`:
+                // `frame_ms`, without the node's one-off set-up and read-back), else the node's
+                // compute time (`sss.render`: samples, gather and shading).
+                let secs = |id: &str| {
+                    let t = &node(&report, id)["timings"];
+                    t["frame_ms"]
+                        .as_f64()
+                        .map(|ms| ms / 1e3)
+                        .or_else(|| t["seconds"].as_f64())
+                        .unwrap_or(f64::NAN)
+                };
+                rows.push(Row {
+                    distance: d,
+                    budget: b,
+                    object,
+                    flip,
+                    predicted: plan["predicted_error"].as_f64(),
+                    full_s: secs(full),
+                    view_s: secs(view),
+                    decisions,
+                });
+            }
+            eprintln!("d = {d}, budget {b}: done");
+        }
+    }
+    rows
+}
