@@ -201,75 +201,19 @@ pub fn plan(
         decisions.push(d.0);
     }
     if kind == RenderKind::Mesh {
-        let connected = file
-            .node(render)
-            .is_some_and(|n| n.inputs.contains_key("mdf"));
-        if connected {
-            let predicted_off =
-                scene
-                    .shell_pixels
-                    .zip(scene.silhouette_fraction)
-                    .and_then(|(px, contour)| {
-                        model.mdf_off_per_contour.at(px).map(|(e, inside)| {
-                            let band = calibration::band_fraction(contour, px);
-                            ((e * band).min(1.0), inside)
-                        })
-                    });
-            let (keep, reason, predicted) = if full {
-                (
-                    true,
-                    "budget 0: the full model keeps the MDF".to_string(),
-                    Some(0.0),
-                )
-            } else if cheapest {
-                (false, why_cheapest.to_string(), predicted_off.map(|p| p.0))
-            } else {
-                match (scene.shell_pixels, predicted_off) {
-                    (Some(px), _) if px < 0.5 => (
-                        false,
-                        format!("the shell projects to {px:.2} px, under half a pixel: no silhouette to see"),
-                        predicted_off.map(|p| p.0),
-                    ),
-                    (Some(px), Some((e, true))) if e <= share => (
-                        false,
-                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}, within this stage's {share:.3}"),
-                        Some(e),
-                    ),
-                    (Some(px), Some((e, true))) => (
-                        true,
-                        format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}, over this stage's {share:.3}"),
-                        Some(0.0),
-                    ),
-                    (Some(px), Some((_, false))) => (
-                        true,
-                        format!("the shell projects to {px:.2} px, beyond the calibrated range: the MDF is kept"),
-                        Some(0.0),
-                    ),
-                    _ => (true, "the shell's projection is unknown: kept".to_string(), None),
-                }
-            };
-            if !keep {
-                if let Some(n) = out.node_mut(render) {
-                    n.inputs.remove("mdf");
-                    n.params.insert("use_mdf".into(), json!(false));
-                }
-            }
-            let time = scene
-                .shell_pixels
-                .and_then(|px| model.mdf_off_time.at(px))
-                .filter(|_| !keep)
-                .map(|(t, _)| json!({ "render_time_vs_full": t }));
-            decisions.push(Decision {
-                stage: "mdf",
-                choice: json!({ "use_mdf": keep }),
-                reason,
-                predicted_error: predicted,
-                predicted_cost: time,
-            });
+        if let Some(d) = decide_mdf(
+            &model,
+            &mut out,
+            file,
+            render,
+            scene,
+            (full, cheapest, why_cheapest),
+            share,
+        ) {
+            decisions.push(d);
         }
     }
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
-        let sss_share = if kind == RenderKind::Sss { b } else { share };
         decisions.push(decide_sss(
             &model,
             &mut out,
@@ -277,7 +221,7 @@ pub fn plan(
             render,
             scene,
             (full, cheapest, why_cheapest),
-            sss_share,
+            share,
         ));
     }
     if let Some(d) = decide_shadows(
@@ -289,6 +233,84 @@ pub fn plan(
     Ok(Plan {
         decisions,
         file: out,
+    })
+}
+
+/// The MDF: left out when the shell is under half a pixel, or when leaving it out is predicted
+/// within the stage's share; `None` when the render has no MDF connected.
+fn decide_mdf(
+    model: &calibration::Calibration,
+    out: &mut GraphFile,
+    file: &GraphFile,
+    render: &str,
+    scene: &Scene,
+    (full, cheapest, why_cheapest): (bool, bool, &str),
+    share: f64,
+) -> Option<Decision> {
+    if !file.node(render)?.inputs.contains_key("mdf") {
+        return None;
+    }
+
+    let predicted_off =
+        scene
+            .shell_pixels
+            .zip(scene.silhouette_fraction)
+            .and_then(|(px, contour)| {
+                model.mdf_off_per_contour.at(px).map(|(e, inside)| {
+                    let band = calibration::band_fraction(contour, px);
+                    ((e * band).min(1.0), inside)
+                })
+            });
+    let (keep, reason, predicted) = if full {
+        (
+            true,
+            "budget 0: the full model keeps the MDF".to_string(),
+            Some(0.0),
+        )
+    } else if cheapest {
+        (false, why_cheapest.to_string(), predicted_off.map(|p| p.0))
+    } else {
+        match (scene.shell_pixels, predicted_off) {
+            (Some(px), _) if px < 0.5 => (
+                false,
+                format!("the shell projects to {px:.2} px, under half a pixel: no silhouette to see"),
+                predicted_off.map(|p| p.0),
+            ),
+            (Some(px), Some((e, true))) if e <= share => (
+                false,
+                format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}, within this stage's {share:.3}"),
+                Some(e),
+            ),
+            (Some(px), Some((e, true))) => (
+                true,
+                format!("the shell projects to {px:.2} px; leaving the MDF out is predicted to cost FLIP {e:.3}, over this stage's {share:.3}"),
+                Some(0.0),
+            ),
+            (Some(px), Some((_, false))) => (
+                true,
+                format!("the shell projects to {px:.2} px, beyond the calibrated range: the MDF is kept"),
+                Some(0.0),
+            ),
+            _ => (true, "the shell's projection is unknown: kept".to_string(), None),
+        }
+    };
+    if !keep {
+        if let Some(n) = out.node_mut(render) {
+            n.inputs.remove("mdf");
+            n.params.insert("use_mdf".into(), json!(false));
+        }
+    }
+    let time = scene
+        .shell_pixels
+        .and_then(|px| model.mdf_off_time.at(px))
+        .filter(|_| !keep)
+        .map(|(t, _)| json!({ "render_time_vs_full": t }));
+    Some(Decision {
+        stage: "mdf",
+        choice: json!({ "use_mdf": keep }),
+        reason,
+        predicted_error: predicted,
+        predicted_cost: time,
     })
 }
 
