@@ -1,5 +1,6 @@
 //! The planner's proof (`graphs/plan_verify.json`), charted: runs the verification sweep
-//! (`common/plan_sweep.rs`) and writes `sweep.csv` and the charts `flip_vs_distance`,
+//! (`common/plan_sweep.rs`) with the joint and the equal budget split, and writes `sweep.csv`
+//! (joint), `sweep_equal.csv` and the charts `flip_vs_distance`,
 //! `speedup_vs_distance` and `calibration` (SVG and PNG) to the output folder, and prints the
 //! misses.
 //!
@@ -22,24 +23,55 @@ use std::path::PathBuf;
 fn main() {
     let out = PathBuf::from(args::arg("--out", "out/plan_verify".to_string()));
     let width: u32 = args::arg("--width", 240);
-    let rows = plan_sweep::sweep(&out, width);
-    let mut csv = String::from("distance,budget,object,flip_mean,predicted,within_budget,full_seconds,view_seconds,speedup,decisions\n");
-    for r in &rows {
-        let _ = writeln!(
-            csv,
-            "{},{},{},{:.6},{},{},{:.4},{:.4},{:.2},\"{}\"",
-            r.distance,
-            r.budget,
-            r.object,
-            r.flip,
-            r.predicted.map_or(String::new(), |p| format!("{p:.6}")),
-            r.flip <= r.budget,
-            r.full_s,
-            r.view_s,
-            r.full_s / r.view_s,
-            r.decisions.replace('"', "'")
-        );
-    }
+    // The equal split first, for comparison; the joint split (the default) is what is charted.
+    let equal = plan_sweep::sweep(&out.join("equal"), width, "equal");
+    let rows = plan_sweep::sweep(&out, width, "joint");
+    let far_median = |rows: &[Row]| {
+        let mut v: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.distance >= DISTANCES[DISTANCES.len() / 2 + 1])
+            .map(|r| r.full_s / r.view_s)
+            .collect();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    let within = |rows: &[Row]| rows.iter().filter(|r| r.flip <= r.budget).count();
+    println!(
+        "split   within budget   median render time saved, far half\nequal   {:>3} of {}      {:.2}x\njoint   {:>3} of {}      {:.2}x",
+        within(&equal),
+        equal.len(),
+        far_median(&equal),
+        within(&rows),
+        rows.len(),
+        far_median(&rows)
+    );
+    let table = |rows: &[Row]| {
+        let mut csv = String::from("distance,budget,object,flip_mean,predicted,within_budget,full_seconds,view_seconds,speedup,decisions\n");
+        for r in rows {
+            let _ = writeln!(
+                csv,
+                "{},{},{},{:.6},{},{},{:.4},{:.4},{:.2},\"{}\"",
+                r.distance,
+                r.budget,
+                r.object,
+                r.flip,
+                r.predicted.map_or(String::new(), |p| format!("{p:.6}")),
+                r.flip <= r.budget,
+                r.full_s,
+                r.view_s,
+                r.full_s / r.view_s,
+                r.decisions.replace('"', "'")
+            );
+        }
+        csv
+    };
+    std::fs::write(out.join("sweep_equal.csv"), table(&equal)).unwrap();
+    let csv = table(&rows);
     std::fs::write(out.join("sweep.csv"), &csv).unwrap();
     print!("{csv}");
     let within = rows.iter().filter(|r| r.flip <= r.budget).count();

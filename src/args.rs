@@ -83,6 +83,12 @@ pub struct CacheArgs {
 }
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum SplitArg {
+    Joint,
+    Equal,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum DeviceArg {
     Auto,
     Cpu,
@@ -167,6 +173,10 @@ pub struct PlanArgs {
     /// The planned graph (default: <graph>.planned.json beside the graph; plan.json goes beside it).
     #[arg(short = 'o', long = "output", value_name = "OUT.json")]
     pub output: Option<PathBuf>,
+    /// How a render.mesh's budget is shared by its BTF and MDF: `joint` (the share that
+    /// predicts the least render time) or `equal` (half each).
+    #[arg(long, value_enum, default_value_t = SplitArg::Joint)]
+    pub split: SplitArg,
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
     #[arg(long, short)]

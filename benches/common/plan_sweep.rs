@@ -28,8 +28,9 @@ pub struct Row {
     pub decisions: String,
 }
 
-/// Runs the sweep at `width` pixels across (height 3/4 of it) into `out`, with its own cache.
-pub fn sweep(out: &Path, width: u32) -> Vec<Row> {
+/// Runs the sweep at `width` pixels across (height 3/4 of it) into `out`, with its own cache,
+/// planning with `split` (`joint` or `equal`).
+pub fn sweep(out: &Path, width: u32, split: &str) -> Vec<Row> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let height = width * 3 / 4;
     std::fs::create_dir_all(out).unwrap();
@@ -66,6 +67,8 @@ pub fn sweep(out: &Path, width: u32) -> Vec<Row> {
                 "-o".into(),
                 step.display().to_string(),
                 "--quiet".into(),
+                "--split".into(),
+                split.into(),
                 "--cache-dir".into(),
                 cache.display().to_string(),
             ];
@@ -86,6 +89,8 @@ pub fn sweep(out: &Path, width: u32) -> Vec<Row> {
                 "-o",
                 planned.to_str().unwrap(),
                 "--quiet",
+                "--split",
+                split,
                 "--cache-dir",
                 cache.to_str().unwrap(),
             ]);

@@ -158,8 +158,20 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     let chain = kind
         .btf_port()
         .and_then(|port| plan::btf_chain(&file, &args.render, port));
-    let planned = plan::plan(&file, &args.render, kind, &scene, chain.as_ref(), budget)
-        .map_err(|e| anyhow::anyhow!("--render {}: {e}", args.render))?;
+    let split = match args.split {
+        crate::args::SplitArg::Joint => plan::Split::Joint,
+        crate::args::SplitArg::Equal => plan::Split::Equal,
+    };
+    let planned = plan::plan(
+        &file,
+        &args.render,
+        kind,
+        &scene,
+        chain.as_ref(),
+        budget,
+        split,
+    )
+    .map_err(|e| anyhow::anyhow!("--render {}: {e}", args.render))?;
     // The planned graph must itself be valid.
     load::checked(&args.graph, &planned.file, engine.registry())?;
 
@@ -209,6 +221,8 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         "budget": { "flip": budget },
         "scene": scene.to_json(),
         "decisions": decisions,
+        "split": if split == plan::Split::Joint { "joint" } else { "equal" },
+        "shares": planned.shares.iter().map(|(k, v)| (k.to_string(), json!(v))).collect::<Map<String, Value>>(),
         "calibration": "src/plan_calibration.json (benches/plan_calibrate.rs, a scene of its own); benches/plan_verify.rs measures the plan on graphs/plan_verify.json",
     });
     if let Some(t) = total {

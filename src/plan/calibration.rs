@@ -53,6 +53,8 @@ pub struct BtfOption {
     pub rank: u32,
     pub level: u32,
     pub flip: Curve,
+    /// Render time over the raw BTF's.
+    pub time: Curve,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -137,20 +139,27 @@ impl Calibration {
         let mut btf: Vec<BtfOption> = Vec::new();
         for r in rows("btf")? {
             let (rank, level) = (num(r, "rank") as u32, num(r, "level") as u32);
-            let point = (num(r, "texels_per_pixel").log2(), num(r, "flip"));
+            let x = num(r, "texels_per_pixel").log2();
+            let point = (x, num(r, "flip"));
+            let time = (x, num(r, "seconds") / num(r, "full_seconds"));
             match btf.iter_mut().find(|o| o.rank == rank && o.level == level) {
-                Some(o) => o.flip.points.push(point),
+                Some(o) => {
+                    o.flip.points.push(point);
+                    o.time.points.push(time);
+                }
                 None => btf.push(BtfOption {
                     rank,
                     level,
                     flip: Curve {
                         points: vec![point],
                     },
+                    time: Curve { points: vec![time] },
                 }),
             }
         }
         for o in &mut btf {
             o.flip = Curve::new(std::mem::take(&mut o.flip.points));
+            o.time = Curve::new(std::mem::take(&mut o.time.points));
         }
         let mdf = rows("mdf_off")?;
         let mdf_off_per_contour = Curve::new(

@@ -5,10 +5,10 @@
 //! - B = 0 asks for the full model: raw BTF at λ = 0, the MDF, the PBD profile gathered by brute
 //!   force. B ≥ 1 (FLIP's whole range) allows the cheapest: the BTF's average BRDF at rank 1, no
 //!   MDF, subsurface scattering as a BRDF. Never nothing.
-//! - Otherwise each stage takes its share of B (an equal split over the render's stages: BTF and
-//!   MDF for `render.mesh`, BTF and subsurface for `qh.render`, subsurface alone for
-//!   `sss.render`) and the cheapest candidate whose error, predicted by the measured model
-//!   ([`calibration`]), fits it:
+//! - Otherwise each stage takes its share of B — for `render.mesh`'s BTF and MDF the share that
+//!   predicts the least render time ([`Split::Joint`]) or half each ([`Split::Equal`]); half each
+//!   for `qh.render`'s BTF and subsurface; all of it for `sss.render` — and the cheapest
+//!   candidate whose error, predicted by the measured model ([`calibration`]), fits it:
 //!   - BTF: PCA in YCbCr at rank r (chroma r/4) and level λ, by memory; none fits → the raw BTF;
 //!   - MDF: left out when its predicted error fits (always when the shell projects under half a
 //!     pixel);
@@ -159,10 +159,38 @@ pub struct BtfChain {
     pub raw: String,
 }
 
+/// How a render's budget is shared between its BTF and MDF stages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Split {
+    /// Half each.
+    Equal,
+    /// Whichever share of nine (0, B/8, …, B) to the BTF gives the least predicted render time
+    /// (the product of the stages' predicted time ratios; memory breaks ties): the budget goes
+    /// where it saves the most time per unit of error.
+    Joint,
+}
+
 /// Decisions and the graph edits that carry them out.
 pub struct Plan {
     pub decisions: Vec<Decision>,
     pub file: GraphFile,
+    /// The budget each stage was given, by stage.
+    pub shares: Vec<(&'static str, f64)>,
+}
+
+/// A decision's predicted render time over the full model's (1 where it says none).
+fn time_ratio(d: &Decision) -> f64 {
+    d.predicted_cost
+        .as_ref()
+        .and_then(|c| c["render_time_vs_full"].as_f64())
+        .unwrap_or(1.0)
+}
+
+fn floats_of(d: &Decision) -> f64 {
+    d.predicted_cost
+        .as_ref()
+        .and_then(|c| c["floats"].as_f64())
+        .unwrap_or(f64::INFINITY)
 }
 
 const PREFIX: &str = "plan_";
@@ -176,6 +204,7 @@ pub fn plan(
     scene: &Scene,
     chain: Option<&BtfChain>,
     b: f64,
+    split: Split,
 ) -> Result<Plan, PlanError> {
     if !(b.is_finite() && b >= 0.0) {
         return Err(PlanError::Budget(b));
@@ -195,12 +224,50 @@ pub fn plan(
         "a budget of 1 or more is FLIP's whole range: any model meets it"
     };
 
+    let mut shares = Vec::new();
+    // The BTF's share: half for the equal split; for the joint split, the one of nine that
+    // predicts the least render time for BTF and MDF together.
+    let mdf_connected = kind == RenderKind::Mesh
+        && file
+            .node(render)
+            .is_some_and(|n| n.inputs.contains_key("mdf"));
+    let btf_share = match (split, kind.btf_port().zip(chain), mdf_connected) {
+        (Split::Joint, Some(_), true) if !full && !cheapest => {
+            let try_share = |s: f64| {
+                let (bd, _) = decide_btf(&model, scene, false, false, why_cheapest, s);
+                let mut scratch = file.clone();
+                let md = decide_mdf(
+                    &model,
+                    &mut scratch,
+                    file,
+                    render,
+                    scene,
+                    (false, false, why_cheapest),
+                    b - s,
+                );
+                let t = time_ratio(&bd) * md.as_ref().map_or(1.0, time_ratio);
+                (t, floats_of(&bd))
+            };
+            (0..=8)
+                .map(|k| b * k as f64 / 8.0)
+                .map(|s| (s, try_share(s)))
+                .min_by(|x, y| x.1 .0.total_cmp(&y.1 .0).then(x.1 .1.total_cmp(&y.1 .1)))
+                .map_or(share, |(s, _)| s)
+        }
+        _ => share,
+    };
     if let (Some(port), Some(chain)) = (kind.btf_port(), chain) {
-        let d = decide_btf(&model, scene, full, cheapest, why_cheapest, share);
+        let d = decide_btf(&model, scene, full, cheapest, why_cheapest, btf_share);
         apply_btf(&mut out, render, port, chain, &d.1);
         decisions.push(d.0);
+        shares.push(("btf", btf_share));
     }
     if kind == RenderKind::Mesh {
+        let mdf_share = if chain.is_some() {
+            b - btf_share
+        } else {
+            share
+        };
         if let Some(d) = decide_mdf(
             &model,
             &mut out,
@@ -208,9 +275,10 @@ pub fn plan(
             render,
             scene,
             (full, cheapest, why_cheapest),
-            share,
+            mdf_share,
         ) {
             decisions.push(d);
+            shares.push(("mdf", mdf_share));
         }
     }
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
@@ -223,6 +291,7 @@ pub fn plan(
             (full, cheapest, why_cheapest),
             share,
         ));
+        shares.push(("sss", share));
     }
     if let Some(d) = decide_shadows(
         &model, &mut out, file, render, kind, scene, full, cheapest, b,
@@ -233,6 +302,7 @@ pub fn plan(
     Ok(Plan {
         decisions,
         file: out,
+        shares,
     })
 }
 
@@ -348,7 +418,10 @@ fn decide_btf(
                 choice: json!({ "model": "raw", "level": 0 }),
                 reason,
                 predicted_error: Some(predicted),
-                predicted_cost: scene.btf_floats.map(|f| json!({ "floats": f })),
+                predicted_cost: Some(match scene.btf_floats {
+                    Some(f) => json!({ "floats": f, "render_time_vs_full": 1.0 }),
+                    None => json!({ "render_time_vs_full": 1.0 }),
+                }),
             },
             BtfModel {
                 raw: true,
@@ -373,7 +446,7 @@ fn decide_btf(
         let at = (texels / 4f64.powf(l)).max(1.0);
         (r as f64 + 2.0 * chroma) * (at + pairs) + 3.0 * at
     };
-    let pca = |r: u32, l: f64, reason: String, predicted: Option<f64>| {
+    let pca = |r: u32, l: f64, reason: String, predicted: Option<f64>, time: Option<f64>| {
         let chroma = (r / 4).max(1);
         let average = l >= coarsest && coarsest > 0.0;
         (
@@ -389,7 +462,10 @@ fn decide_btf(
                     }
                 ),
                 predicted_error: predicted,
-                predicted_cost: Some(json!({ "floats": floats(r, l) })),
+                predicted_cost: Some(match time {
+                    Some(t) => json!({ "floats": floats(r, l), "render_time_vs_full": t }),
+                    None => json!({ "floats": floats(r, l) }),
+                }),
             },
             BtfModel {
                 raw: false,
@@ -408,7 +484,7 @@ fn decide_btf(
             .filter(|o| o.rank == 2 && o.level as f64 >= coarsest.min(5.0))
             .find_map(predict)
             .map(|p| p.0);
-        return pca(1, coarsest, why_cheapest.to_string(), worst);
+        return pca(1, coarsest, why_cheapest.to_string(), worst, None);
     }
     let Some(t) = tpp else {
         return raw("texels per pixel unknown: the raw BTF".into(), 0.0);
@@ -431,6 +507,7 @@ fn decide_btf(
                 range_note(inside)
             ),
             Some(e),
+            o.time.at(t).map(|p| p.0),
         ),
         None => raw(
             format!("{t:.2} texels per pixel: no PCA rank and level is predicted within this stage's {share:.3}; the raw BTF"),
@@ -770,7 +847,7 @@ mod tests {
         let f = graph();
         let chain = btf_chain(&f, "r", "btf").unwrap();
         assert_eq!(chain.raw, "capture.btf");
-        plan(&f, "r", RenderKind::Mesh, s, Some(&chain), b).unwrap()
+        plan(&f, "r", RenderKind::Mesh, s, Some(&chain), b, Split::Equal).unwrap()
     }
 
     fn decision<'a>(p: &'a Plan, stage: &str) -> &'a Decision {
@@ -805,6 +882,43 @@ mod tests {
                             "tpp {tpp}, shell {shell} px, budget {b}: {d:?}"
                         );
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_joint_split_keeps_the_total_within_budget() {
+        // Whatever share the joint split gives the BTF, the stages' predictions add up to at
+        // most the budget.
+        let f = graph();
+        let chain = btf_chain(&f, "r", "btf").unwrap();
+        for tpp in [0.2, 1.0, 3.0, 10.0] {
+            for shell in [0.6, 1.0, 4.0] {
+                for b in [0.01, 0.05, 0.2, 0.6] {
+                    let p = plan(
+                        &f,
+                        "r",
+                        RenderKind::Mesh,
+                        &scene(tpp, shell),
+                        Some(&chain),
+                        b,
+                        Split::Joint,
+                    )
+                    .unwrap();
+                    let total: f64 = p
+                        .decisions
+                        .iter()
+                        .filter(|d| d.stage != "shadows")
+                        .map(|d| d.predicted_error.unwrap_or(0.0))
+                        .sum();
+                    assert!(
+                        total <= b + 1e-12,
+                        "tpp {tpp}, shell {shell}, budget {b}: {:?}",
+                        p.decisions
+                    );
+                    let given: f64 = p.shares.iter().map(|s| s.1).sum();
+                    assert!((given - b).abs() < 1e-12, "{:?}", p.shares);
                 }
             }
         }
@@ -863,12 +977,20 @@ mod tests {
         s.camera_inside = true;
         let f = graph();
         assert!(matches!(
-            plan(&f, "r", RenderKind::Mesh, &s, None, 0.1),
+            plan(&f, "r", RenderKind::Mesh, &s, None, 0.1, Split::Joint),
             Err(PlanError::CameraInside)
         ));
         for b in [-1.0, f64::NAN] {
             assert!(matches!(
-                plan(&f, "r", RenderKind::Mesh, &scene(1.0, 1.0), None, b),
+                plan(
+                    &f,
+                    "r",
+                    RenderKind::Mesh,
+                    &scene(1.0, 1.0),
+                    None,
+                    b,
+                    Split::Joint
+                ),
                 Err(PlanError::Budget(_))
             ));
         }
@@ -893,7 +1015,7 @@ mod tests {
             mfp_pixels: Some(0.25),
             ..Default::default()
         };
-        let p = plan(&f, "r", RenderKind::Sss, &s, None, 0.05).unwrap();
+        let p = plan(&f, "r", RenderKind::Sss, &s, None, 0.05, Split::Joint).unwrap();
         assert_eq!(p.file.node("r").unwrap().params["mode"], json!("brdf"));
         // Nearer, scattering spans many pixels: gathered, and what is chosen is predicted
         // within the budget or is the graph's own gather.
@@ -902,7 +1024,7 @@ mod tests {
             mfp_pixels: Some(50.0),
             ..s.clone()
         };
-        let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.05).unwrap();
+        let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.05, Split::Joint).unwrap();
         let d = &p.decisions[0];
         assert_eq!(
             p.file.node("r").unwrap().params["mode"],
@@ -911,7 +1033,7 @@ mod tests {
         );
         assert!(d.predicted_error.is_none_or(|e| e <= 0.05), "{d:?}");
         // Budget 0: brute force, PBD.
-        let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.0).unwrap();
+        let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.0, Split::Joint).unwrap();
         assert_eq!(p.file.node("r").unwrap().params["threshold"], json!(0.0));
         assert_eq!(p.file.node("pr").unwrap().params["model"], json!("pbd"));
     }
