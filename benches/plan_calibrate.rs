@@ -7,7 +7,7 @@
 //!   pixels on a silhouette (the only pixels the MDF changes);
 //! - shadow maps at the planner's resolution (four texels per pixel the object spans), for both
 //!   renderers, against the object's size in pixels;
-//! - subsurface scattering as a BRDF, or gathered (octree, threshold 0.05) with samples k pixel
+//! - subsurface scattering as a BRDF, or gathered (brute force) with samples k pixel
 //!   footprints apart (never closer than the profile's default), against the longest mean free
 //!   path in pixels.
 //!
@@ -223,7 +223,7 @@ fn main() {
                 let spacing = (k * footprint).max(default_spacing);
                 let mut v = g[&format!("{p}_full")].clone();
                 v["params"]["spacing"] = json!(spacing);
-                v["params"]["threshold"] = json!(0.05);
+                v["params"]["threshold"] = json!(0.0);
                 g.insert(id.clone(), v);
                 g.insert(format!("flip_{id}"), json!({ "kind": "image.flip", "inputs": { "reference": format!("{p}_full.image"), "test": format!("{id}.image") }, "params": { "object_only": true } }));
             }

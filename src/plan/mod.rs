@@ -12,9 +12,10 @@
 //!   - BTF: PCA in YCbCr at rank r (chroma r/4) and level λ, by memory; none fits → the raw BTF;
 //!   - MDF: left out when its predicted error fits (always when the shell projects under half a
 //!     pixel);
-//!   - subsurface: the BRDF approximation, or the gather with samples 4, 2, 1 or ½ pixel
-//!     footprints apart (never closer than the default spacing), by render time; none fits →
-//!     the graph's own gather. Scattering under half a pixel is always the BRDF approximation.
+//!   - subsurface: the BRDF approximation, or the brute-force gather with samples 4, 2, 1 or ½
+//!     pixel footprints apart (never closer than the default spacing), by render time; none
+//!     fits → the full model's gather (brute force, default spacing). Scattering under half a
+//!     pixel is always the BRDF approximation.
 //!
 //! A prediction beyond the calibrated range (a view nearer or farther than any calibrated one)
 //! is not trusted: there the stage keeps the graph's own model, except for the half-pixel rules
@@ -663,10 +664,12 @@ fn decide_sss(
             let spacing = (k * footprint).max(default);
             set(out, "mode", json!("diffusion"));
             set(out, "spacing", json!(spacing));
-            set(out, "threshold", json!(0.05));
+            // Brute force, as calibrated (the calibration's gathers ran on the GPU path, which
+            // sums every sample); an octree would add an error the model does not know.
+            set(out, "threshold", json!(0.0));
             Decision {
                 stage: "sss",
-                choice: json!({ "mode": "diffusion", "spacing_mm": spacing, "threshold": 0.05 }),
+                choice: json!({ "mode": "diffusion", "spacing_mm": spacing, "threshold": 0.0 }),
                 reason: format!(
                     "scattering spans {:.2} px; samples {k} pixel footprints apart ({spacing:.3} mm, never closer than the default {default:.3} mm) are predicted at FLIP {e:.3} (the worse calibration medium), within {share:.3}",
                     mfp.unwrap_or(f64::NAN),
@@ -676,12 +679,18 @@ fn decide_sss(
             }
         }
         _ => {
+            // Nothing cheaper is predicted within the budget: the full model's gather (brute
+            // force at the profile's own spacing). The profile stays the graph's.
             set(out, "mode", json!("diffusion"));
+            set(out, "threshold", json!(0.0));
+            if let Some(n) = out.node_mut(render) {
+                n.params.remove("spacing");
+            }
             Decision {
                 stage: "sss",
-                choice: json!({ "mode": "diffusion" }),
+                choice: json!({ "mode": "diffusion", "threshold": 0.0 }),
                 reason: format!(
-                    "scattering spans {:.2} px; no cheaper candidate is predicted within {share:.3}: the graph's own gather",
+                    "scattering spans {:.2} px; no cheaper candidate is predicted within {share:.3}: the full model's brute-force gather",
                     mfp.unwrap_or(f64::NAN)
                 ),
                 predicted_error: None,
