@@ -22,6 +22,7 @@ mod args;
 mod cli;
 
 use cli::{mesoflow, node};
+use mesoflow_nodes::render::footprint::shadow_resolution;
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 
@@ -120,13 +121,6 @@ fn sss_render(p: &str, camera: &Value, extra: Value) -> Value {
         params[k] = v.clone();
     }
     json!({ "kind": "sss.render", "inputs": { "mesh": "ring.mesh", "material": format!("{p}_material.material"), "profile": format!("{p}_profile.profile") }, "params": params })
-}
-
-/// The planner's shadow-map rule (`src/plan/mod.rs`, kept in step): four texels per pixel the
-/// object spans, a power of two, at least 64 and at most the graph's own.
-fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
-    let want = (4.0 * object_pixels).max(64.0).min(graph as f64);
-    (want as u32).next_power_of_two().min(graph)
 }
 
 fn run(graph: &Map<String, Value>, dir: &Path, cache: &Path) -> Value {

@@ -25,6 +25,7 @@
 pub mod calibration;
 
 use mesoflow_graph::GraphFile;
+use mesoflow_nodes::render::footprint::shadow_resolution;
 use serde_json::{json, Map, Value};
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -698,14 +699,6 @@ fn decide_sss(
             }
         }
     }
-}
-
-/// The shadow map no finer than the screen: four texels per pixel the object spans, a power of
-/// two, at least 64 and at most the graph's own (`benches/plan_calibrate.rs` keeps the same
-/// rule).
-pub fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
-    let want = (4.0 * object_pixels).max(64.0).min(graph as f64);
-    (want as u32).next_power_of_two().min(graph)
 }
 
 /// Shadow maps: the renderer's resolution lowered to what the view shows, when the measured

@@ -21,7 +21,7 @@
 use crate::geometry::{dot, V3};
 use crate::heightfield::raycast::Caster;
 use crate::progress::Counter;
-use crate::render::camera::{Camera, CameraParams};
+use crate::render::camera::CameraParams;
 use crate::render::footprint;
 use crate::render::layers::Frag;
 use crate::render::light::{Light, LightParams};
@@ -155,10 +155,6 @@ impl Node for QhRender {
         } else {
             return Err(NodeError::input("lrf", "expected a Btf or a BtfBasis"));
         };
-        let texels = match &source {
-            Source::Raw(b) => [b.width, b.height],
-            Source::Basis { basis, .. } => [basis.width, basis.height],
-        };
         let lrf = Material::new(source);
         let terms = Terms {
             entrance: inputs.opt::<Image>("entrance")?,
@@ -178,18 +174,11 @@ impl Node for QhRender {
         for w in r.warnings {
             ctx.warn(w);
         }
-        // The render's own footprint has no texture; the LRF's texels give the texel count.
-        let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
-        let texture = footprint::Texture {
-            tiling: p.tiling,
-            texels,
-        };
-        let fp = footprint::footprint(mesh, &camera, Some(texture), p.mm_per_unit);
         let out = Outputs::new()
             .with("image", r.image)
             .with("global", r.exitance)
             .with("points", Scalar(r.points as f64));
-        Ok(footprint::with_metrics(out, fp.as_ref()))
+        Ok(footprint::with_metrics(out, r.footprint.as_ref()))
     }
 }
 
@@ -310,6 +299,13 @@ impl Qh<'_> {
 }
 
 impl Weights for Qh<'_> {
+    fn texture(&self) -> Option<footprint::Texture> {
+        Some(footprint::Texture {
+            tiling: self.scene.tiling,
+            texels: [self.scene.material.width, self.scene.material.height],
+        })
+    }
+
     fn entrance(&self, at: &Frag, to_light: V3) -> [f64; 3] {
         let s = self.scene.surface(at);
         if let Some(img) = self.terms.entrance {

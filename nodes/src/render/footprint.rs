@@ -81,7 +81,7 @@ pub fn contains(mesh: &Mesh, p: V3) -> bool {
                 .filter(|&t| {
                     let [a, b, c] = mesh.corners(t);
                     let q = |i: usize| mesh.positions[i].map(|v| v as f64);
-                    ray_hits_triangle(p, **d, q(a), q(b), q(c))
+                    layers::intersect(p, **d, q(a), q(b), q(c)).is_some()
                 })
                 .count();
             crossings % 2 == 1
@@ -90,25 +90,12 @@ pub fn contains(mesh: &Mesh, p: V3) -> bool {
     odd >= 2
 }
 
-/// Möller–Trumbore: does the ray from `o` along `d` cross triangle (a, b, c) at t > 0?
-fn ray_hits_triangle(o: V3, d: V3, a: V3, b: V3, c: V3) -> bool {
-    let (e1, e2) = (sub(b, a), sub(c, a));
-    let h = cross(d, e2);
-    let det = dot(e1, h);
-    if det.abs() < 1e-14 {
-        return false;
-    }
-    let s = sub(o, a);
-    let u = dot(s, h) / det;
-    if !(0.0..=1.0).contains(&u) {
-        return false;
-    }
-    let q = cross(s, e1);
-    let v = dot(d, q) / det;
-    if v < 0.0 || u + v > 1.0 {
-        return false;
-    }
-    dot(e2, q) / det > 0.0
+/// The shadow map no finer than the screen: four texels per pixel the object spans, a power of
+/// two, at least 64 and at most `graph` (the renderer's own). The planner decides with it and
+/// the calibration measures it.
+pub fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
+    let want = (4.0 * object_pixels).max(64.0).min(graph as f64);
+    (want as u32).next_power_of_two().min(graph)
 }
 
 /// The footprint of `camera`'s pixels on `mesh`; `None` when no ray hits it.

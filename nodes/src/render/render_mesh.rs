@@ -177,10 +177,6 @@ impl Node for RenderMesh {
         } else {
             return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
         };
-        let texels = match &source {
-            Source::Raw(b) => [b.width, b.height],
-            Source::Basis { basis, .. } => [basis.width, basis.height],
-        };
         let material = Material::new(source);
         let mdf = inputs.opt::<Mdf>("mdf")?.filter(|_| p.use_mdf);
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
@@ -228,7 +224,7 @@ impl Node for RenderMesh {
         }
         let texture = footprint::Texture {
             tiling: p.tiling,
-            texels,
+            texels: [material.width, material.height],
         };
         let fp = footprint::footprint(mesh, &camera, Some(texture), p.mm_per_unit);
         let out = Outputs::new()

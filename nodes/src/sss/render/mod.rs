@@ -179,7 +179,7 @@ pub struct Rendered {
     /// Mean profile evaluations per covered pixel.
     pub terms: f64,
     pub gather_seconds: f64,
-    /// What one pixel covers on the surface (no texture: texels are the caller's).
+    /// What one pixel covers on the surface (texels per pixel with the weights' texture).
     pub footprint: Option<Footprint>,
     pub warnings: Vec<String>,
 }
@@ -192,6 +192,10 @@ pub struct Rendered {
 pub trait Weights: Sync {
     fn entrance(&self, at: &Frag, to_light: V3) -> [f64; 3];
     fn pixel(&self, px: usize, at: &Frag, to_viewer: V3) -> ([f64; 3], [f64; 3]);
+    /// The texture on the surface, for the footprint's texels per pixel (none by default).
+    fn texture(&self) -> Option<footprint::Texture> {
+        None
+    }
 }
 
 /// No mesostructure: the homogeneous render.
@@ -278,7 +282,7 @@ pub fn render_with(
         spacing: (p.mode == Mode::Diffusion).then_some(setup.spacing_mm),
         terms,
         gather_seconds,
-        footprint: footprint::footprint(mesh, &camera, None, p.mm_per_unit),
+        footprint: footprint::footprint(mesh, &camera, weights.texture(), p.mm_per_unit),
         warnings,
     })
 }
