@@ -71,6 +71,10 @@ pub fn trace(mesh: &Mesh, cam: &Camera, count: usize, watch: &Counter) -> Layers
     // Bin triangles by the screen tiles their projection covers; a corner behind a pinhole puts
     // the triangle in every tile (rare, and correct, just slower).
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); (tiles_x * tiles_y) as usize];
+    // Each triangle's screen box widened by a pixel, so that a pixel whose centre lies outside
+    // it skips the triangle: a far object lands whole in one tile, and without this every pixel
+    // of that tile would test every triangle.
+    let mut boxes: Vec<[f64; 4]> = Vec::with_capacity(mesh.triangles());
     for t in 0..mesh.triangles() {
         let c = mesh.corners(t);
         let proj: Option<Vec<(f64, f64, f64)>> = c.iter().map(|&i| cam.project(pos(i))).collect();
@@ -85,8 +89,14 @@ pub fn trace(mesh: &Mesh, cam: &Camera, count: usize, watch: &Counter) -> Layers
                     ys.fold(f64::NEG_INFINITY, f64::max),
                 )
             }
-            None => (0.0, w as f64, 0.0, h as f64),
+            None => (
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+            ),
         };
+        boxes.push([x0 - 1.0, x1 + 1.0, y0 - 1.0, y1 + 1.0]);
         if x1 < -1.0 || y1 < -1.0 || x0 > w as f64 + 1.0 || y0 > h as f64 + 1.0 {
             continue;
         }
@@ -113,8 +123,13 @@ pub fn trace(mesh: &Mesh, cam: &Camera, count: usize, watch: &Counter) -> Layers
             for y in by * TILE..((by + 1) * TILE).min(h) {
                 for x in bx * TILE..((bx + 1) * TILE).min(w) {
                     let (o, d) = cam.ray(x, y);
+                    let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
                     let mut hits: Vec<(Frag, bool)> = tris
                         .iter()
+                        .filter(|&&tri| {
+                            let [x0, x1, y0, y1] = boxes[tri as usize];
+                            (x0..=x1).contains(&cx) && (y0..=y1).contains(&cy)
+                        })
                         .filter_map(|&tri| {
                             let [a, b, c] = mesh.corners(tri as usize);
                             intersect(o, d, pos(a), pos(b), pos(c))

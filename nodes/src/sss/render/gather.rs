@@ -101,9 +101,17 @@ pub(super) fn gather_gpu(
     for c in 0..3 {
         input.extend(setup.table.rd[c].iter().map(|&v| v as f32));
     }
+    // Only the pixels that see the object are shaded, packed COLUMNS to a row: a far object
+    // covers a few hundred of the image's pixels, and every workgroup streams all the samples
+    // through its memory whether its pixels are valid or not.
+    const COLUMNS: usize = 64;
+    let shaded: Vec<usize> = (0..view.hits.len())
+        .filter(|&i| view.hits[i].is_some())
+        .collect();
+    let rows = shaded.len().div_ceil(COLUMNS).max(1);
     let shade_offset = input.len();
-    for h in &view.hits {
-        match h {
+    for k in 0..rows * COLUMNS {
+        match shaded.get(k).and_then(|&i| view.hits[i].as_ref()) {
             Some((p, ..)) => {
                 input.extend([p[0] * unit, p[1] * unit, p[2] * unit, 1.0].map(|v| v as f32))
             }
@@ -121,8 +129,8 @@ pub(super) fn gather_gpu(
     }
     let mut params = Vec::with_capacity(48);
     for v in [
-        view.width as u32,
-        view.height as u32,
+        COLUMNS as u32,
+        rows as u32,
         setup.sources.len() as u32,
         n as u32,
         shade_offset as u32,
@@ -148,12 +156,14 @@ pub(super) fn gather_gpu(
             entry: "main",
             params: &params,
             input: &input,
-            output_len: 4 * view.width * view.height,
-            grid: (view.width as u32, view.height as u32),
+            output_len: 4 * rows * COLUMNS,
+            grid: (COLUMNS as u32, rows as u32),
         },
     )?;
-    Ok(out
-        .chunks_exact(4)
-        .map(|c| [c[0] as f64, c[1] as f64, c[2] as f64])
-        .collect())
+    let mut sums = vec![[0.0; 3]; view.width * view.height];
+    for (k, &i) in shaded.iter().enumerate() {
+        let c = &out[4 * k..4 * k + 3];
+        sums[i] = [c[0] as f64, c[1] as f64, c[2] as f64];
+    }
+    Ok(sums)
 }

@@ -1,4 +1,5 @@
-// sss.render, the gather on the GPU: for every pixel's shading point, the sum over all
+// sss.render, the gather on the GPU: for every shading point (the pixels that see the object,
+// packed into rows by the host), the sum over all
 // irradiance samples farther than `near` of Rd(distance)·(E·ΔA), brute force, with the samples
 // streamed through workgroup memory 64 at a time. Rd is looked up exactly as the CPU path does:
 // a log-uniform radius table, linear in ln r, the first value inside it, 0 beyond it.
