@@ -5,8 +5,9 @@
 //! - BTF: PCA rank r (YCbCr, chroma r/4) at level λ, against texels per pixel;
 //! - MDF left out, against the shell's thickness in pixels, with the fraction of the object's
 //!   pixels on a silhouette (the only pixels the MDF changes);
-//! - shadow maps at the planner's resolution (four texels per pixel the object spans), for both
-//!   renderers, against the object's size in pixels;
+//! - shadow maps at each density the planner chooses among (1, 2 and 4 texels per pixel the
+//!   object spans), for both renderers, on the torus under a low light (it shadows itself),
+//!   against the object's size in pixels;
 //! - subsurface scattering as a BRDF, or gathered (brute force) with samples k pixel
 //!   footprints apart (never closer than the profile's default), against the longest mean free
 //!   path in pixels.
@@ -22,7 +23,7 @@ mod args;
 mod cli;
 
 use cli::{mesoflow, node};
-use mesoflow_nodes::render::footprint::shadow_resolution;
+use mesoflow_nodes::render::footprint::{shadow_resolution, SHADOW_TEXELS_PER_PIXEL};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 
@@ -107,6 +108,15 @@ fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
             flip(&format!("{p}_full"), &format!("{p}_brdf")),
         );
     }
+    // Shadow maps need a scene that casts shadows (a convex sphere casts none, and the torus
+    // lit from above hardly any): the torus under a low light, with the BTF and with marble.
+    let low = json!({ "direction": [0.2, 0.35, 0.9], "intensity": 5.0 });
+    n.insert("shadow_btf_full".into(), json!({ "kind": "render.mesh", "inputs": { "mesh": "ring.mesh", "btf": "capture.btf", "mdf": "mdf.mdf" }, "params": {
+        "camera": camera, "light": low, "tiling": [12, 5], "shell": 0.06, "mm_per_unit": 20.0, "use_mdf": true, "shadows": true, "shadow_resolution": 512 } }));
+    n.insert(
+        "shadow_sss_full".into(),
+        sss_render("sss", &camera, json!({ "light": low })),
+    );
     n
 }
 
@@ -162,7 +172,7 @@ fn main() {
     let mut mdf: Vec<Value> = Vec::new();
     let mut sss: Vec<Value> = Vec::new();
     let mut shadows: Vec<Value> = Vec::new();
-    let mut shadow_sizes: Vec<(&str, f64, u32)> = Vec::new();
+    let mut shadow_sizes: Vec<(&str, &str, String, f64, f64, u32)> = Vec::new();
     for &d in &DISTANCES {
         let eye = dir.map(|v| v * d);
         let mut g = scene(width, eye);
@@ -172,7 +182,6 @@ fn main() {
                 let mut p = g.clone();
                 p.retain(|k, _| {
                     k == "ring"
-                        || k == "ball"
                         || MEDIA.iter().any(|(m, _)| {
                             [
                                 format!("{m}_material"),
@@ -182,32 +191,31 @@ fn main() {
                             .contains(k)
                         })
                 });
-                p.insert(
-                    "ball_scene".into(),
-                    json!({ "kind": "scene.footprint", "inputs": { "mesh": "ball.mesh" },
-                        "params": { "camera": p["sss_scene"]["params"]["camera"].clone(), "mm_per_unit": 25.0 } }),
-                );
                 p
             },
             &out.join(format!("d{d}/probe")),
             &cache,
         );
         let footprint = metric(&probe, "sss_scene", "pixel_footprint_mm").unwrap_or(f64::NAN);
-        // Shadow maps at the planner's rule: four texels per pixel the object spans.
-        for (id, full, scene_id) in [
-            ("btf_shadow", "btf_full", "ball_scene"),
-            ("sss_shadow", "sss_full", "sss_scene"),
+        // Shadow maps at each density the planner chooses among (texels per pixel the object
+        // spans).
+        for (base, full, scene_id) in [
+            ("btf_shadow", "shadow_btf_full", "sss_scene"),
+            ("sss_shadow", "shadow_sss_full", "sss_scene"),
         ] {
             let px = metric(&probe, scene_id, "object_pixels").unwrap_or(f64::NAN);
-            let size = shadow_resolution(px, 512);
-            let mut v = g[full].clone();
-            v["params"]["shadow_resolution"] = json!(size);
-            g.insert(id.into(), v);
-            g.insert(
-                format!("flip_{id}"),
-                json!({ "kind": "image.flip", "inputs": { "reference": format!("{full}.image"), "test": format!("{id}.image") }, "params": { "object_only": true } }),
-            );
-            shadow_sizes.push((id, px, size));
+            for t in SHADOW_TEXELS_PER_PIXEL {
+                let id = format!("{base}_{t}");
+                let size = shadow_resolution(px, t, 512);
+                let mut v = g[full].clone();
+                v["params"]["shadow_resolution"] = json!(size);
+                g.insert(id.clone(), v);
+                g.insert(
+                    format!("flip_{id}"),
+                    json!({ "kind": "image.flip", "inputs": { "reference": format!("{full}.image"), "test": format!("{id}.image") }, "params": { "object_only": true } }),
+                );
+                shadow_sizes.push((base, full, id, px, t, size));
+            }
         }
         for (p, _) in MEDIA {
             let default_spacing =
@@ -242,18 +250,13 @@ fn main() {
             "flip": metric(&rep, "flip_nomdf", "mean"),
             "seconds": seconds(&rep, "btf_nomdf"), "full_seconds": full_s,
         }));
-        for (id, px, size) in shadow_sizes.drain(..) {
-            let full = if id == "btf_shadow" {
-                "btf_full"
-            } else {
-                "sss_full"
-            };
+        for (base, full, id, px, t, size) in shadow_sizes.drain(..) {
             shadows.push(json!({
-                "distance": d, "renderer": if id == "btf_shadow" { "mesh" } else { "sss" },
-                "object_pixels": px, "resolution": size, "full_resolution": 512,
+                "distance": d, "renderer": if base == "btf_shadow" { "mesh" } else { "sss" },
+                "object_pixels": px, "texels_per_pixel": t, "resolution": size, "full_resolution": 512,
                 "flip": metric(&rep, &format!("flip_{id}"), "mean"),
-                "seconds": seconds(&rep, id), "full_seconds": seconds(&rep, full),
-                "frame_ms": node(&rep, id)["timings"]["frame_ms"].as_f64(),
+                "seconds": seconds(&rep, &id), "full_seconds": seconds(&rep, full),
+                "frame_ms": node(&rep, &id)["timings"]["frame_ms"].as_f64(),
                 "full_frame_ms": node(&rep, full)["timings"]["frame_ms"].as_f64(),
             }));
         }

@@ -77,9 +77,11 @@ pub struct SssCandidate {
     pub time: Curve,
 }
 
-/// Shadow maps at the planner's resolution, per renderer family.
+/// A shadow map of `texels_per_pixel` texels per pixel the object spans
+/// ([`mesoflow_nodes::render::footprint::shadow_resolution`]), per renderer family.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Shadows {
+    pub texels_per_pixel: f64,
     /// FLIP against the object's size in pixels.
     pub flip: Curve,
     /// Frame (or render) time over the full model's.
@@ -88,9 +90,10 @@ pub struct Shadows {
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration {
-    /// `render.mesh` (and `qh.render`'s local term) and `sss.render`.
-    pub shadows_mesh: Shadows,
-    pub shadows_sss: Shadows,
+    /// `render.mesh` (and `qh.render`'s local term) and `sss.render`, by density, sparsest
+    /// first.
+    pub shadows_mesh: Vec<Shadows>,
+    pub shadows_sss: Vec<Shadows>,
     pub btf: Vec<BtfOption>,
     /// FLIP of leaving the MDF out per unit of [`band_fraction`].
     pub mdf_off_per_contour: Curve,
@@ -215,7 +218,7 @@ impl Calibration {
             c.flip = Curve::new(std::mem::take(&mut c.flip.points));
             c.time = Curve::new(std::mem::take(&mut c.time.points));
         }
-        let shadows = |family: &str| -> Result<Shadows, String> {
+        let shadows = |family: &str| -> Result<Vec<Shadows>, String> {
             let rows: Vec<&Value> = rows("shadows")?
                 .iter()
                 .filter(|r| r["renderer"] == family)
@@ -224,18 +227,30 @@ impl Calibration {
                 (Some(a), Some(b)) => a / b,
                 _ => num(r, "seconds") / num(r, "full_seconds"),
             };
-            Ok(Shadows {
-                flip: Curve::new(
-                    rows.iter()
-                        .map(|r| (num(r, "object_pixels").log2(), num(r, "flip")))
-                        .collect(),
-                ),
-                time: Curve::new(
-                    rows.iter()
-                        .map(|r| (num(r, "object_pixels").log2(), time(r)))
-                        .collect(),
-                ),
-            })
+            let density = |r: &Value| r["texels_per_pixel"].as_f64().unwrap_or(4.0);
+            let mut out: Vec<Shadows> = Vec::new();
+            for r in rows {
+                let x = num(r, "object_pixels").log2();
+                let t = density(r);
+                let i = match out.iter().position(|s| s.texels_per_pixel == t) {
+                    Some(i) => i,
+                    None => {
+                        out.push(Shadows {
+                            texels_per_pixel: t,
+                            ..Default::default()
+                        });
+                        out.len() - 1
+                    }
+                };
+                out[i].flip.points.push((x, num(r, "flip")));
+                out[i].time.points.push((x, time(r)));
+            }
+            for s in &mut out {
+                s.flip = Curve::new(std::mem::take(&mut s.flip.points));
+                s.time = Curve::new(std::mem::take(&mut s.time.points));
+            }
+            out.sort_by(|a, b| a.texels_per_pixel.total_cmp(&b.texels_per_pixel));
+            Ok(out)
         };
         let (shadows_mesh, shadows_sss) = (shadows("mesh")?, shadows("sss")?);
         if btf.is_empty() || sss.is_empty() {
@@ -255,6 +270,7 @@ impl Calibration {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_nodes::render::footprint::SHADOW_TEXELS_PER_PIXEL;
 
     #[test]
     fn the_builtin_table_loads_and_covers_every_stage() {
@@ -263,7 +279,10 @@ mod tests {
         assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
         assert!(c.mdf_off_per_contour.points.len() >= 6);
         assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
-        assert!(c.shadows_mesh.flip.points.len() >= 6 && c.shadows_sss.flip.points.len() >= 6);
+        for family in [&c.shadows_mesh, &c.shadows_sss] {
+            assert_eq!(family.len(), SHADOW_TEXELS_PER_PIXEL.len());
+            assert!(family.iter().all(|s| s.flip.points.len() >= 6));
+        }
         // Errors are FLIP values: in [0, 1].
         for o in &c.btf {
             assert!(o.flip.points.iter().all(|p| (0.0..=1.0).contains(&p.1)));

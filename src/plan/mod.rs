@@ -701,8 +701,9 @@ fn decide_sss(
     }
 }
 
-/// Shadow maps: the renderer's resolution lowered to what the view shows, when the measured
-/// model predicts the change within a tenth of the budget (it is meant to be invisible).
+/// Shadow maps: the renderer's resolution lowered to what the view shows, at the sparsest
+/// calibrated density the measured model predicts within a tenth of the budget (the change is
+/// meant to be invisible).
 #[allow(clippy::too_many_arguments)]
 fn decide_shadows(
     model: &calibration::Calibration,
@@ -734,18 +735,18 @@ fn decide_shadows(
         .and_then(Value::as_u64)
         .map_or(defaults.1, |v| v as u32);
     let px = scene.object_pixels?;
-    let size = shadow_resolution(px, current);
-    if size >= current {
-        return None;
-    }
     let curves = match kind {
         RenderKind::Sss => &model.shadows_sss,
         RenderKind::Mesh | RenderKind::Qh => &model.shadows_mesh,
     };
-    let (e, inside) = curves.flip.at(px)?;
-    if !cheapest && (!inside || e > 0.1 * b) {
-        return None;
-    }
+    // The sparsest calibrated density predicted invisible (within a tenth of the budget); the
+    // sparsest of all when the budget asks for the cheapest.
+    let (size, density, e, inside, time) = curves.iter().find_map(|c| {
+        let size = shadow_resolution(px, c.texels_per_pixel, current);
+        let (e, inside) = c.flip.at(px)?;
+        let ok = size < current && (cheapest || (inside && e <= 0.1 * b));
+        ok.then(|| (size, c.texels_per_pixel, e, inside, c.time.at(px)))
+    })?;
     if let Some(n) = out.node_mut(render) {
         n.params.insert("shadow_resolution".into(), json!(size));
     }
@@ -753,14 +754,11 @@ fn decide_shadows(
         stage: "shadows",
         choice: json!({ "shadow_resolution": size }),
         reason: format!(
-            "the object spans {px:.0} px: a {size}² shadow map (not {current}²) has four texels per pixel; predicted FLIP {e:.4}{}",
+            "the object spans {px:.0} px: a {size}² shadow map (not {current}²), {density} texels per pixel, is predicted at FLIP {e:.4}{}",
             range_note(inside)
         ),
         predicted_error: Some(e),
-        predicted_cost: curves
-            .time
-            .at(px)
-            .map(|(t, _)| json!({ "render_time_vs_full": t })),
+        predicted_cost: time.map(|(t, _)| json!({ "render_time_vs_full": t })),
     })
 }
 
@@ -943,12 +941,54 @@ mod tests {
 
     #[test]
     fn shadow_maps_match_the_object_on_screen() {
-        // Worked by hand: 23 px → 92 → 128; 10 px → 64 (the floor); 300 px → 1200 → the graph's
-        // 512; never above the graph's own.
-        assert_eq!(shadow_resolution(23.0, 512), 128);
-        assert_eq!(shadow_resolution(10.0, 512), 64);
-        assert_eq!(shadow_resolution(300.0, 512), 512);
-        assert_eq!(shadow_resolution(10.0, 32), 32);
+        // Worked by hand: 23 px at 4 texels → 92 → 128, at 2 → 46 → 64; 10 px at 4 → 40 → 64,
+        // at 1 → 32 (the floor); 300 px → 1200 → the graph's 512; never above the graph's own.
+        assert_eq!(shadow_resolution(23.0, 4.0, 512), 128);
+        assert_eq!(shadow_resolution(23.0, 2.0, 512), 64);
+        assert_eq!(shadow_resolution(10.0, 4.0, 512), 64);
+        assert_eq!(shadow_resolution(10.0, 1.0, 512), 32);
+        assert_eq!(shadow_resolution(300.0, 4.0, 512), 512);
+        assert_eq!(shadow_resolution(10.0, 4.0, 32), 32);
+    }
+
+    #[test]
+    fn shadow_maps_are_as_sparse_as_the_budget_allows_and_no_sparser() {
+        let mut f = graph();
+        let r = f.node_mut("r").unwrap();
+        r.params.insert("shadows".into(), json!(true));
+        r.params.insert("shadow_resolution".into(), json!(1024));
+        let model = calibration::Calibration::builtin().unwrap();
+        for px in [20.0, 60.0, 150.0] {
+            let mut s = scene(1.0, 1.0);
+            s.object_pixels = Some(px);
+            let size = |b: f64| {
+                let p = plan(&f, "r", RenderKind::Mesh, &s, None, b, Split::Equal).unwrap();
+                let d = p.decisions.iter().find(|d| d.stage == "shadows");
+                if let Some(d) = d {
+                    // Within a tenth of the budget, as predicted by the calibrated density it names.
+                    assert!(
+                        b >= 1.0 || d.predicted_error.unwrap() <= 0.1 * b,
+                        "{px} px, {b}: {d:?}"
+                    );
+                }
+                p.file.node("r").unwrap().params["shadow_resolution"]
+                    .as_u64()
+                    .unwrap()
+            };
+            let mut last = 0;
+            for b in [0.0, 0.005, 0.02, 0.1, 0.5] {
+                let got = size(b);
+                assert!(
+                    last == 0 || got <= last,
+                    "{px} px: a larger budget, a finer map"
+                );
+                last = got;
+            }
+            assert_eq!(size(0.0), 1024, "budget 0 keeps the graph's map");
+            // The cheapest: one texel per pixel the object spans.
+            let sparsest = model.shadows_mesh[0].texels_per_pixel;
+            assert_eq!(size(1e9) as u32, shadow_resolution(px, sparsest, 1024));
+        }
     }
 
     #[test]

@@ -90,11 +90,17 @@ pub fn contains(mesh: &Mesh, p: V3) -> bool {
     odd >= 2
 }
 
-/// The shadow map no finer than the screen: four texels per pixel the object spans, a power of
-/// two, at least 64 and at most `graph` (the renderer's own). The planner decides with it and
-/// the calibration measures it.
-pub fn shadow_resolution(object_pixels: f64, graph: u32) -> u32 {
-    let want = (4.0 * object_pixels).max(64.0).min(graph as f64);
+/// The shadow-map densities the planner chooses among and the calibration measures: texels
+/// per pixel the object spans on screen.
+pub const SHADOW_TEXELS_PER_PIXEL: [f64; 3] = [1.0, 2.0, 4.0];
+
+/// The shadow map no finer than the screen: `texels_per_pixel` texels per pixel the object
+/// spans, a power of two, at least 32 and at most `graph` (the renderer's own). The planner
+/// decides with it and the calibration measures it.
+pub fn shadow_resolution(object_pixels: f64, texels_per_pixel: f64, graph: u32) -> u32 {
+    let want = (texels_per_pixel * object_pixels)
+        .max(32.0)
+        .min(graph as f64);
     (want as u32).next_power_of_two().min(graph)
 }
 
