@@ -177,10 +177,26 @@ fn renders(counts: &[usize], width: u32, height: u32, gpu: Option<&Gpu>) {
             .iter()
             .map(|b| (*b as f64).powi(2))
             .sum();
+        let rms = |test: &[f32]| {
+            let num: f64 = test
+                .iter()
+                .zip(&brute.exitance.data)
+                .map(|(a, b)| ((a - b) as f64).powi(2))
+                .sum();
+            (num / den).sqrt()
+        };
+        // The GPU's sums (f32) against the CPU's brute force (f64): the same sum, so the
+        // difference is rounding alone.
         let gpu_s = gpu
             .map(|g| {
                 render::render(Some(g), &torus, &m, &prof, &p(0.0))
-                    .map(|r| format!("{:.3}", r.gather_seconds))
+                    .map(|r| {
+                        format!(
+                            "{:.3} (RMS vs CPU {:.1e})",
+                            r.gather_seconds,
+                            rms(&r.exitance.data)
+                        )
+                    })
                     .unwrap_or_else(|e| format!("error: {e}"))
             })
             .unwrap_or_else(|| "(no GPU)".into());

@@ -118,7 +118,7 @@ impl Node for Render {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.render",
-            version: 2,
+            version: 3,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
