@@ -197,6 +197,20 @@ fn floats_of(d: &Decision) -> f64 {
 
 const PREFIX: &str = "plan_";
 
+/// What every stage's decision reads: the measured model, the graph as given, the render node
+/// and what its view shows, and whether the budget asks for the full or the cheapest model.
+#[derive(Clone, Copy)]
+struct Stage<'a> {
+    model: &'a calibration::Calibration,
+    file: &'a GraphFile,
+    render: &'a str,
+    kind: RenderKind,
+    scene: &'a Scene,
+    full: bool,
+    cheapest: bool,
+    why_cheapest: &'a str,
+}
+
 /// Plans `render` (a node of `file`) for budget `b`, from `scene`. `chain` is where its BTF comes
 /// from (for renderers with one).
 pub fn plan(
@@ -225,6 +239,16 @@ pub fn plan(
     } else {
         "a budget of 1 or more is FLIP's whole range: any model meets it"
     };
+    let cx = Stage {
+        model: &model,
+        file,
+        render,
+        kind,
+        scene,
+        full,
+        cheapest,
+        why_cheapest,
+    };
 
     let mut shares = Vec::new();
     // The BTF's share: half for the equal split; for the joint split, the one of nine that
@@ -235,18 +259,11 @@ pub fn plan(
             .is_some_and(|n| n.inputs.contains_key("mdf"));
     let btf_share = match (split, kind.btf_port().zip(chain), mdf_connected) {
         (Split::Joint, Some(_), true) if !full && !cheapest => {
+            // Inside this arm neither the full nor the cheapest model is asked for.
             let try_share = |s: f64| {
-                let (bd, _) = decide_btf(&model, scene, false, false, why_cheapest, s);
+                let (bd, _) = decide_btf(&cx, s);
                 let mut scratch = file.clone();
-                let md = decide_mdf(
-                    &model,
-                    &mut scratch,
-                    file,
-                    render,
-                    scene,
-                    (false, false, why_cheapest),
-                    b - s,
-                );
+                let md = decide_mdf(&cx, &mut scratch, b - s);
                 let t = time_ratio(&bd) * md.as_ref().map_or(1.0, time_ratio);
                 (t, floats_of(&bd))
             };
@@ -259,7 +276,7 @@ pub fn plan(
         _ => share,
     };
     if let (Some(port), Some(chain)) = (kind.btf_port(), chain) {
-        let d = decide_btf(&model, scene, full, cheapest, why_cheapest, btf_share);
+        let d = decide_btf(&cx, btf_share);
         apply_btf(&mut out, render, port, chain, &d.1);
         decisions.push(d.0);
         shares.push(("btf", btf_share));
@@ -270,34 +287,16 @@ pub fn plan(
         } else {
             share
         };
-        if let Some(d) = decide_mdf(
-            &model,
-            &mut out,
-            file,
-            render,
-            scene,
-            (full, cheapest, why_cheapest),
-            mdf_share,
-        ) {
+        if let Some(d) = decide_mdf(&cx, &mut out, mdf_share) {
             decisions.push(d);
             shares.push(("mdf", mdf_share));
         }
     }
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
-        decisions.push(decide_sss(
-            &model,
-            &mut out,
-            file,
-            render,
-            scene,
-            (full, cheapest, why_cheapest),
-            share,
-        ));
+        decisions.push(decide_sss(&cx, &mut out, share));
         shares.push(("sss", share));
     }
-    if let Some(d) = decide_shadows(
-        &model, &mut out, file, render, kind, scene, full, cheapest, b,
-    ) {
+    if let Some(d) = decide_shadows(&cx, &mut out, b) {
         decisions.push(d);
     }
     prune(&mut out, file, render);
@@ -310,15 +309,17 @@ pub fn plan(
 
 /// The MDF: left out when the shell is under half a pixel, or when leaving it out is predicted
 /// within the stage's share; `None` when the render has no MDF connected.
-fn decide_mdf(
-    model: &calibration::Calibration,
-    out: &mut GraphFile,
-    file: &GraphFile,
-    render: &str,
-    scene: &Scene,
-    (full, cheapest, why_cheapest): (bool, bool, &str),
-    share: f64,
-) -> Option<Decision> {
+fn decide_mdf(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
+    let Stage {
+        model,
+        file,
+        render,
+        scene,
+        full,
+        cheapest,
+        why_cheapest,
+        ..
+    } = *cx;
     if !file.node(render)?.inputs.contains_key("mdf") {
         return None;
     }
@@ -404,14 +405,15 @@ fn range_note(inside: bool) -> &'static str {
     }
 }
 
-fn decide_btf(
-    model: &calibration::Calibration,
-    scene: &Scene,
-    full: bool,
-    cheapest: bool,
-    why_cheapest: &str,
-    share: f64,
-) -> (Decision, BtfModel) {
+fn decide_btf(cx: &Stage, share: f64) -> (Decision, BtfModel) {
+    let Stage {
+        model,
+        scene,
+        full,
+        cheapest,
+        why_cheapest,
+        ..
+    } = *cx;
     let coarsest = scene.tile_texels.map_or(0.0, |t| t.max(1.0).log2().ceil());
     let raw = |reason: String, predicted: f64| {
         (
@@ -571,15 +573,17 @@ fn upsert(
     }
 }
 
-fn decide_sss(
-    model: &calibration::Calibration,
-    out: &mut GraphFile,
-    file: &GraphFile,
-    render: &str,
-    scene: &Scene,
-    (full, cheapest, why_cheapest): (bool, bool, &str),
-    share: f64,
-) -> Decision {
+fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decision {
+    let Stage {
+        model,
+        file,
+        render,
+        scene,
+        full,
+        cheapest,
+        why_cheapest,
+        ..
+    } = *cx;
     let set = |out: &mut GraphFile, k: &str, v: Value| {
         if let Some(n) = out.node_mut(render) {
             n.params.insert(k.into(), v);
@@ -704,18 +708,17 @@ fn decide_sss(
 /// Shadow maps: the renderer's resolution lowered to what the view shows, at the sparsest
 /// calibrated density the measured model predicts within a tenth of the budget (the change is
 /// meant to be invisible).
-#[allow(clippy::too_many_arguments)]
-fn decide_shadows(
-    model: &calibration::Calibration,
-    out: &mut GraphFile,
-    file: &GraphFile,
-    render: &str,
-    kind: RenderKind,
-    scene: &Scene,
-    full: bool,
-    cheapest: bool,
-    b: f64,
-) -> Option<Decision> {
+fn decide_shadows(cx: &Stage, out: &mut GraphFile, b: f64) -> Option<Decision> {
+    let Stage {
+        model,
+        file,
+        render,
+        kind,
+        scene,
+        full,
+        cheapest,
+        ..
+    } = *cx;
     let node = file.node(render)?;
     let defaults = match kind {
         RenderKind::Mesh => (false, 1024),
