@@ -73,16 +73,7 @@ pub fn sample(mesh: &Mesh, spacing: f64, seed: u64) -> Samples {
         // Uniform in the triangle: the square-root warp.
         let s = u1.sqrt();
         let (b1, b2) = (s * (1.0 - u2), s * u2);
-        let [i0, i1, i2] = mesh.corners(t);
-        let w = [1.0 - b1 - b2, b1, b2];
-        let mut p = [0.0; 3];
-        let mut n = [0.0; 3];
-        for (j, i) in [i0, i1, i2].into_iter().enumerate() {
-            for k in 0..3 {
-                p[k] += w[j] * mesh.positions[i][k] as f64;
-                n[k] += w[j] * mesh.normals[i][k] as f64;
-            }
-        }
+        let (p, n) = mesh.interpolate(t, b1, b2);
         let c = key(p);
         let mut near = false;
         'search: for dx in -1..=1 {
@@ -104,7 +95,7 @@ pub fn sample(mesh: &Mesh, spacing: f64, seed: u64) -> Samples {
         let n = if l > 0.0 {
             n.map(|v| v / l)
         } else {
-            let [a, b, c] = [i0, i1, i2].map(|i| mesh.positions[i].map(|v| v as f64));
+            let [a, b, c] = mesh.corners(t).map(|i| mesh.positions[i].map(|v| v as f64));
             let f = cross(sub(b, a), sub(c, a));
             f.map(|v| v / length(f))
         };

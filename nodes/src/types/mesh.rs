@@ -54,6 +54,21 @@ impl Mesh {
         ]
     }
 
+    /// Position and vertex normal (interpolated, not normalised) at barycentric weights b1, b2
+    /// of corners 1 and 2 of triangle `t`, in f64.
+    pub fn interpolate(&self, t: usize, b1: f64, b2: f64) -> ([f64; 3], [f64; 3]) {
+        let w = [1.0 - b1 - b2, b1, b2];
+        let mut p = [0.0; 3];
+        let mut n = [0.0; 3];
+        for (j, i) in self.corners(t).into_iter().enumerate() {
+            for k in 0..3 {
+                p[k] += w[j] * self.positions[i][k] as f64;
+                n[k] += w[j] * self.normals[i][k] as f64;
+            }
+        }
+        (p, n)
+    }
+
     /// Triangles whose area is zero (repeated or collinear corners); renderers skip them.
     pub fn degenerate_triangles(&self) -> usize {
         (0..self.triangles())

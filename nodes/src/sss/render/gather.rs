@@ -18,16 +18,7 @@ pub(super) struct View {
 }
 
 pub(super) fn surface(mesh: &Mesh, f: &Frag) -> (V3, V3) {
-    let [i0, i1, i2] = mesh.corners(f.tri as usize);
-    let w = [1.0 - f.b1 - f.b2, f.b1, f.b2];
-    let mut p = [0.0; 3];
-    let mut n = [0.0; 3];
-    for (j, i) in [i0, i1, i2].into_iter().enumerate() {
-        for k in 0..3 {
-            p[k] += w[j] * mesh.positions[i][k] as f64;
-            n[k] += w[j] * mesh.normals[i][k] as f64;
-        }
-    }
+    let (p, n) = mesh.interpolate(f.tri as usize, f.b1, f.b2);
     (p, normalize(n).unwrap_or([0.0, 0.0, 1.0]))
 }
 
