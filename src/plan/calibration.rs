@@ -48,6 +48,27 @@ impl Curve {
     }
 }
 
+/// Rows (key, FLIP point, time point) grouped by key in the order keys first appear, each
+/// group's points made into its FLIP and time curves.
+fn grouped<K: PartialEq>(
+    rows: impl IntoIterator<Item = (K, (f64, f64), (f64, f64))>,
+) -> Vec<(K, Curve, Curve)> {
+    let mut groups: Vec<(K, Vec<(f64, f64)>, Vec<(f64, f64)>)> = Vec::new();
+    for (key, flip, time) in rows {
+        match groups.iter_mut().find(|g| g.0 == key) {
+            Some(g) => {
+                g.1.push(flip);
+                g.2.push(time);
+            }
+            None => groups.push((key, vec![flip], vec![time])),
+        }
+    }
+    groups
+        .into_iter()
+        .map(|(k, flip, time)| (k, Curve::new(flip), Curve::new(time)))
+        .collect()
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct BtfOption {
     pub rank: u32,
@@ -139,31 +160,22 @@ impl Calibration {
                 .ok_or_else(|| format!("calibration table: no `{k}`"))
         };
         let num = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
-        let mut btf: Vec<BtfOption> = Vec::new();
-        for r in rows("btf")? {
-            let (rank, level) = (num(r, "rank") as u32, num(r, "level") as u32);
+        let btf: Vec<BtfOption> = grouped(rows("btf")?.iter().map(|r| {
             let x = num(r, "texels_per_pixel").log2();
-            let point = (x, num(r, "flip"));
-            let time = (x, num(r, "seconds") / num(r, "full_seconds"));
-            match btf.iter_mut().find(|o| o.rank == rank && o.level == level) {
-                Some(o) => {
-                    o.flip.points.push(point);
-                    o.time.points.push(time);
-                }
-                None => btf.push(BtfOption {
-                    rank,
-                    level,
-                    flip: Curve {
-                        points: vec![point],
-                    },
-                    time: Curve { points: vec![time] },
-                }),
-            }
-        }
-        for o in &mut btf {
-            o.flip = Curve::new(std::mem::take(&mut o.flip.points));
-            o.time = Curve::new(std::mem::take(&mut o.time.points));
-        }
+            (
+                (num(r, "rank") as u32, num(r, "level") as u32),
+                (x, num(r, "flip")),
+                (x, num(r, "seconds") / num(r, "full_seconds")),
+            )
+        }))
+        .into_iter()
+        .map(|((rank, level), flip, time)| BtfOption {
+            rank,
+            level,
+            flip,
+            time,
+        })
+        .collect();
         let mdf = rows("mdf_off")?;
         let mdf_off_per_contour = Curve::new(
             mdf.iter()
@@ -184,40 +196,29 @@ impl Calibration {
                 })
                 .collect(),
         );
-        let mut sss: Vec<SssCandidate> = Vec::new();
-        for r in rows("sss")? {
+        let sss: Vec<SssCandidate> = grouped(rows("sss")?.iter().map(|r| {
             let option = match r["option"].as_str() {
                 Some("brdf") => SssOption::Brdf,
                 _ => SssOption::Gather {
                     footprints: num(r, "spacing_footprints"),
                 },
             };
+            let medium = r["medium"].as_str().unwrap_or("").to_string();
             let x = num(r, "mfp_pixels").log2();
-            let (f, t) = (
+            (
+                (option, medium),
                 (x, num(r, "flip")),
                 (x, num(r, "seconds") / num(r, "full_seconds")),
-            );
-            let medium = r["medium"].as_str().unwrap_or("").to_string();
-            match sss
-                .iter_mut()
-                .find(|c| c.option == option && c.medium == medium)
-            {
-                Some(c) => {
-                    c.flip.points.push(f);
-                    c.time.points.push(t);
-                }
-                None => sss.push(SssCandidate {
-                    option,
-                    medium,
-                    flip: Curve { points: vec![f] },
-                    time: Curve { points: vec![t] },
-                }),
-            }
-        }
-        for c in &mut sss {
-            c.flip = Curve::new(std::mem::take(&mut c.flip.points));
-            c.time = Curve::new(std::mem::take(&mut c.time.points));
-        }
+            )
+        }))
+        .into_iter()
+        .map(|((option, medium), flip, time)| SssCandidate {
+            option,
+            medium,
+            flip,
+            time,
+        })
+        .collect();
         let shadows = |family: &str| -> Result<Vec<Shadows>, String> {
             let rows: Vec<&Value> = rows("shadows")?
                 .iter()
@@ -227,28 +228,22 @@ impl Calibration {
                 (Some(a), Some(b)) => a / b,
                 _ => num(r, "seconds") / num(r, "full_seconds"),
             };
-            let density = |r: &Value| r["texels_per_pixel"].as_f64().unwrap_or(4.0);
-            let mut out: Vec<Shadows> = Vec::new();
+            let mut rows_by_density = Vec::new();
             for r in rows {
+                let density = r["texels_per_pixel"].as_f64().ok_or_else(|| {
+                    "calibration table: a shadow row without `texels_per_pixel`".to_string()
+                })?;
                 let x = num(r, "object_pixels").log2();
-                let t = density(r);
-                let i = match out.iter().position(|s| s.texels_per_pixel == t) {
-                    Some(i) => i,
-                    None => {
-                        out.push(Shadows {
-                            texels_per_pixel: t,
-                            ..Default::default()
-                        });
-                        out.len() - 1
-                    }
-                };
-                out[i].flip.points.push((x, num(r, "flip")));
-                out[i].time.points.push((x, time(r)));
+                rows_by_density.push((density, (x, num(r, "flip")), (x, time(r))));
             }
-            for s in &mut out {
-                s.flip = Curve::new(std::mem::take(&mut s.flip.points));
-                s.time = Curve::new(std::mem::take(&mut s.time.points));
-            }
+            let mut out: Vec<Shadows> = grouped(rows_by_density)
+                .into_iter()
+                .map(|(texels_per_pixel, flip, time)| Shadows {
+                    texels_per_pixel,
+                    flip,
+                    time,
+                })
+                .collect();
             out.sort_by(|a, b| a.texels_per_pixel.total_cmp(&b.texels_per_pixel));
             Ok(out)
         };
