@@ -53,7 +53,8 @@ impl Curve {
 fn grouped<K: PartialEq>(
     rows: impl IntoIterator<Item = (K, (f64, f64), (f64, f64))>,
 ) -> Vec<(K, Curve, Curve)> {
-    let mut groups: Vec<(K, Vec<(f64, f64)>, Vec<(f64, f64)>)> = Vec::new();
+    type Points = Vec<(f64, f64)>;
+    let mut groups: Vec<(K, Points, Points)> = Vec::new();
     for (key, flip, time) in rows {
         match groups.iter_mut().find(|g| g.0 == key) {
             Some(g) => {
