@@ -19,14 +19,25 @@ pub struct Pass2d<'a> {
 
 /// Runs the pass and returns the output buffer.
 pub fn compute_2d(gpu: &Gpu, pass: &Pass2d) -> Result<Vec<f32>, NodeError> {
+    compute_2d_sequence(gpu, pass, &[pass.params])
+}
+
+/// Runs the pass once per entry of `params` (ignoring `pass.params`), in order, on the same
+/// input and output buffers, and returns the output after the last: a shader can split work
+/// too long for one dispatch and accumulate into its output.
+pub fn compute_2d_sequence(
+    gpu: &Gpu,
+    pass: &Pass2d,
+    params: &[&[u8]],
+) -> Result<Vec<f32>, NodeError> {
     let Pass2d {
         label,
         shader,
         entry,
-        params,
         input,
         output_len,
         grid: (width, height),
+        ..
     } = *pass;
     let limit = gpu.device.limits().max_storage_buffer_binding_size;
     let out_bytes = (output_len * 4) as u64;
@@ -50,11 +61,6 @@ pub fn compute_2d(gpu: &Gpu, pass: &Pass2d) -> Result<Vec<f32>, NodeError> {
         compilation_options: Default::default(),
         cache: None,
     });
-    let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-        label: Some("params"),
-        contents: params,
-        usage: wgpu::BufferUsages::UNIFORM,
-    });
     let input_buf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
         label: Some("input"),
         contents: bytemuck::cast_slice(input),
@@ -72,27 +78,32 @@ pub fn compute_2d(gpu: &Gpu, pass: &Pass2d) -> Result<Vec<f32>, NodeError> {
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: Some(label),
-        layout: &pipeline.get_bind_group_layout(0),
-        entries: &[
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: uniform.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: input_buf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 2,
-                resource: output_buf.as_entire_binding(),
-            },
-        ],
-    });
     let mut encoder =
         device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
-    {
+    for params in params {
+        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("params"),
+            contents: params,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: uniform.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: input_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: output_buf.as_entire_binding(),
+                },
+            ],
+        });
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(label),
             timestamp_writes: None,

@@ -110,65 +110,65 @@ pub(super) fn gather_gpu(
         }
     }
     let point_offset = input.len();
-    let mut totals = vec![[0.0f64; 3]; shaded.len()];
-    // At most CHUNK samples per dispatch, the partial sums added here in chunk order (fixed, so
-    // deterministic). On lavapipe one dispatch looping over 65 764 samples came back 3% short
-    // of the CPU's brute force (96 600: 35%), while 61 926 agreed, whatever the buffer's size;
-    // the cause is not found. Half of 65 536 keeps well clear; tests.rs holds the agreement
-    // past it.
-    const CHUNK: usize = 32_768;
-    for chunk in setup.sources.chunks(CHUNK) {
-        input.truncate(point_offset);
-        for s in chunk {
-            input.extend(
-                [
-                    s.p[0], s.p[1], s.p[2], 0.0, s.power[0], s.power[1], s.power[2], 0.0,
-                ]
-                .map(|v| v as f32),
-            );
-        }
-        let mut params = Vec::with_capacity(48);
-        for v in [
-            COLUMNS as u32,
-            rows as u32,
-            chunk.len() as u32,
-            n as u32,
-            shade_offset as u32,
-            point_offset as u32,
-            0,
-            0,
-        ] {
-            params.extend_from_slice(&v.to_le_bytes());
-        }
-        for v in [
-            setup.table.ln_r0 as f32,
-            setup.table.inv_h as f32,
-            (setup.near * setup.near) as f32,
-            0.0,
-        ] {
-            params.extend_from_slice(&v.to_le_bytes());
-        }
-        let out = crate::gpu::compute_2d(
-            gpu,
-            &crate::gpu::Pass2d {
-                label: "sss.render",
-                shader: include_str!("render.wgsl"),
-                entry: "main",
-                params: &params,
-                input: &input,
-                output_len: 4 * rows * COLUMNS,
-                grid: (COLUMNS as u32, rows as u32),
-            },
-        )?;
-        for (k, t) in totals.iter_mut().enumerate() {
-            for c in 0..3 {
-                t[c] += out[4 * k + c] as f64;
-            }
-        }
+    for s in &setup.sources {
+        input.extend(
+            [
+                s.p[0], s.p[1], s.p[2], 0.0, s.power[0], s.power[1], s.power[2], 0.0,
+            ]
+            .map(|v| v as f32),
+        );
     }
+    // At most CHUNK samples per dispatch, each later dispatch adding to the earlier ones' sums.
+    // On lavapipe one dispatch looping over 65 764 samples came back 3% short of the CPU's
+    // brute force (96 600: 35%), while 61 926 agreed, whatever the buffer's size; the cause is
+    // not found. Half of 65 536 keeps well clear; tests.rs holds the agreement past it.
+    const CHUNK: usize = 32_768;
+    let count = setup.sources.len();
+    let params: Vec<Vec<u8>> = (0..count.div_ceil(CHUNK).max(1))
+        .map(|c| {
+            let start = c * CHUNK;
+            let mut params = Vec::with_capacity(48);
+            for v in [
+                COLUMNS as u32,
+                rows as u32,
+                (count - start).min(CHUNK) as u32,
+                n as u32,
+                shade_offset as u32,
+                (point_offset + 8 * start) as u32,
+                (c > 0) as u32,
+                0,
+            ] {
+                params.extend_from_slice(&v.to_le_bytes());
+            }
+            for v in [
+                setup.table.ln_r0 as f32,
+                setup.table.inv_h as f32,
+                (setup.near * setup.near) as f32,
+                0.0,
+            ] {
+                params.extend_from_slice(&v.to_le_bytes());
+            }
+            params
+        })
+        .collect();
+    let params: Vec<&[u8]> = params.iter().map(Vec::as_slice).collect();
+    let out = crate::gpu::compute_2d_sequence(
+        gpu,
+        &crate::gpu::Pass2d {
+            label: "sss.render",
+            shader: include_str!("render.wgsl"),
+            entry: "main",
+            params: &[], // one set per dispatch, below
+            input: &input,
+            output_len: 4 * rows * COLUMNS,
+            grid: (COLUMNS as u32, rows as u32),
+        },
+        &params,
+    )?;
     let mut sums = vec![[0.0; 3]; view.width * view.height];
-    for (&i, t) in shaded.iter().zip(totals) {
-        sums[i] = t;
+    for (k, &i) in shaded.iter().enumerate() {
+        let c = &out[4 * k..4 * k + 3];
+        sums[i] = [c[0] as f64, c[1] as f64, c[2] as f64];
     }
     Ok(sums)
 }

@@ -6,7 +6,7 @@
 
 struct Params {
     width: u32, height: u32, points: u32, table: u32,
-    shade_offset: u32, point_offset: u32, _pad0: u32, _pad1: u32,
+    shade_offset: u32, point_offset: u32, accumulate: u32, _pad1: u32,
     ln_r0: f32, inv_h: f32, near2: f32, _pad2: f32,
 }
 
@@ -64,6 +64,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(local_invocation_
         workgroupBarrier();
     }
     if (inside) {
+        // A later dispatch of the same pixels adds its samples' share to the earlier ones'.
+        if (P.accumulate == 1u) {
+            sum += vec3<f32>(output[4u * px], output[4u * px + 1u], output[4u * px + 2u]);
+        }
         output[4u * px] = sum.x;
         output[4u * px + 1u] = sum.y;
         output[4u * px + 2u] = sum.z;
