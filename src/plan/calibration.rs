@@ -161,12 +161,18 @@ impl Calibration {
                 .ok_or_else(|| format!("calibration table: no `{k}`"))
         };
         let num = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        // Render time over the full model's: by frame where the renderer times one, else by
+        // the node's seconds.
+        let time = |r: &Value| match (r["frame_ms"].as_f64(), r["full_frame_ms"].as_f64()) {
+            (Some(a), Some(b)) => a / b,
+            _ => num(r, "seconds") / num(r, "full_seconds"),
+        };
         let btf: Vec<BtfOption> = grouped(rows("btf")?.iter().map(|r| {
             let x = num(r, "texels_per_pixel").log2();
             (
                 (num(r, "rank") as u32, num(r, "level") as u32),
                 (x, num(r, "flip")),
-                (x, num(r, "seconds") / num(r, "full_seconds")),
+                (x, time(r)),
             )
         }))
         .into_iter()
@@ -189,12 +195,7 @@ impl Calibration {
         );
         let mdf_off_time = Curve::new(
             mdf.iter()
-                .map(|r| {
-                    (
-                        num(r, "shell_pixels").log2(),
-                        num(r, "seconds") / num(r, "full_seconds"),
-                    )
-                })
+                .map(|r| (num(r, "shell_pixels").log2(), time(r)))
                 .collect(),
         );
         let sss: Vec<SssCandidate> = grouped(rows("sss")?.iter().map(|r| {
@@ -206,11 +207,7 @@ impl Calibration {
             };
             let medium = r["medium"].as_str().unwrap_or("").to_string();
             let x = num(r, "mfp_pixels").log2();
-            (
-                (option, medium),
-                (x, num(r, "flip")),
-                (x, num(r, "seconds") / num(r, "full_seconds")),
-            )
+            ((option, medium), (x, num(r, "flip")), (x, time(r)))
         }))
         .into_iter()
         .map(|((option, medium), flip, time)| SssCandidate {
@@ -225,10 +222,6 @@ impl Calibration {
                 .iter()
                 .filter(|r| r["renderer"] == family)
                 .collect();
-            let time = |r: &Value| match (r["frame_ms"].as_f64(), r["full_frame_ms"].as_f64()) {
-                (Some(a), Some(b)) => a / b,
-                _ => num(r, "seconds") / num(r, "full_seconds"),
-            };
             let mut rows_by_density = Vec::new();
             for r in rows {
                 let density = r["texels_per_pixel"].as_f64().ok_or_else(|| {
