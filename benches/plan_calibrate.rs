@@ -12,6 +12,7 @@
 //!   footprints apart (never closer than the profile's default), against the longest mean free
 //!   path in pixels.
 //!
+//! Each FLIP is measured at 67 pixels per degree (FLIP's default) and at 30 and 120.
 //! Each candidate's render time is recorded too: the node's seconds, and for `render.mesh` a
 //! frame's milliseconds (what the planner's time curves use where present). Writes `calibration.json` (what
 //! `src/plan_calibration.json` holds) to the output folder.
@@ -36,6 +37,9 @@ const LEVELS: [u32; 6] = [0, 1, 2, 3, 4, 5];
 /// Sample spacings of the gathered candidates, in pixel footprints (never finer than the
 /// profile's default, a quarter of the shortest effective mean free path).
 const SPACINGS: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
+/// Viewing conditions besides FLIP's default (67 pixels per degree) at which every candidate's
+/// FLIP is measured too: a farther or smaller display, and a nearer or larger one.
+const OTHER_PPDS: [u32; 2] = [30, 120];
 
 fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     let height = width * 3 / 4;
@@ -156,6 +160,20 @@ fn metric(report: &Value, id: &str, m: &str) -> Option<f64> {
     node(report, id)["metrics"][m].as_f64()
 }
 
+/// The mean FLIP of `id` at each of [`OTHER_PPDS`], keyed by the ppd.
+fn at_ppds(report: &Value, id: &str) -> Value {
+    OTHER_PPDS
+        .iter()
+        .map(|p| {
+            (
+                p.to_string(),
+                json!(metric(report, &format!("{id}_p{p}"), "mean")),
+            )
+        })
+        .collect::<Map<String, Value>>()
+        .into()
+}
+
 fn seconds(report: &Value, id: &str) -> Option<f64> {
     node(report, id)["timings"]["seconds"].as_f64()
 }
@@ -237,6 +255,19 @@ fn main() {
                 g.insert(format!("flip_{id}"), json!({ "kind": "image.flip", "inputs": { "reference": format!("{p}_full.image"), "test": format!("{id}.image") }, "params": { "object_only": true } }));
             }
         }
+        // Every FLIP again at the other calibrated viewing conditions.
+        let flips: Vec<String> = g
+            .iter()
+            .filter(|(_, v)| v["kind"] == "image.flip")
+            .map(|(k, _)| k.clone())
+            .collect();
+        for k in flips {
+            for ppd in OTHER_PPDS {
+                let mut v = g[&k].clone();
+                v["params"]["ppd"] = json!(ppd);
+                g.insert(format!("{k}_p{ppd}"), v);
+            }
+        }
         let rep = run(&g, &out.join(format!("d{d}")), &cache);
         let tpp = metric(&rep, "btf_scene", "texels_per_pixel");
         let shell = metric(&rep, "btf_scene", "shell_pixels");
@@ -248,6 +279,7 @@ fn main() {
                 btf.push(json!({
                     "distance": d, "texels_per_pixel": tpp, "rank": r, "level": l,
                     "flip": metric(&rep, &format!("flip_btf_{r}_{l}"), "mean"),
+                    "flip_at_ppd": at_ppds(&rep, &format!("flip_btf_{r}_{l}")),
                     "seconds": seconds(&rep, &format!("btf_{r}_{l}")), "full_seconds": full_s,
                     "frame_ms": frame_ms(&rep, &format!("btf_{r}_{l}")), "full_frame_ms": frame_ms(&rep, "btf_full"),
                 }));
@@ -256,6 +288,7 @@ fn main() {
         mdf.push(json!({
             "distance": d, "shell_pixels": shell, "silhouette_fraction": silhouette,
             "flip": metric(&rep, "flip_nomdf", "mean"),
+            "flip_at_ppd": at_ppds(&rep, "flip_nomdf"),
             "seconds": seconds(&rep, "btf_nomdf"), "full_seconds": full_s,
             "frame_ms": frame_ms(&rep, "btf_nomdf"), "full_frame_ms": frame_ms(&rep, "btf_full"),
         }));
@@ -264,6 +297,7 @@ fn main() {
                 "distance": d, "renderer": if base == "btf_shadow" { "mesh" } else { "sss" },
                 "object_pixels": px, "texels_per_pixel": t, "resolution": size, "full_resolution": 512,
                 "flip": metric(&rep, &format!("flip_{id}"), "mean"),
+                "flip_at_ppd": at_ppds(&rep, &format!("flip_{id}")),
                 "seconds": seconds(&rep, &id), "full_seconds": seconds(&rep, full),
                 "frame_ms": frame_ms(&rep, &id), "full_frame_ms": frame_ms(&rep, full),
             }));
@@ -274,6 +308,7 @@ fn main() {
             sss.push(json!({
                 "distance": d, "medium": preset, "mfp_pixels": mfp, "option": "brdf",
                 "flip": metric(&rep, &format!("flip_{p}_brdf"), "mean"),
+                "flip_at_ppd": at_ppds(&rep, &format!("flip_{p}_brdf")),
                 "seconds": seconds(&rep, &format!("{p}_brdf")), "full_seconds": full_s,
             }));
             for k in SPACINGS {
@@ -281,6 +316,7 @@ fn main() {
                 sss.push(json!({
                     "distance": d, "medium": preset, "mfp_pixels": mfp, "option": "gather", "spacing_footprints": k,
                     "flip": metric(&rep, &format!("flip_{id}"), "mean"),
+                    "flip_at_ppd": at_ppds(&rep, &format!("flip_{id}")),
                     "seconds": seconds(&rep, &id), "full_seconds": full_s,
                 }));
             }
@@ -288,7 +324,7 @@ fn main() {
         eprintln!("distance {d}: texels/pixel {tpp:?}, shell {shell:?} px, mfp {mfp:?} px");
     }
     let doc = json!({
-        "about": "FLIP (mean over the object's pixels, HDR, 67 ppd) of each candidate model against the full model on the calibration scene of benches/plan_calibrate.rs (a bumps BTF on a sphere, a marble and a ketchup torus), by camera distance, with what the view shows there. Made by `cargo bench --bench plan_calibrate`; the planner interpolates it.",
+        "about": "FLIP (mean over the object's pixels, HDR, at 67 ppd in `flip`, at other pixels per degree in `flip_at_ppd`) of each candidate model against the full model on the calibration scene of benches/plan_calibrate.rs (a bumps BTF on a sphere, a marble and a ketchup torus), by camera distance, with what the view shows there. Made by `cargo bench --bench plan_calibrate`; the planner interpolates it.",
         "width": width,
         "btf": btf,
         "mdf_off": mdf,

@@ -1,6 +1,8 @@
 //! The planner's proof (`graphs/plan_verify.json`), charted: runs the verification sweep
-//! (`common/plan_sweep.rs`) with the joint and the equal budget split, and writes `sweep.csv`
-//! (joint), `sweep_equal.csv` and the charts `flip_vs_distance`,
+//! (`common/plan_sweep.rs`) with the joint and the equal budget split at FLIP's default 67
+//! pixels per degree, and with the joint split for viewers at 30 and 120, and writes
+//! `sweep.csv` (joint), `sweep_equal.csv`, `sweep_ppd30.csv`, `sweep_ppd120.csv` and the charts
+//! `flip_vs_distance`,
 //! `speedup_vs_distance` and `calibration` (SVG and PNG) to the output folder, and prints the
 //! misses.
 //!
@@ -24,8 +26,16 @@ fn main() {
     let out = PathBuf::from(args::arg("--out", "out/plan_verify".to_string()));
     let width: u32 = args::arg("--width", 240);
     // The equal split first, for comparison; the joint split (the default) is what is charted.
-    let equal = plan_sweep::sweep(&out.join("equal"), width, "equal");
-    let rows = plan_sweep::sweep(&out, width, "joint");
+    let equal = plan_sweep::sweep(&out.join("equal"), width, "equal", None);
+    // Viewers at 30 and 120 pixels per degree, planned and measured at their own ppd.
+    let viewers: Vec<(u32, Vec<Row>)> = [30u32, 120]
+        .into_iter()
+        .map(|p| {
+            let dir = out.join(format!("ppd{p}"));
+            (p, plan_sweep::sweep(&dir, width, "joint", Some(p as f64)))
+        })
+        .collect();
+    let rows = plan_sweep::sweep(&out, width, "joint", None);
     let far_median = |rows: &[Row]| {
         let mut v: Vec<f64> = rows
             .iter()
@@ -50,6 +60,14 @@ fn main() {
         rows.len(),
         far_median(&rows)
     );
+    for (p, v) in &viewers {
+        println!(
+            "joint, {p} ppd  {:>3} of {}      {:.2}x",
+            within(v),
+            v.len(),
+            far_median(v)
+        );
+    }
     let table = |rows: &[Row]| {
         let mut csv = String::from("distance,budget,object,flip_mean,predicted,within_budget,full_seconds,view_seconds,speedup,decisions\n");
         for r in rows {
@@ -71,6 +89,9 @@ fn main() {
         csv
     };
     std::fs::write(out.join("sweep_equal.csv"), table(&equal)).unwrap();
+    for (p, v) in &viewers {
+        std::fs::write(out.join(format!("sweep_ppd{p}.csv")), table(v)).unwrap();
+    }
     let csv = table(&rows);
     std::fs::write(out.join("sweep.csv"), &csv).unwrap();
     print!("{csv}");

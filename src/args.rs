@@ -173,6 +173,14 @@ pub struct PlanArgs {
     /// The planned graph (default: <graph>.planned.json beside the graph; plan.json goes beside it).
     #[arg(short = 'o', long = "output", value_name = "OUT.json")]
     pub output: Option<PathBuf>,
+    /// The viewer's pixels per degree the budget is judged at (default FLIP's 67: a 0.7 m wide
+    /// 4K display at 0.7 m).
+    #[arg(long, value_name = "P", conflicts_with = "viewer")]
+    pub ppd: Option<f64>,
+    /// The viewer as distance and image width in metres (DIST_M,WIDTH_M), the ppd following
+    /// from the render's width in pixels as `image.flip`'s `viewer` does.
+    #[arg(long, value_name = "DIST_M,WIDTH_M")]
+    pub viewer: Option<String>,
     /// How a render.mesh's budget is shared by its BTF and MDF: `joint` (the share that
     /// predicts the least render time) or `equal` (half each).
     #[arg(long, value_enum, default_value_t = SplitArg::Joint)]

@@ -63,6 +63,19 @@ fn plan(
     budget: &str,
     sets: &[String],
 ) -> Planned {
+    plan_with(s, name, graph, render, budget, sets, &[])
+}
+
+/// [`plan`] with further arguments.
+fn plan_with(
+    s: &Scratch,
+    name: &str,
+    graph: &Path,
+    render: &str,
+    budget: &str,
+    sets: &[String],
+    extra: &[&str],
+) -> Planned {
     let dir = s.path(name);
     let out = dir.join("planned.json");
     let cache = s.path("cache");
@@ -83,6 +96,7 @@ fn plan(
         args.push("--set".into());
         args.push(kv.clone());
     }
+    args.extend(extra.iter().map(|a| a.to_string()));
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     Planned {
         run: mesoflow(&args, s.dir.path()),
@@ -244,5 +258,69 @@ fn a_camera_inside_and_bad_arguments_are_clear_errors() {
             "{render} {budget}: {}",
             r.run.stderr
         );
+    }
+}
+
+#[test]
+fn a_viewer_sets_the_pixels_per_degree_the_plan_is_read_at() {
+    let s = Scratch::new();
+    let near = sets([0.0, 1.5, 2.7]);
+    let p = plan_with(
+        &s,
+        "ppd30",
+        &graph(),
+        "btf_view",
+        "flip=0.05",
+        &near,
+        &["--ppd", "30"],
+    );
+    assert_eq!(p.run.code, 0, "{}", p.run.stderr);
+    let doc = p.plan();
+    assert_eq!(doc["budget"]["ppd"], 30.0);
+    assert_eq!(doc["calibrated_ppd"], 30.0);
+    assert!(doc.get("ppd_note").is_none(), "{doc}");
+    // Half a metre from a half-metre-wide image 48 pixels across: 48·π/180 ≈ 0.84 pixels per
+    // degree (image.flip's formula), below the sparsest calibrated 30: said so.
+    let v = plan_with(
+        &s,
+        "viewer",
+        &graph(),
+        "btf_view",
+        "flip=0.05",
+        &near,
+        &["--viewer", "0.5,0.5"],
+    );
+    assert_eq!(v.run.code, 0, "{}", v.run.stderr);
+    let doc = v.plan();
+    let ppd = doc["budget"]["ppd"].as_f64().unwrap();
+    assert!(
+        (ppd - 48.0 * std::f64::consts::PI / 180.0).abs() < 1e-9,
+        "{ppd}"
+    );
+    assert_eq!(doc["calibrated_ppd"], 30.0);
+    assert!(
+        doc["ppd_note"].as_str().unwrap().contains("may be low"),
+        "{doc}"
+    );
+    for (extra, text) in [
+        (&["--ppd", "0.1"][..], "0.5"),
+        (&["--viewer", "1"][..], "DIST_M,WIDTH_M"),
+        (&["--viewer", "1,-2"][..], "positive"),
+        (
+            &["--ppd", "30", "--viewer", "1,1"][..],
+            "cannot be used with",
+        ),
+    ] {
+        let r = plan_with(
+            &s,
+            "bad_viewer",
+            &graph(),
+            "btf_view",
+            "flip=0.05",
+            &near,
+            extra,
+        );
+        assert_eq!(r.run.code, 2, "{extra:?}: {}", r.run.stderr);
+        assert!(r.run.stderr.contains(text), "{extra:?}: {}", r.run.stderr);
     }
 }

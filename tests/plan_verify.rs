@@ -15,7 +15,7 @@ mod plan_sweep;
 #[test]
 fn planned_views_stay_within_their_flip_budget() {
     let out = tempfile::tempdir().expect("temp dir");
-    let rows = plan_sweep::sweep(out.path(), 240, "joint");
+    let rows = plan_sweep::sweep(out.path(), 240, "joint", None);
     assert_eq!(
         rows.len(),
         plan_sweep::DISTANCES.len() * plan_sweep::BUDGETS.len() * plan_sweep::OBJECTS.len()

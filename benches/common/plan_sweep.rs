@@ -29,8 +29,9 @@ pub struct Row {
 }
 
 /// Runs the sweep at `width` pixels across (height 3/4 of it) into `out`, with its own cache,
-/// planning with `split` (`joint` or `equal`).
-pub fn sweep(out: &Path, width: u32, split: &str) -> Vec<Row> {
+/// planning with `split` (`joint` or `equal`) for a viewer at `ppd` pixels per degree (FLIP's
+/// default when `None`), the FLIP measured at the same.
+pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let height = width * 3 / 4;
     std::fs::create_dir_all(out).unwrap();
@@ -51,6 +52,13 @@ pub fn sweep(out: &Path, width: u32, split: &str) -> Vec<Row> {
             sets.push(format!("{id}.camera.eye={eye}"));
             sets.push(format!("{id}.camera.resolution=[{width},{height}]"));
         }
+        if let Some(p) = ppd {
+            sets.push(format!("btf_flip.ppd={p}"));
+            sets.push(format!("sss_flip.ppd={p}"));
+        }
+        let viewer: Vec<String> = ppd
+            .map(|p| vec!["--ppd".to_string(), p.to_string()])
+            .unwrap_or_default();
         for &b in &BUDGETS {
             let case = out.join(format!("d{d}_b{b}"));
             std::fs::create_dir_all(&case).unwrap();
@@ -76,10 +84,11 @@ pub fn sweep(out: &Path, width: u32, split: &str) -> Vec<Row> {
                 a.push("--set".into());
                 a.push(s.clone());
             }
+            a.extend(viewer.iter().cloned());
             mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
             let btf_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
             std::fs::rename(case.join("plan.json"), case.join("plan_btf.json")).unwrap();
-            mesoflow(&[
+            let mut a: Vec<&str> = vec![
                 "plan",
                 step.to_str().unwrap(),
                 "--render",
@@ -93,7 +102,9 @@ pub fn sweep(out: &Path, width: u32, split: &str) -> Vec<Row> {
                 split,
                 "--cache-dir",
                 cache.to_str().unwrap(),
-            ]);
+            ];
+            a.extend(viewer.iter().map(String::as_str));
+            mesoflow(&a);
             let sss_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
             std::fs::rename(case.join("plan.json"), case.join("plan_sss.json")).unwrap();
             let run_out = case.join("out");

@@ -9,6 +9,8 @@ use crate::exit::invalid;
 use crate::load;
 use crate::plan::{self, RenderKind, Scene};
 use mesoflow_graph::{GraphFile, NodeDecl};
+use mesoflow_nodes::image::flip;
+use mesoflow_nodes::render::camera::CameraParams;
 use mesoflow_runtime::{RunOptions, SilentObserver};
 use serde_json::{json, Map, Value};
 use std::collections::BTreeSet;
@@ -35,6 +37,46 @@ fn parse_budget(text: &str) -> anyhow::Result<f64> {
         return Err(invalid(format!("--budget {text}: must be a number ≥ 0")));
     }
     Ok(b)
+}
+
+/// The viewer's pixels per degree: `--ppd`, or `--viewer DIST_M,WIDTH_M` with the render's
+/// width in pixels, or FLIP's default.
+fn viewer_ppd(args: &PlanArgs, render: &NodeDecl) -> anyhow::Result<f64> {
+    if let Some(p) = args.ppd {
+        if !(p.is_finite() && p >= 0.5) {
+            return Err(invalid(format!("--ppd {p}: must be a number ≥ 0.5")));
+        }
+        return Ok(p);
+    }
+    let Some(text) = &args.viewer else {
+        return Ok(flip::DEFAULT_PPD);
+    };
+    let parts: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| invalid(format!("--viewer {text}: expected DIST_M,WIDTH_M")))?;
+    let [distance_m, width_m] = parts[..] else {
+        return Err(invalid(format!("--viewer {text}: expected DIST_M,WIDTH_M")));
+    };
+    if !([distance_m, width_m]
+        .iter()
+        .all(|v| v.is_finite() && *v > 0.0))
+    {
+        return Err(invalid(format!(
+            "--viewer {text}: distance and width must be positive metres"
+        )));
+    }
+    let pixels = render.params["camera"]["resolution"][0]
+        .as_u64()
+        .map_or(CameraParams::default().resolution[0] as usize, |w| {
+            w as usize
+        });
+    Ok(flip::Viewer {
+        distance_m,
+        width_m,
+    }
+    .ppd(pixels))
 }
 
 /// The nodes `id` depends on, and itself.
@@ -122,6 +164,7 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
             args.render, decl.kind
         )));
     };
+    let ppd = viewer_ppd(args, decl)?;
 
     // Measure the view (cached like any run).
     let probe = probe_graph(&file, &args.render, kind);
@@ -168,7 +211,7 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         kind,
         &scene,
         chain.as_ref(),
-        budget,
+        plan::Budget { flip: budget, ppd },
         split,
     )
     .map_err(|e| anyhow::anyhow!("--render {}: {e}", args.render))?;
@@ -185,7 +228,7 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     });
     let mut planned_file = planned.file;
     planned_file.description = Some(format!(
-        "{} — planned for `{}` at a FLIP budget of {budget} (see plan.json)",
+        "{} — planned for `{}` at a FLIP budget of {budget}, {ppd:.1} pixels per degree (see plan.json)",
         file.description.clone().unwrap_or_default(),
         args.render
     ));
@@ -218,7 +261,8 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         "planned": out_path.display().to_string(),
         "render": args.render,
         "kind": decl.kind,
-        "budget": { "flip": budget },
+        "budget": { "flip": budget, "ppd": ppd },
+        "calibrated_ppd": planned.calibrated_ppd,
         "scene": scene.to_json(),
         "decisions": decisions,
         "split": if split == plan::Split::Joint { "joint" } else { "equal" },
@@ -227,6 +271,12 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     });
     if let Some(t) = total {
         doc["predicted_error"] = json!(t);
+    }
+    if !planned.ppd_inside {
+        doc["ppd_note"] = json!(format!(
+            "{ppd:.1} pixels per degree is beyond the calibrated {:.0}: predictions may be low",
+            planned.calibrated_ppd
+        ));
     }
     write(
         &plan_path,

@@ -10,6 +10,7 @@
 //! A view between two calibrated distances is interpolated linearly in log₂ of the quantity;
 //! beyond the calibrated range the nearest end stands in (and the reason says so).
 
+use mesoflow_nodes::image::flip::DEFAULT_PPD;
 use serde_json::Value;
 
 /// The fraction of an object's pixels an MDF changes: its contour pixels, each widened to the
@@ -121,6 +122,13 @@ pub struct Calibration {
     pub mdf_off_per_contour: Curve,
     pub mdf_off_time: Curve,
     pub sss: Vec<SssCandidate>,
+    /// The viewing condition (pixels per degree) the FLIP curves were measured at: the
+    /// calibrated one nearest at or below the viewer's, so that a viewer between two sees no
+    /// more than predicted (FLIP falls as ppd rises).
+    pub ppd: f64,
+    /// Whether the viewer's ppd lies within the calibrated ones (below the sparsest, its curves
+    /// stand in and may under-predict).
+    pub ppd_inside: bool,
 }
 
 /// The table `benches/plan_calibrate.rs` wrote, compiled in.
@@ -148,19 +156,50 @@ impl Calibration {
         out
     }
 
-    pub fn builtin() -> Result<Calibration, String> {
+    /// The compiled-in model, its FLIP read for a viewer at `ppd` pixels per degree.
+    pub fn builtin(ppd: f64) -> Result<Calibration, String> {
         let doc: Value =
             serde_json::from_str(TABLE).map_err(|e| format!("calibration table: {e}"))?;
-        Calibration::from_json(&doc)
+        Calibration::from_json(&doc, ppd)
     }
 
-    pub fn from_json(doc: &Value) -> Result<Calibration, String> {
+    /// Reads a table: the `flip` column is FLIP at its default [`DEFAULT_PPD`], `flip_at_ppd`
+    /// holds the same at other pixels per degree.
+    pub fn from_json(doc: &Value, ppd: f64) -> Result<Calibration, String> {
         let rows = |k: &str| -> Result<&Vec<Value>, String> {
             doc[k]
                 .as_array()
                 .ok_or_else(|| format!("calibration table: no `{k}`"))
         };
         let num = |v: &Value, k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        // The calibrated viewing conditions, from the first row (every row has the same).
+        let mut ppds: Vec<(f64, Option<String>)> = vec![(DEFAULT_PPD, None)];
+        if let Some(m) = rows("btf")?
+            .first()
+            .and_then(|r| r["flip_at_ppd"].as_object())
+        {
+            for k in m.keys() {
+                let p: f64 = k
+                    .parse()
+                    .map_err(|_| format!("calibration table: `{k}` is not a ppd"))?;
+                ppds.push((p, Some(k.clone())));
+            }
+        }
+        ppds.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // The densest calibrated ppd at or below the viewer's (67 asks for FLIP's 67.02): fewer
+        // pixels per degree make each pixel's error larger in the eye, and the calibration
+        // measured FLIP falling as ppd rises (by a median 1.4× for the BTF from 30 to 67).
+        let (chosen, column, ppd_inside) = match ppds.iter().rev().find(|c| c.0 <= ppd + 0.05) {
+            Some(c) => (c.0, c.1.clone(), true),
+            None => ppds
+                .first()
+                .map(|c| (c.0, c.1.clone(), false))
+                .ok_or("calibration table: no viewing condition")?,
+        };
+        let flip = |r: &Value| match &column {
+            None => num(r, "flip"),
+            Some(k) => r["flip_at_ppd"][k.as_str()].as_f64().unwrap_or(f64::NAN),
+        };
         // Render time over the full model's: by frame where the renderer times one, else by
         // the node's seconds.
         let time = |r: &Value| match (r["frame_ms"].as_f64(), r["full_frame_ms"].as_f64()) {
@@ -171,7 +210,7 @@ impl Calibration {
             let x = num(r, "texels_per_pixel").log2();
             (
                 (num(r, "rank") as u32, num(r, "level") as u32),
-                (x, num(r, "flip")),
+                (x, flip(r)),
                 (x, time(r)),
             )
         }))
@@ -189,7 +228,7 @@ impl Calibration {
                 .map(|r| {
                     let shell = num(r, "shell_pixels");
                     let band = band_fraction(num(r, "silhouette_fraction"), shell);
-                    (shell.log2(), num(r, "flip") / band)
+                    (shell.log2(), flip(r) / band)
                 })
                 .collect(),
         );
@@ -207,7 +246,7 @@ impl Calibration {
             };
             let medium = r["medium"].as_str().unwrap_or("").to_string();
             let x = num(r, "mfp_pixels").log2();
-            ((option, medium), (x, num(r, "flip")), (x, time(r)))
+            ((option, medium), (x, flip(r)), (x, time(r)))
         }))
         .into_iter()
         .map(|((option, medium), flip, time)| SssCandidate {
@@ -228,7 +267,7 @@ impl Calibration {
                     "calibration table: a shadow row without `texels_per_pixel`".to_string()
                 })?;
                 let x = num(r, "object_pixels").log2();
-                rows_by_density.push((density, (x, num(r, "flip")), (x, time(r))));
+                rows_by_density.push((density, (x, flip(r)), (x, time(r))));
             }
             let mut out: Vec<Shadows> = grouped(rows_by_density)
                 .into_iter()
@@ -252,6 +291,8 @@ impl Calibration {
             mdf_off_per_contour,
             mdf_off_time,
             sss,
+            ppd: chosen,
+            ppd_inside,
         })
     }
 }
@@ -263,7 +304,7 @@ mod tests {
 
     #[test]
     fn the_builtin_table_loads_and_covers_every_stage() {
-        let c = Calibration::builtin().unwrap();
+        let c = Calibration::builtin(DEFAULT_PPD).unwrap();
         assert!(c.btf.len() >= 20);
         assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
         assert!(c.mdf_off_per_contour.points.len() >= 6);

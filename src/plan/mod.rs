@@ -150,6 +150,8 @@ pub enum PlanError {
     CameraInside,
     #[error("budget {0}: a FLIP budget is a number ≥ 0")]
     Budget(f64),
+    #[error("{0} pixels per degree: the viewer's ppd is a number ≥ 0.5")]
+    Ppd(f64),
     #[error("{0}")]
     Calibration(String),
 }
@@ -159,6 +161,25 @@ pub enum PlanError {
 pub struct BtfChain {
     /// The node and port giving the raw BTF (what `btf.pca` reads, or the renderer directly).
     pub raw: String,
+}
+
+/// The error the view may show: mean FLIP over the object's pixels, for a viewer at `ppd`
+/// pixels per degree.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Budget {
+    pub flip: f64,
+    pub ppd: f64,
+}
+
+#[cfg(test)]
+impl Budget {
+    /// `flip` at FLIP's default viewing condition (67 pixels per degree).
+    pub fn flip(flip: f64) -> Budget {
+        Budget {
+            flip,
+            ppd: mesoflow_nodes::image::flip::DEFAULT_PPD,
+        }
+    }
 }
 
 /// How a render's budget is shared between its BTF and MDF stages.
@@ -178,6 +199,10 @@ pub struct Plan {
     pub file: GraphFile,
     /// The budget each stage was given, by stage.
     pub shares: Vec<(&'static str, f64)>,
+    /// The calibrated viewing condition the predictions are for, and whether the viewer's lies
+    /// within the calibrated ones.
+    pub calibrated_ppd: f64,
+    pub ppd_inside: bool,
 }
 
 /// A decision's predicted render time over the full model's (1 where it says none).
@@ -211,7 +236,7 @@ struct Stage<'a> {
     why_cheapest: &'a str,
 }
 
-/// Plans `render` (a node of `file`) for budget `b`, from `scene`. `chain` is where its BTF comes
+/// Plans `render` (a node of `file`) for `budget`, from `scene`. `chain` is where its BTF comes
 /// from (for renderers with one).
 pub fn plan(
     file: &GraphFile,
@@ -219,16 +244,20 @@ pub fn plan(
     kind: RenderKind,
     scene: &Scene,
     chain: Option<&BtfChain>,
-    b: f64,
+    budget: Budget,
     split: Split,
 ) -> Result<Plan, PlanError> {
+    let b = budget.flip;
     if !(b.is_finite() && b >= 0.0) {
         return Err(PlanError::Budget(b));
+    }
+    if !(budget.ppd.is_finite() && budget.ppd >= 0.5) {
+        return Err(PlanError::Ppd(budget.ppd));
     }
     if scene.camera_inside || scene.backfacing_fraction.is_some_and(|f| f > 0.5) {
         return Err(PlanError::CameraInside);
     }
-    let model = calibration::Calibration::builtin().map_err(PlanError::Calibration)?;
+    let model = calibration::Calibration::builtin(budget.ppd).map_err(PlanError::Calibration)?;
     let share = b / kind.stages();
     let mut out = file.clone();
     let mut decisions = Vec::new();
@@ -304,6 +333,8 @@ pub fn plan(
         decisions,
         file: out,
         shares,
+        calibrated_ppd: model.ppd,
+        ppd_inside: model.ppd_inside,
     })
 }
 
@@ -850,7 +881,16 @@ mod tests {
         let f = graph();
         let chain = btf_chain(&f, "r", "btf").unwrap();
         assert_eq!(chain.raw, "capture.btf");
-        plan(&f, "r", RenderKind::Mesh, s, Some(&chain), b, Split::Equal).unwrap()
+        plan(
+            &f,
+            "r",
+            RenderKind::Mesh,
+            s,
+            Some(&chain),
+            Budget::flip(b),
+            Split::Equal,
+        )
+        .unwrap()
     }
 
     fn decision<'a>(p: &'a Plan, stage: &str) -> &'a Decision {
@@ -905,7 +945,7 @@ mod tests {
                         RenderKind::Mesh,
                         &scene(tpp, shell),
                         Some(&chain),
-                        b,
+                        Budget::flip(b),
                         Split::Joint,
                     )
                     .unwrap();
@@ -960,12 +1000,22 @@ mod tests {
         let r = f.node_mut("r").unwrap();
         r.params.insert("shadows".into(), json!(true));
         r.params.insert("shadow_resolution".into(), json!(1024));
-        let model = calibration::Calibration::builtin().unwrap();
+        let model =
+            calibration::Calibration::builtin(mesoflow_nodes::image::flip::DEFAULT_PPD).unwrap();
         for px in [20.0, 60.0, 150.0] {
             let mut s = scene(1.0, 1.0);
             s.object_pixels = Some(px);
             let size = |b: f64| {
-                let p = plan(&f, "r", RenderKind::Mesh, &s, None, b, Split::Equal).unwrap();
+                let p = plan(
+                    &f,
+                    "r",
+                    RenderKind::Mesh,
+                    &s,
+                    None,
+                    Budget::flip(b),
+                    Split::Equal,
+                )
+                .unwrap();
                 let d = p.decisions.iter().find(|d| d.stage == "shadows");
                 if let Some(d) = d {
                     // Within a tenth of the budget, as predicted by the calibrated density it names.
@@ -1022,7 +1072,15 @@ mod tests {
         s.camera_inside = true;
         let f = graph();
         assert!(matches!(
-            plan(&f, "r", RenderKind::Mesh, &s, None, 0.1, Split::Joint),
+            plan(
+                &f,
+                "r",
+                RenderKind::Mesh,
+                &s,
+                None,
+                Budget::flip(0.1),
+                Split::Joint
+            ),
             Err(PlanError::CameraInside)
         ));
         for b in [-1.0, f64::NAN] {
@@ -1033,11 +1091,68 @@ mod tests {
                     RenderKind::Mesh,
                     &scene(1.0, 1.0),
                     None,
-                    b,
+                    Budget::flip(b),
                     Split::Joint
                 ),
                 Err(PlanError::Budget(_))
             ));
+        }
+        for ppd in [0.0, f64::NAN] {
+            let budget = Budget { flip: 0.1, ppd };
+            assert!(matches!(
+                plan(
+                    &f,
+                    "r",
+                    RenderKind::Mesh,
+                    &scene(1.0, 1.0),
+                    None,
+                    budget,
+                    Split::Joint
+                ),
+                Err(PlanError::Ppd(_))
+            ));
+        }
+    }
+
+    #[test]
+    fn a_viewer_reads_the_calibration_at_or_below_its_pixels_per_degree() {
+        use calibration::Calibration;
+        use mesoflow_nodes::image::flip::DEFAULT_PPD;
+        let at = |ppd: f64| Calibration::builtin(ppd).unwrap();
+        // Calibrated at 30, 67.02 (FLIP's default) and 120 pixels per degree.
+        assert_eq!((at(30.0).ppd, at(30.0).ppd_inside), (30.0, true));
+        assert_eq!((at(20.0).ppd, at(20.0).ppd_inside), (30.0, false));
+        assert_eq!(at(45.0).ppd, 30.0);
+        assert_eq!(at(67.0).ppd, DEFAULT_PPD);
+        assert_eq!(at(100.0).ppd, DEFAULT_PPD);
+        assert_eq!((at(200.0).ppd, at(200.0).ppd_inside), (120.0, true));
+        // The columns differ: a viewer's ppd changes what is predicted.
+        assert_ne!(at(120.0).btf, at(30.0).btf);
+    }
+
+    #[test]
+    fn fewer_pixels_per_degree_never_plan_a_cheaper_model() {
+        // A viewer at 30 ppd sees each pixel's error larger than at 120: over views near to
+        // far and budgets, the plan for 30 keeps at least as many BTF floats.
+        let f = graph();
+        let chain = btf_chain(&f, "r", "btf").unwrap();
+        for tpp in [0.5, 2.0, 8.0, 20.0] {
+            for b in [0.05, 0.1, 0.25] {
+                let floats = |ppd: f64| {
+                    let p = plan(
+                        &f,
+                        "r",
+                        RenderKind::Mesh,
+                        &scene(tpp, 1.0),
+                        Some(&chain),
+                        Budget { flip: b, ppd },
+                        Split::Equal,
+                    )
+                    .unwrap();
+                    floats_of(decision(&p, "btf"))
+                };
+                assert!(floats(30.0) >= floats(120.0), "tpp {tpp}, budget {b}");
+            }
         }
     }
 
@@ -1060,7 +1175,16 @@ mod tests {
             mfp_pixels: Some(0.25),
             ..Default::default()
         };
-        let p = plan(&f, "r", RenderKind::Sss, &s, None, 0.05, Split::Joint).unwrap();
+        let p = plan(
+            &f,
+            "r",
+            RenderKind::Sss,
+            &s,
+            None,
+            Budget::flip(0.05),
+            Split::Joint,
+        )
+        .unwrap();
         assert_eq!(p.file.node("r").unwrap().params["mode"], json!("brdf"));
         // Nearer, scattering spans many pixels: gathered, and what is chosen is predicted
         // within the budget or is the graph's own gather.
@@ -1069,7 +1193,16 @@ mod tests {
             mfp_pixels: Some(50.0),
             ..s.clone()
         };
-        let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.05, Split::Joint).unwrap();
+        let p = plan(
+            &f,
+            "r",
+            RenderKind::Sss,
+            &near,
+            None,
+            Budget::flip(0.05),
+            Split::Joint,
+        )
+        .unwrap();
         let d = &p.decisions[0];
         assert_eq!(
             p.file.node("r").unwrap().params["mode"],
@@ -1078,7 +1211,16 @@ mod tests {
         );
         assert!(d.predicted_error.is_none_or(|e| e <= 0.05), "{d:?}");
         // Budget 0: brute force, PBD.
-        let p = plan(&f, "r", RenderKind::Sss, &near, None, 0.0, Split::Joint).unwrap();
+        let p = plan(
+            &f,
+            "r",
+            RenderKind::Sss,
+            &near,
+            None,
+            Budget::flip(0.0),
+            Split::Joint,
+        )
+        .unwrap();
         assert_eq!(p.file.node("r").unwrap().params["threshold"], json!(0.0));
         assert_eq!(p.file.node("pr").unwrap().params["model"], json!("pbd"));
     }
