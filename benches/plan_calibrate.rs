@@ -9,7 +9,8 @@
 //!   object spans), for both renderers, on the torus under a low light (it shadows itself),
 //!   against the object's size in pixels;
 //! - subsurface scattering as a BRDF, or gathered (brute force) with samples k pixel
-//!   footprints apart (never closer than the profile's default), against the longest mean free
+//!   footprints apart (never closer than the profile's default), or gathered as the full model
+//!   is with the classical dipole's profile instead of PBD's, against the longest mean free
 //!   path in pixels.
 //!
 //! Each FLIP is measured at 67 pixels per degree (FLIP's default) and at 30 and 120.
@@ -111,6 +112,15 @@ fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
         n.insert(
             format!("flip_{p}_brdf"),
             flip(&format!("{p}_full"), &format!("{p}_brdf")),
+        );
+        // The classical dipole instead of PBD, gathered as the full model is.
+        n.insert(format!("{p}_dipole_profile"), json!({ "kind": "sss.profile", "inputs": { "material": format!("{p}_material.material") }, "params": { "model": "dipole" } }));
+        let mut dipole = sss_render(p, &camera, json!({}));
+        dipole["inputs"]["profile"] = json!(format!("{p}_dipole_profile.profile"));
+        n.insert(format!("{p}_dipole"), dipole);
+        n.insert(
+            format!("flip_{p}_dipole"),
+            flip(&format!("{p}_full"), &format!("{p}_dipole")),
         );
     }
     // Shadow maps need a scene that casts shadows (a convex sphere casts none, and the torus
@@ -310,6 +320,14 @@ fn main() {
                 "flip": metric(&rep, &format!("flip_{p}_brdf"), "mean"),
                 "flip_at_ppd": at_ppds(&rep, &format!("flip_{p}_brdf")),
                 "seconds": seconds(&rep, &format!("{p}_brdf")), "full_seconds": full_s,
+            }));
+            sss.push(json!({
+                "distance": d, "medium": preset, "mfp_pixels": mfp, "option": "dipole",
+                "flip": metric(&rep, &format!("flip_{p}_dipole"), "mean"),
+                "flip_at_ppd": at_ppds(&rep, &format!("flip_{p}_dipole")),
+                "seconds": seconds(&rep, &format!("{p}_dipole")), "full_seconds": full_s,
+                "profile_seconds": seconds(&rep, &format!("{p}_dipole_profile")),
+                "full_profile_seconds": seconds(&rep, &format!("{p}_profile")),
             }));
             for k in SPACINGS {
                 let id = format!("{p}_k{}", (k * 10.0) as u32);

@@ -32,6 +32,13 @@ impl Curve {
         Curve { points }
     }
 
+    /// The same curve with every value times `k` (tests that need a model other than the
+    /// measured one).
+    #[cfg(test)]
+    pub fn scaled(&self, k: f64) -> Curve {
+        Curve::new(self.points.iter().map(|&(x, y)| (x, k * y)).collect())
+    }
+
     /// The value at `x` (not its log), and whether `x` lies inside the calibrated range.
     pub fn at(&self, x: f64) -> Option<(f64, bool)> {
         let (first, last) = (self.points.first()?, self.points.last()?);
@@ -88,6 +95,8 @@ pub enum SssOption {
     Gather {
         footprints: f64,
     },
+    /// Gathered as the full model is, from the classical dipole's profile instead of PBD's.
+    Dipole,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -122,6 +131,8 @@ pub struct Calibration {
     pub mdf_off_per_contour: Curve,
     pub mdf_off_time: Curve,
     pub sss: Vec<SssCandidate>,
+    /// The classical dipole profile's computing time over PBD's, where measured.
+    pub dipole_profile_time: Option<f64>,
     /// The viewing condition (pixels per degree) the FLIP curves were measured at: the
     /// calibrated one nearest at or below the viewer's, so that a viewer between two sees no
     /// more than predicted (FLIP falls as ppd rises).
@@ -240,6 +251,7 @@ impl Calibration {
         let sss: Vec<SssCandidate> = grouped(rows("sss")?.iter().map(|r| {
             let option = match r["option"].as_str() {
                 Some("brdf") => SssOption::Brdf,
+                Some("dipole") => SssOption::Dipole,
                 _ => SssOption::Gather {
                     footprints: num(r, "spacing_footprints"),
                 },
@@ -256,6 +268,16 @@ impl Calibration {
             time,
         })
         .collect();
+        // The dipole profile's own computing time over PBD's (the median of the measurements:
+        // it does not depend on the view).
+        let mut profile_ratios: Vec<f64> = rows("sss")?
+            .iter()
+            .filter(|r| r["option"] == "dipole")
+            .map(|r| num(r, "profile_seconds") / num(r, "full_profile_seconds"))
+            .filter(|v| v.is_finite())
+            .collect();
+        profile_ratios.sort_by(f64::total_cmp);
+        let dipole_profile_time = profile_ratios.get(profile_ratios.len() / 2).copied();
         let shadows = |family: &str| -> Result<Vec<Shadows>, String> {
             let rows: Vec<&Value> = rows("shadows")?
                 .iter()
@@ -291,6 +313,7 @@ impl Calibration {
             mdf_off_per_contour,
             mdf_off_time,
             sss,
+            dipole_profile_time,
             ppd: chosen,
             ppd_inside,
         })
@@ -309,6 +332,8 @@ mod tests {
         assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
         assert!(c.mdf_off_per_contour.points.len() >= 6);
         assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
+        assert!(c.sss.iter().any(|s| s.option == SssOption::Dipole));
+        assert!(c.dipole_profile_time.is_some_and(|t| t > 0.0 && t < 1.0));
         for family in [&c.shadows_mesh, &c.shadows_sss] {
             assert_eq!(family.len(), SHADOW_TEXELS_PER_PIXEL.len());
             assert!(family.iter().all(|s| s.flip.points.len() >= 6));

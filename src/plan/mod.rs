@@ -324,6 +324,9 @@ pub fn plan(
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
         decisions.push(decide_sss(&cx, &mut out, share));
         shares.push(("sss", share));
+        if let Some(d) = decide_profile(&cx, &mut out, share) {
+            decisions.push(d);
+        }
     }
     if let Some(d) = decide_shadows(&cx, &mut out, b) {
         decisions.push(d);
@@ -675,7 +678,7 @@ fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decision {
         model
             .sss_predictions(m)
             .into_iter()
-            .filter(|(_, e, _)| *e <= share)
+            .filter(|(o, e, _)| *e <= share && *o != calibration::SssOption::Dipole)
             .min_by(|a, b| a.2.total_cmp(&b.2))
     });
     let default_spacing = scene.mfp_min_mm.map(|m| 0.25 * m);
@@ -734,6 +737,58 @@ fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decision {
             }
         }
     }
+}
+
+/// The diffusion profile: the classical dipole instead of the graph's PBD where the measured
+/// model predicts the change within a tenth of the translucency's share (like a shadow map's,
+/// meant to be invisible), for a gathered render (a BRDF uses only the profile's totals, which
+/// the dipole gets 1–17% wrong where PBD's are 4–10% high: no calibration says which a view
+/// shows). The render itself costs the same; the saving is the profile's computation. The
+/// graph's profile node stays as it is (others may read it): the render reads a copy.
+fn decide_profile(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
+    let Stage {
+        model,
+        file,
+        render,
+        scene,
+        full,
+        ..
+    } = *cx;
+    if full || out.node(render)?.params.get("mode") == Some(&json!("brdf")) {
+        return None;
+    }
+    let from = file.node(render)?.inputs.get("profile")?;
+    let (id, port) = from.split_once('.')?;
+    let profile = file.node(id).filter(|n| n.kind == "sss.profile")?;
+    if profile.params.get("model").and_then(Value::as_str) != Some("pbd") {
+        return None;
+    }
+    let mfp = scene.mfp_pixels?;
+    let (_, e, _) = model
+        .sss_predictions(mfp)
+        .into_iter()
+        .find(|(o, ..)| *o == calibration::SssOption::Dipole)?;
+    if e > 0.1 * share {
+        return None;
+    }
+    let mut params = profile.params.clone();
+    params.insert("model".into(), json!("dipole"));
+    let copy = format!("{PREFIX}profile");
+    upsert(out, &copy, "sss.profile", params, profile.inputs.clone());
+    out.node_mut(render)?
+        .inputs
+        .insert("profile".into(), format!("{copy}.{port}"));
+    Some(Decision {
+        stage: "profile",
+        choice: json!({ "model": "dipole" }),
+        reason: format!(
+            "scattering spans {mfp:.2} px: the classical dipole's profile instead of PBD's is predicted at FLIP {e:.4} (the worse calibration medium), within a tenth of {share:.3}"
+        ),
+        predicted_error: Some(e),
+        predicted_cost: model
+            .dipole_profile_time
+            .map(|t| json!({ "profile_time_vs_full": t })),
+    })
 }
 
 /// Shadow maps: the renderer's resolution lowered to what the view shows, at the sparsest
@@ -1154,6 +1209,90 @@ mod tests {
                 assert!(floats(30.0) >= floats(120.0), "tpp {tpp}, budget {b}");
             }
         }
+    }
+
+    #[test]
+    fn the_dipole_replaces_pbd_only_where_predicted_invisible_and_never_in_place() {
+        let f = GraphFile::parse(
+            r#"{"mesoflow": 1, "nodes": {
+              "m": {"kind": "sss.material", "params": {"preset": "skin1"}},
+              "pr": {"kind": "sss.profile", "inputs": {"material": "m.material"}, "params": {"model": "pbd"}},
+              "torus": {"kind": "mesh.primitive"},
+              "full": {"kind": "sss.render", "inputs": {"mesh": "torus.mesh", "material": "m.material", "profile": "pr.profile"}},
+              "r": {"kind": "sss.render", "inputs": {"mesh": "torus.mesh", "material": "m.material", "profile": "pr.profile"}}
+            }}"#,
+        )
+        .unwrap();
+        let measured =
+            calibration::Calibration::builtin(mesoflow_nodes::image::flip::DEFAULT_PPD).unwrap();
+        // A model in which the dipole is 100× closer to PBD than measured, so that both
+        // outcomes occur; and the measured one.
+        let mut closer = measured.clone();
+        for c in closer
+            .sss
+            .iter_mut()
+            .filter(|c| c.option == calibration::SssOption::Dipole)
+        {
+            c.flip = c.flip.scaled(0.01);
+        }
+        let mut chosen = [0, 0];
+        for (m, model) in [&measured, &closer].into_iter().enumerate() {
+            for mfp in [2.0, 5.0, 12.0, 30.0, 80.0] {
+                let s = Scene {
+                    visible_fraction: 0.3,
+                    mfp_pixels: Some(mfp),
+                    ..Default::default()
+                };
+                for b in [0.0, 0.02, 0.1, 0.5] {
+                    for mode in ["diffusion", "brdf"] {
+                        let cx = Stage {
+                            model,
+                            file: &f,
+                            render: "r",
+                            kind: RenderKind::Sss,
+                            scene: &s,
+                            full: b == 0.0,
+                            cheapest: false,
+                            why_cheapest: "",
+                        };
+                        let mut out = f.clone();
+                        out.node_mut("r")
+                            .unwrap()
+                            .params
+                            .insert("mode".into(), json!(mode));
+                        let d = decide_profile(&cx, &mut out, b);
+                        // The graph's profile node is never changed: the full render reads it.
+                        assert_eq!(out.node("pr").unwrap().params["model"], json!("pbd"));
+                        let r = out.node("r").unwrap();
+                        let Some(d) = d else {
+                            assert_eq!(r.inputs["profile"], "pr.profile");
+                            continue;
+                        };
+                        chosen[m] += 1;
+                        assert!(b > 0.0 && mode == "diffusion", "{b} {mode}");
+                        assert_eq!(r.inputs["profile"], "plan_profile.profile");
+                        assert_eq!(
+                            out.node("plan_profile").unwrap().params["model"],
+                            json!("dipole")
+                        );
+                        // Within a tenth of the translucency's share (all of b), as the model
+                        // predicts for the worse calibration medium whose range holds the view.
+                        let e = d.predicted_error.unwrap();
+                        let worst = model
+                            .sss
+                            .iter()
+                            .filter(|c| c.option == calibration::SssOption::Dipole)
+                            .filter_map(|c| c.flip.at(mfp).filter(|x| x.1).map(|x| x.0))
+                            .fold(0.0, f64::max);
+                        assert!(e <= 0.1 * b && e == worst, "mfp {mfp}, budget {b}: {e}");
+                    }
+                }
+            }
+        }
+        // Measured, the dipole is never invisible (FLIP 0.04–0.2 against PBD, ketchup the
+        // worse); 100× closer, it is at the larger budgets.
+        assert_eq!(chosen[0], 0);
+        assert!(chosen[1] > 0);
     }
 
     #[test]
