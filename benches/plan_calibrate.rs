@@ -10,8 +10,8 @@
 //!   against the object's size in pixels;
 //! - subsurface scattering as a BRDF, or gathered (brute force) with samples k pixel
 //!   footprints apart (never closer than the profile's default), or gathered as the full model
-//!   is with the classical dipole's profile instead of PBD's, against the longest mean free
-//!   path in pixels.
+//!   is with the classical dipole's profile instead of PBD's, or (on the CPU, where the gather
+//!   is an octree) at octree thresholds 0.01–0.3, against the longest mean free path in pixels.
 //!
 //! Each FLIP is measured at 67 pixels per degree (FLIP's default) and at 30 and 120.
 //! Each candidate's render time is recorded too: the node's seconds, and for `render.mesh` a
@@ -41,6 +41,8 @@ const SPACINGS: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
 /// Viewing conditions besides FLIP's default (67 pixels per degree) at which every candidate's
 /// FLIP is measured too: a farther or smaller display, and a nearer or larger one.
 const OTHER_PPDS: [u32; 2] = [30, 120];
+/// Octree thresholds (ΔA/d²) of the CPU path's gather.
+const THRESHOLDS: [f64; 4] = [0.01, 0.03, 0.1, 0.3];
 
 fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     let height = width * 3 / 4;
@@ -149,6 +151,11 @@ fn sss_render(p: &str, camera: &Value, extra: Value) -> Value {
 }
 
 fn run(graph: &Map<String, Value>, dir: &Path, cache: &Path) -> Value {
+    run_on(graph, dir, cache, "auto")
+}
+
+/// [`run`] on `device` (`auto`, `cpu` or `gpu`).
+fn run_on(graph: &Map<String, Value>, dir: &Path, cache: &Path, device: &str) -> Value {
     std::fs::create_dir_all(dir).unwrap();
     let file = dir.join("graph.json");
     let doc = json!({ "mesoflow": 1, "nodes": graph });
@@ -158,6 +165,8 @@ fn run(graph: &Map<String, Value>, dir: &Path, cache: &Path) -> Value {
         "run",
         file.to_str().unwrap(),
         "--quiet",
+        "--device",
+        device,
         "--out-dir",
         out.to_str().unwrap(),
         "--cache-dir",
@@ -279,6 +288,38 @@ fn main() {
             }
         }
         let rep = run(&g, &out.join(format!("d{d}")), &cache);
+        // The CPU path's octree: the full model gathered by brute force and at each threshold,
+        // on the CPU (the GPU path always sums every sample), in a cache of its own.
+        let mut cpu = Map::new();
+        cpu.insert("ring".into(), g["ring"].clone());
+        for (p, _) in MEDIA {
+            for k in ["material", "profile", "full"] {
+                cpu.insert(format!("{p}_{k}"), g[&format!("{p}_{k}")].clone());
+            }
+            for t in THRESHOLDS {
+                let id = format!("{p}_t{}", (t * 1000.0) as u32);
+                let mut v = g[&format!("{p}_full")].clone();
+                v["params"]["threshold"] = json!(t);
+                cpu.insert(id.clone(), v);
+                for (suffix, ppd) in [
+                    (String::new(), None),
+                    ("_p30".into(), Some(30)),
+                    ("_p120".into(), Some(120)),
+                ] {
+                    let mut f = json!({ "kind": "image.flip", "inputs": { "reference": format!("{p}_full.image"), "test": format!("{id}.image") }, "params": { "object_only": true } });
+                    if let Some(ppd) = ppd {
+                        f["params"]["ppd"] = json!(ppd);
+                    }
+                    cpu.insert(format!("flip_{id}{suffix}"), f);
+                }
+            }
+        }
+        let cpu_rep = run_on(
+            &cpu,
+            &out.join(format!("d{d}/cpu")),
+            &out.join("cpu_cache"),
+            "cpu",
+        );
         let tpp = metric(&rep, "btf_scene", "texels_per_pixel");
         let shell = metric(&rep, "btf_scene", "shell_pixels");
         let silhouette = metric(&rep, "btf_scene", "silhouette_fraction");
@@ -329,6 +370,15 @@ fn main() {
                 "profile_seconds": seconds(&rep, &format!("{p}_dipole_profile")),
                 "full_profile_seconds": seconds(&rep, &format!("{p}_profile")),
             }));
+            for t in THRESHOLDS {
+                let id = format!("{p}_t{}", (t * 1000.0) as u32);
+                sss.push(json!({
+                    "distance": d, "medium": preset, "mfp_pixels": mfp, "option": "octree", "threshold": t,
+                    "flip": metric(&cpu_rep, &format!("flip_{id}"), "mean"),
+                    "flip_at_ppd": at_ppds(&cpu_rep, &format!("flip_{id}")),
+                    "seconds": seconds(&cpu_rep, &id), "full_seconds": seconds(&cpu_rep, &format!("{p}_full")),
+                }));
+            }
             for k in SPACINGS {
                 let id = format!("{p}_k{}", (k * 10.0) as u32);
                 sss.push(json!({

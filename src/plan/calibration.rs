@@ -97,6 +97,11 @@ pub enum SssOption {
     },
     /// Gathered as the full model is, from the classical dipole's profile instead of PBD's.
     Dipole,
+    /// Gathered as the full model is on the CPU, by an octree at `threshold` (ΔA/d²) instead of
+    /// brute force; times are the CPU's.
+    Octree {
+        threshold: f64,
+    },
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -252,6 +257,9 @@ impl Calibration {
             let option = match r["option"].as_str() {
                 Some("brdf") => SssOption::Brdf,
                 Some("dipole") => SssOption::Dipole,
+                Some("octree") => SssOption::Octree {
+                    threshold: num(r, "threshold"),
+                },
                 _ => SssOption::Gather {
                     footprints: num(r, "spacing_footprints"),
                 },
@@ -333,6 +341,10 @@ mod tests {
         assert!(c.mdf_off_per_contour.points.len() >= 6);
         assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
         assert!(c.sss.iter().any(|s| s.option == SssOption::Dipole));
+        assert!(c
+            .sss
+            .iter()
+            .any(|s| matches!(s.option, SssOption::Octree { .. })));
         assert!(c.dipole_profile_time.is_some_and(|t| t > 0.0 && t < 1.0));
         for family in [&c.shadows_mesh, &c.shadows_sss] {
             assert_eq!(family.len(), SHADOW_TEXELS_PER_PIXEL.len());

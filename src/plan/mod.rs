@@ -324,6 +324,9 @@ pub fn plan(
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
         decisions.push(decide_sss(&cx, &mut out, share));
         shares.push(("sss", share));
+        if let Some(d) = decide_threshold(&cx, &mut out, share) {
+            decisions.push(d);
+        }
         if let Some(d) = decide_profile(&cx, &mut out, share) {
             decisions.push(d);
         }
@@ -678,7 +681,13 @@ fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decision {
         model
             .sss_predictions(m)
             .into_iter()
-            .filter(|(o, e, _)| *e <= share && *o != calibration::SssOption::Dipole)
+            .filter(|(o, e, _)| {
+                *e <= share
+                    && matches!(
+                        o,
+                        calibration::SssOption::Brdf | calibration::SssOption::Gather { .. }
+                    )
+            })
             .min_by(|a, b| a.2.total_cmp(&b.2))
     });
     let default_spacing = scene.mfp_min_mm.map(|m| 0.25 * m);
@@ -737,6 +746,47 @@ fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decision {
             }
         }
     }
+}
+
+/// The CPU path's octree: the gather at the largest calibrated threshold the measured model
+/// predicts within a tenth of the translucency's share (meant to be invisible, as shadow maps
+/// are), else brute force as `decide_sss` set it. The GPU path sums every sample whatever the
+/// threshold, so there the choice changes nothing; on the CPU the octree is what makes the
+/// gather fast.
+fn decide_threshold(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
+    let Stage {
+        model,
+        render,
+        scene,
+        full,
+        ..
+    } = *cx;
+    if full || out.node(render)?.params.get("mode") == Some(&json!("brdf")) {
+        return None;
+    }
+    let mfp = scene.mfp_pixels?;
+    let (t, e, time) = model
+        .sss_predictions(mfp)
+        .into_iter()
+        .filter_map(|(o, e, time)| match o {
+            calibration::SssOption::Octree { threshold } if e <= 0.1 * share => {
+                Some((threshold, e, time))
+            }
+            _ => None,
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))?;
+    out.node_mut(render)?
+        .params
+        .insert("threshold".into(), json!(t));
+    Some(Decision {
+        stage: "octree",
+        choice: json!({ "threshold": t }),
+        reason: format!(
+            "on the CPU path (the GPU sums every sample): an octree at ΔA/d² < {t} is predicted at FLIP {e:.4} (the worse calibration medium), within a tenth of {share:.3}"
+        ),
+        predicted_error: Some(e),
+        predicted_cost: Some(json!({ "cpu_render_time_vs_full": time })),
+    })
 }
 
 /// The diffusion profile: the classical dipole instead of the graph's PBD where the measured
@@ -1293,6 +1343,64 @@ mod tests {
         // worse); 100× closer, it is at the larger budgets.
         assert_eq!(chosen[0], 0);
         assert!(chosen[1] > 0);
+    }
+
+    #[test]
+    fn the_cpu_octree_coarsens_with_the_budget_within_a_tenth_of_it() {
+        let f = GraphFile::parse(
+            r#"{"mesoflow": 1, "nodes": {
+              "m": {"kind": "sss.material", "params": {"preset": "skin1"}},
+              "pr": {"kind": "sss.profile", "inputs": {"material": "m.material"}, "params": {"model": "pbd"}},
+              "torus": {"kind": "mesh.primitive"},
+              "r": {"kind": "sss.render", "inputs": {"mesh": "torus.mesh", "material": "m.material", "profile": "pr.profile"}, "params": {"threshold": 0.05}}
+            }}"#,
+        )
+        .unwrap();
+        let mut chosen = 0;
+        for mfp in [2.0, 5.0, 12.0, 30.0, 80.0] {
+            let s = Scene {
+                visible_fraction: 0.3,
+                pixel_footprint_mm: Some(8.0 / mfp),
+                mfp_mm: Some(8.0),
+                mfp_min_mm: Some(2.0),
+                mfp_pixels: Some(mfp),
+                ..Default::default()
+            };
+            let mut last = 0.0;
+            for b in [0.0, 0.01, 0.05, 0.2, 0.6] {
+                let p = plan(
+                    &f,
+                    "r",
+                    RenderKind::Sss,
+                    &s,
+                    None,
+                    Budget::flip(b),
+                    Split::Joint,
+                )
+                .unwrap();
+                let r = p.file.node("r").unwrap();
+                let t = r.params["threshold"].as_f64().unwrap();
+                match p.decisions.iter().find(|d| d.stage == "octree") {
+                    Some(d) => {
+                        chosen += 1;
+                        assert!(b > 0.0 && r.params["mode"] == json!("diffusion"));
+                        assert_eq!(d.choice["threshold"].as_f64(), Some(t));
+                        assert!(
+                            d.predicted_error.unwrap() <= 0.1 * b,
+                            "{mfp} px, {b}: {d:?}"
+                        );
+                    }
+                    // Without one the gather is brute force (the graph's 0.05 is not kept),
+                    // or the render is a BRDF.
+                    None => assert!(t == 0.0 || r.params["mode"] == json!("brdf"), "{t}"),
+                }
+                if r.params["mode"] == json!("diffusion") {
+                    assert!(t >= last, "{mfp} px: a larger budget, a finer octree");
+                    last = t;
+                }
+            }
+        }
+        assert!(chosen > 0);
     }
 
     #[test]
