@@ -748,34 +748,42 @@ fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decision {
     }
 }
 
+/// The subsurface options of the invisible tier for a gathered render: each with the worse
+/// calibration medium's (FLIP, time) at this view where that FLIP is within a tenth of `share`;
+/// none for the full model, a BRDF render or a view the calibration does not cover.
+fn invisible_sss(
+    cx: &Stage,
+    out: &GraphFile,
+    share: f64,
+) -> Vec<(calibration::SssOption, f64, f64)> {
+    let brdf = out
+        .node(cx.render)
+        .is_some_and(|n| n.params.get("mode") == Some(&json!("brdf")));
+    match cx.scene.mfp_pixels {
+        Some(mfp) if !cx.full && !brdf => cx
+            .model
+            .sss_predictions(mfp)
+            .into_iter()
+            .filter(|(_, e, _)| *e <= 0.1 * share)
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
 /// The CPU path's octree: the gather at the largest calibrated threshold the measured model
 /// predicts within a tenth of the translucency's share (meant to be invisible, as shadow maps
 /// are), else brute force as `decide_sss` set it. The GPU path sums every sample whatever the
 /// threshold, so there the choice changes nothing; on the CPU the octree is what makes the
 /// gather fast.
 fn decide_threshold(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
-    let Stage {
-        model,
-        render,
-        scene,
-        full,
-        ..
-    } = *cx;
-    if full || out.node(render)?.params.get("mode") == Some(&json!("brdf")) {
-        return None;
-    }
-    let mfp = scene.mfp_pixels?;
-    let (t, e, time) = model
-        .sss_predictions(mfp)
+    let (t, e, time) = invisible_sss(cx, out, share)
         .into_iter()
         .filter_map(|(o, e, time)| match o {
-            calibration::SssOption::Octree { threshold } if e <= 0.1 * share => {
-                Some((threshold, e, time))
-            }
+            calibration::SssOption::Octree { threshold } => Some((threshold, e, time)),
             _ => None,
         })
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
-    out.node_mut(render)?
+    out.node_mut(cx.render)?
         .params
         .insert("threshold".into(), json!(t));
     Some(Decision {
@@ -801,24 +809,16 @@ fn decide_profile(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decisio
         file,
         render,
         scene,
-        full,
         ..
     } = *cx;
-    if full || out.node(render)?.params.get("mode") == Some(&json!("brdf")) {
-        return None;
-    }
+    let (_, e, _) = invisible_sss(cx, out, share)
+        .into_iter()
+        .find(|(o, ..)| *o == calibration::SssOption::Dipole)?;
+    let mfp = scene.mfp_pixels?;
     let from = file.node(render)?.inputs.get("profile")?;
     let (id, port) = from.split_once('.')?;
     let profile = file.node(id).filter(|n| n.kind == "sss.profile")?;
     if profile.params.get("model").and_then(Value::as_str) != Some("pbd") {
-        return None;
-    }
-    let mfp = scene.mfp_pixels?;
-    let (_, e, _) = model
-        .sss_predictions(mfp)
-        .into_iter()
-        .find(|(o, ..)| *o == calibration::SssOption::Dipole)?;
-    if e > 0.1 * share {
         return None;
     }
     let mut params = profile.params.clone();
