@@ -2,7 +2,8 @@
 //! (`common/plan_sweep.rs`) with the joint and the equal budget split at FLIP's default 67
 //! pixels per degree, and with the joint split for viewers at 30 and 120, and writes
 //! `sweep.csv` (joint), `sweep_equal.csv`, `sweep_ppd30.csv`, `sweep_ppd120.csv` and the charts
-//! `flip_vs_distance`,
+//! `popping.csv` (where a decision changes between neighbouring distances, the FLIP between
+//! the two plans' renders from the nearer camera), and the charts `flip_vs_distance`,
 //! `speedup_vs_distance` and `calibration` (SVG and PNG) to the output folder, and prints the
 //! misses.
 //!
@@ -36,6 +37,7 @@ fn main() {
         })
         .collect();
     let rows = plan_sweep::sweep(&out, width, "joint", None);
+    let pops = popping(&out, &rows);
     let far_median = |rows: &[Row]| {
         let mut v: Vec<f64> = rows
             .iter()
@@ -107,6 +109,18 @@ fn main() {
             r.flip / r.budget
         );
     }
+    let mut pop_csv =
+        String::from("object,budget,nearer_distance,flip_between_plans,within_budget\n");
+    for (object, b, d, f) in &pops {
+        let _ = writeln!(pop_csv, "{object},{b},{d},{f:.6},{}", f <= b);
+    }
+    std::fs::write(out.join("popping.csv"), &pop_csv).unwrap();
+    let calm = pops.iter().filter(|p| p.3 <= p.1).count();
+    println!(
+        "popping: {calm} of {} switches within the budget; largest {:.2}× it",
+        pops.len(),
+        pops.iter().map(|p| p.3 / p.1).fold(0.0, f64::max)
+    );
     let series = |y: &dyn Fn(&Row) -> f64, with_budgets: bool| {
         let mut v = Vec::new();
         for (object, _, _) in OBJECTS {
@@ -190,4 +204,82 @@ fn main() {
             eprintln!("chart {name}: {e}");
         }
     }
+}
+
+/// Popping: where the plan's decisions change between two neighbouring distances, the FLIP
+/// between the two plans' renders from the nearer camera (what a viewer moving through the
+/// switch sees jump), as (object, budget, nearer distance, FLIP). Runs each farther plan's
+/// view from the nearer camera beside the nearer plan, in the sweep's cache.
+fn popping(out: &std::path::Path, rows: &[Row]) -> Vec<(&'static str, f64, f64, f64)> {
+    use serde_json::{json, Value};
+    let mut pops = Vec::new();
+    for (object, _, view) in OBJECTS {
+        for &b in &BUDGETS {
+            for w in DISTANCES.windows(2) {
+                let (near, far) = (w[0], w[1]);
+                let decisions = |d: f64| {
+                    rows.iter()
+                        .find(|r| r.object == object && r.budget == b && r.distance == d)
+                        .map(|r| r.decisions.clone())
+                };
+                if decisions(near) == decisions(far) {
+                    continue;
+                }
+                let read = |d: f64| -> Value {
+                    let f = out.join(format!("d{d}_b{b}")).join("planned.json");
+                    serde_json::from_str(&std::fs::read_to_string(f).unwrap()).unwrap()
+                };
+                let (mut g, next) = (read(near), read(far));
+                // The farther plan's view and what it needs, renamed, from the nearer camera.
+                let mut stack = vec![view.to_string()];
+                let mut seen = std::collections::BTreeSet::new();
+                while let Some(id) = stack.pop() {
+                    if !seen.insert(id.clone()) {
+                        continue;
+                    }
+                    let mut n = next["nodes"][&id].clone();
+                    if let Some(inputs) = n.get_mut("inputs").and_then(Value::as_object_mut) {
+                        for v in inputs.values_mut() {
+                            let from = v.as_str().unwrap_or("").to_string();
+                            if let Some((up, port)) = from.split_once('.') {
+                                stack.push(up.to_string());
+                                *v = json!(format!("next_{up}.{port}"));
+                            }
+                        }
+                    }
+                    g["nodes"][format!("next_{id}")] = n;
+                }
+                g["nodes"][format!("next_{view}")]["params"]["camera"]["eye"] =
+                    serde_json::from_str(&plan_sweep::eye(near)).unwrap();
+                g["nodes"]["pop_flip"] = json!({ "kind": "image.flip",
+                    "inputs": { "reference": format!("{view}.image"), "test": format!("next_{view}.image") },
+                    "params": { "object_only": true } });
+                let dir = out.join(format!("pop_{object}_d{near}_b{b}"));
+                std::fs::create_dir_all(&dir).unwrap();
+                let graph = dir.join("graph.json");
+                std::fs::write(&graph, serde_json::to_string_pretty(&g).unwrap()).unwrap();
+                let run = dir.join("out");
+                cli::mesoflow(&[
+                    "run",
+                    graph.to_str().unwrap(),
+                    "--output",
+                    "pop_flip.mean",
+                    "--quiet",
+                    "--out-dir",
+                    run.to_str().unwrap(),
+                    "--cache-dir",
+                    out.join("cache").to_str().unwrap(),
+                ]);
+                let report: Value = serde_json::from_str(
+                    &std::fs::read_to_string(run.join("report.json")).unwrap(),
+                )
+                .unwrap();
+                let flip = cli::node(&report, "pop_flip")["metrics"]["mean"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN);
+                pops.push((object, b, near, flip));
+            }
+        }
+    }
+    pops
 }

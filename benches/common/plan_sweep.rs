@@ -16,6 +16,18 @@ pub const OBJECTS: [(&str, &str, &str); 2] = [
     ("sss", "sss_full", "sss_view"),
 ];
 
+/// The cameras' eye at distance `d` from the scene's target, as a graph value.
+pub fn eye(d: f64) -> String {
+    let target = [0.0, -0.1, 0.0];
+    let dir = {
+        let v = [0.0f64, 1.6, 2.7];
+        let l = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        v.map(|x| x / l)
+    };
+    let e: Vec<f64> = (0..3).map(|k| target[k] + d * dir[k]).collect();
+    format!("[{:.4},{:.4},{:.4}]", e[0], e[1], e[2])
+}
+
 pub struct Row {
     pub distance: f64,
     pub budget: f64,
@@ -37,16 +49,9 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
     std::fs::create_dir_all(out).unwrap();
     let graph = root.join("graphs/plan_verify.json");
     let cache = out.join("cache");
-    let target = [0.0, -0.1, 0.0];
-    let dir = {
-        let d = [0.0f64, 1.6, 2.7];
-        let l = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        d.map(|v| v / l)
-    };
     let mut rows = Vec::new();
     for &d in &DISTANCES {
-        let eye: Vec<f64> = (0..3).map(|k| target[k] + d * dir[k]).collect();
-        let eye = format!("[{:.4},{:.4},{:.4}]", eye[0], eye[1], eye[2]);
+        let eye = eye(d);
         let mut sets = Vec::new();
         for id in ["btf_full", "btf_view", "sss_full", "sss_view"] {
             sets.push(format!("{id}.camera.eye={eye}"));
