@@ -254,12 +254,12 @@ fn surface_scale(mesh: &Mesh, f: &Frag, texture: Option<Texture>) -> (V3, Option
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::render::camera::CameraParams;
 
     /// A unit square in z = 0 facing +z, texture coordinates = (x, y) + 0.5.
-    fn square() -> Mesh {
+    pub(crate) fn square() -> Mesh {
         let positions = vec![
             [-0.5, -0.5, 0.0],
             [0.5, -0.5, 0.0],

@@ -1,13 +1,15 @@
 //! `scene.footprint`: what a renderer's camera shows of a mesh, without rendering — the nearest
 //! visible distance, the finest pixel footprint (mm, widened at grazing angles), the texels per
 //! pixel of a connected BTF, the shell's thickness in pixels, the longest effective mean free
-//! path of a connected diffusion profile in pixels, and with a viewer its pixels per degree.
+//! path of a connected diffusion profile in pixels, the texels per pixel of any other texture
+//! over the same tile (an MDF's height field, a synthesized map), and with a viewer its pixels
+//! per degree.
 //! The planner runs it to decide each stage's model; users run it to see a view's scale.
 
 use super::camera::{Camera, CameraParams};
 use super::footprint::{footprint, Texture};
 use crate::image::flip::Viewer;
-use crate::types::{Btf, BtfBasis, DiffusionProfile, Mesh};
+use crate::types::{Btf, BtfBasis, DiffusionProfile, HeightField, Image, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use schemars::JsonSchema;
@@ -50,8 +52,8 @@ impl Node for SceneFootprint {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "scene.footprint",
-            version: 1,
-            doc: "What a camera shows of a mesh, without rendering: nearest distance, finest pixel footprint (mm), texels per pixel of a BTF, shell thickness and mean free path in pixels, viewer's pixels per degree.",
+            version: 2,
+            doc: "What a camera shows of a mesh, without rendering: nearest distance, finest pixel footprint (mm), texels per pixel of a BTF or another texture over the tile, shell thickness and mean free path in pixels, viewer's pixels per degree.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("mesh", Mesh::TYPE, "the rendered mesh"),
@@ -60,6 +62,10 @@ impl Node for SceneFootprint {
                     ..Port::any_of("btf", &[Btf::TYPE, BtfBasis::TYPE], "its material, for the texel count of a tile")
                 },
                 Port::optional("profile", DiffusionProfile::TYPE, "its diffusion profile, for the mean free path"),
+                Port {
+                    required: false,
+                    ..Port::any_of("texture", &[HeightField::TYPE, Image::TYPE], "another texture over the same tile (a height field, a map), for its texels per pixel")
+                },
             ],
             outputs: vec![
                 Port::optional_output("nearest_distance", "Scalar", "distance to the nearest visible surface, world units"),
@@ -76,6 +82,9 @@ impl Node for SceneFootprint {
                 Port::optional_output("object_pixels", "Scalar", "the mesh's bounding sphere's diameter in pixels: the texels a shadow map of it needs"),
                 Port::optional_output("silhouette_fraction", "Scalar", "fraction of the object's pixels on a silhouette or inner contour: the pixels an MDF changes"),
                 Port::optional_output("backfacing_fraction", "Scalar", "fraction of the visible samples seeing a triangle from behind: near 1 with the camera inside a closed mesh"),
+                Port::optional_output("texture_texels_per_pixel", "Scalar", "texels of `texture` one pixel spans where it is seen finest"),
+                Port::optional_output("texture_width", "Scalar", "`texture`'s width in texels"),
+                Port::optional_output("texture_height", "Scalar", "`texture`'s height in texels"),
                 Port::optional_output("ppd", "Scalar", "the viewer's pixels per degree (with `viewer`)"),
                 Port::output("visible_fraction", "Scalar", "fraction of the sampled rays that hit the mesh"),
                 Port::output("camera_inside", "Scalar", "1 when the camera is inside the (closed) mesh, else 0"),
@@ -130,7 +139,27 @@ impl Node for SceneFootprint {
                 }
             }
         };
-        let texture = texels.map(|texels| Texture {
+        let other = match inputs.value("texture").ok() {
+            None => None,
+            Some(v) => {
+                if let Some(h) = v.as_any().downcast_ref::<HeightField>() {
+                    Some([h.width, h.height])
+                } else if let Some(i) = v.as_any().downcast_ref::<Image>() {
+                    Some([i.width, i.height])
+                } else {
+                    return Err(NodeError::input(
+                        "texture",
+                        "expected a HeightField or an Image",
+                    ));
+                }
+            }
+        };
+        if other.is_some_and(|[w, h]| w == 0 || h == 0) {
+            return Err(NodeError::input("texture", "an empty texture"));
+        }
+        // One trace serves both textures: texels per pixel go as the square root of the texel
+        // count over the same tile (the footprint's texel is the geometric mean of its sides).
+        let texture = texels.or(other).map(|texels| Texture {
             tiling: p.tiling,
             texels,
         });
@@ -157,7 +186,15 @@ impl Node for SceneFootprint {
                 .with("silhouette_fraction", Scalar(f.silhouette_fraction))
                 .with("object_pixels", Scalar(f.object_pixels));
             if let Some(t) = f.texels_per_pixel {
-                out = out.with("texels_per_pixel", Scalar(t));
+                if let Some(bt) = texels {
+                    out = out.with("texels_per_pixel", Scalar(t));
+                    if let Some(ot) = other {
+                        let ratio = (ot[0] * ot[1]) as f64 / (bt[0] * bt[1]) as f64;
+                        out = out.with("texture_texels_per_pixel", Scalar(t * ratio.sqrt()));
+                    }
+                } else {
+                    out = out.with("texture_texels_per_pixel", Scalar(t));
+                }
             }
             if let Some(l) = mfp_mm {
                 out = out.with("mfp_pixels", Scalar(l / f.pixel_mm));
@@ -173,6 +210,11 @@ impl Node for SceneFootprint {
         }
         if let Some([w, h]) = texels {
             out = out.with("tile_texels", Scalar(w.min(h) as f64));
+        }
+        if let Some([w, h]) = other {
+            out = out
+                .with("texture_width", Scalar(w as f64))
+                .with("texture_height", Scalar(h as f64));
         }
         if let Some(f) = floats {
             out = out.with("btf_floats", Scalar(f));
@@ -195,4 +237,69 @@ pub fn scattering_length(p: &DiffusionProfile) -> f64 {
         .iter()
         .map(|m| if m.is_finite() { *m } else { extent })
         .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::footprint::tests::square;
+    use std::sync::Arc;
+
+    fn run(inputs: Inputs) -> Outputs {
+        let p = Params {
+            camera: CameraParams {
+                eye: [0.0, 0.0, 3.0],
+                target: [0.0; 3],
+                orthographic: Some(1.0),
+                resolution: [100, 100],
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        SceneFootprint
+            .run(&NodeContext::detached(None), &p, &inputs)
+            .unwrap()
+    }
+
+    fn scalar(o: &Outputs, k: &str) -> f64 {
+        o.get(k)
+            .and_then(|v| v.as_any().downcast_ref::<Scalar>())
+            .map_or(f64::NAN, |s| s.0)
+    }
+
+    #[test]
+    fn another_texture_over_the_tile_has_its_own_texels_per_pixel() {
+        // Closed form (footprint.rs's orthographic test): a pixel is 0.02 units and 4 tiles of
+        // 64 texels per unit make 1/256-unit texels, so 5.12 texels per pixel; a 128² texture
+        // over the same tile has 10.24, a 32 × 128 one √(32·128)/64 × 5.12 = 5.12.
+        let hf = HeightField::from_fn(128, 128, |_, _| 0.0);
+        let alone = run(Inputs::new()
+            .with("mesh", Arc::new(square()))
+            .with("texture", Arc::new(hf.clone())));
+        assert!((scalar(&alone, "texture_texels_per_pixel") - 10.24).abs() < 1e-9);
+        assert_eq!(scalar(&alone, "texture_width"), 128.0);
+        assert!(alone.get("texels_per_pixel").is_none());
+        // Only the BTF's tile size matters here.
+        let btf = Btf {
+            width: 64,
+            height: 64,
+            pairs: Vec::new(),
+            data: Vec::new(),
+        };
+        let both = run(Inputs::new()
+            .with("mesh", Arc::new(square()))
+            .with("btf", Arc::new(btf))
+            .with(
+                "texture",
+                Arc::new(Image {
+                    width: 32,
+                    height: 128,
+                    channels: 3,
+                    data: vec![0.0; 32 * 128 * 3],
+                }),
+            ));
+        assert!((scalar(&both, "texels_per_pixel") - 5.12).abs() < 1e-9);
+        assert!((scalar(&both, "texture_texels_per_pixel") - 5.12).abs() < 1e-9);
+        assert_eq!(scalar(&both, "texture_height"), 128.0);
+    }
 }
