@@ -98,6 +98,7 @@ fn main() {
         width: size,
         height: size,
         levels: 3,
+        stop: 0,
         sizes: vec![32, 16, 8],
         iterations: 4,
         exponent: 0.8,

@@ -26,6 +26,11 @@ pub struct Params {
     /// Pyramid levels (coarse to fine).
     #[schemars(range(min = 1, max = 8))]
     pub levels: u32,
+    /// Levels left out at the fine end (0 to levels − 1): the output is 2^k times smaller per
+    /// side and is exactly the full run's result after that level (the same stages, the same
+    /// seeds), for a view that cannot show the finest detail. The planner sets it.
+    #[schemars(range(min = 0, max = 7))]
+    pub stop_level: u32,
     /// Patch sizes in pixels (at least 2), used largest first at every level where they fit.
     #[schemars(length(min = 1), inner(range(min = 2)))]
     pub patch_sizes: Vec<u32>,
@@ -53,6 +58,7 @@ impl Default for Params {
             width: 0,
             height: 0,
             levels: 3,
+            stop_level: 0,
             patch_sizes: vec![32, 16, 8],
             iterations: 4,
             exponent: 0.8,
@@ -72,7 +78,7 @@ impl Node for Texture {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "synthesis.texture",
-            version: 2,
+            version: 3,
             doc: "Example-based texture synthesis by texture optimisation (Kwatra et al. 2005), multi-resolution, PatchMatch search, optional guide channels; outputs the image, its source map and its energy (mean nearest-patch RMS distance).",
             device: DevicePreference::Cpu,
             inputs: vec![
@@ -109,6 +115,15 @@ impl Node for Texture {
             return Err(NodeError::param(
                 "guide_weight",
                 "must be finite and not negative",
+            ));
+        }
+        if p.stop_level >= p.levels {
+            return Err(NodeError::param(
+                "stop_level",
+                format!(
+                    "{} leaves no level of {}: at most levels − 1",
+                    p.stop_level, p.levels
+                ),
             ));
         }
         for (name, v) in [
@@ -221,6 +236,7 @@ impl Node for Texture {
             width,
             height,
             levels: p.levels as usize,
+            stop: p.stop_level as usize,
             sizes,
             iterations: p.iterations as usize,
             exponent: p.exponent,
@@ -228,6 +244,18 @@ impl Node for Texture {
             rounds: p.search_rounds as usize,
             seed: p.seed,
         };
+        if p.stop_level > 0 {
+            let stages = optimize::plan((ex.width, ex.height), (width, height), &settings);
+            if stages.last().map(|(l, _)| *l) != Some(p.stop_level as usize) {
+                return Err(NodeError::param(
+                    "stop_level",
+                    format!(
+                        "no patch size fits level {} (the exemplar {} × {} and the output {width} × {height} halved {} times): stop at a finer level",
+                        p.stop_level, ex.width, ex.height, p.stop_level
+                    ),
+                ));
+            }
+        }
         let out = optimize::synthesize(
             &exemplar,
             ex.channels,
@@ -244,7 +272,11 @@ impl Node for Texture {
             .last()
             .and_then(|s| s.distances.first())
             .map_or(out.energy, |e| *e);
-        let (sw, sh) = ((ex.width - 1).max(1) as f32, (ex.height - 1).max(1) as f32);
+        let (sw, sh) = (
+            (out.exemplar_size.0 - 1).max(1) as f32,
+            (out.exemplar_size.1 - 1).max(1) as f32,
+        );
+        let (width, height) = (out.image.width, out.image.height);
         let source = Image {
             width,
             height,
@@ -395,6 +427,45 @@ mod tests {
             "image",
         );
         assert_eq!((im.width, im.height), (52, 33));
+    }
+
+    #[test]
+    fn stop_level_halves_the_output_per_level_or_says_why_it_cannot() {
+        let ex = Arc::new(stripes(40, 32));
+        let p = Params {
+            width: 64,
+            height: 48,
+            levels: 3,
+            stop_level: 1,
+            patch_sizes: vec![8],
+            iterations: 1,
+            ..Params::default()
+        };
+        let out = run(&p, Inputs::new().with("exemplar", ex.clone())).unwrap();
+        assert_eq!(
+            (img(&out, "image").width, img(&out, "image").height),
+            (32, 24)
+        );
+        assert_eq!(
+            (img(&out, "source").width, img(&out, "source").height),
+            (32, 24)
+        );
+        // Source coordinates are in the level's exemplar (20 × 16), normalised to [0, 1].
+        assert!(img(&out, "source")
+            .data
+            .iter()
+            .all(|v| (0.0..=1.0).contains(v)));
+        // Level 2's exemplar is 10 × 8: an 8-pixel patch is more than half of it.
+        let e = run(
+            &Params {
+                stop_level: 2,
+                ..p.clone()
+            },
+            Inputs::new().with("exemplar", ex),
+        )
+        .unwrap_err();
+        assert!(e.to_string().contains("stop_level"), "{e}");
+        assert!(Texture.check(&Params { stop_level: 3, ..p }).is_err());
     }
 
     #[test]
