@@ -5,6 +5,10 @@
 //! - BTF: PCA rank r (YCbCr, chroma r/4) at level λ, against texels per pixel;
 //! - MDF left out, against the shell's thickness in pixels, with the fraction of the object's
 //!   pixels on a silhouette (the only pixels the MDF changes);
+//! - the MDF tabulated 2, 4 and 8 times coarser than its height field, against the full
+//!   table's texels per pixel (the same silhouette band);
+//! - a synthesized texture (`qh.render`'s entrance function on the marble torus) stopped 1 or 2
+//!   pyramid levels before its finest, against the full texture's texels per pixel;
 //! - shadow maps at each density the planner chooses among (1, 2 and 4 texels per pixel the
 //!   object spans), for both renderers, on the torus under a low light (it shadows itself),
 //!   against the object's size in pixels;
@@ -43,6 +47,14 @@ const SPACINGS: [f64; 4] = [0.5, 1.0, 2.0, 4.0];
 const OTHER_PPDS: [u32; 2] = [30, 120];
 /// Octree thresholds (ΔA/d²) of the CPU path's gather.
 const THRESHOLDS: [f64; 4] = [0.01, 0.03, 0.1, 0.3];
+/// How many times coarser than its height field the MDF is tabulated.
+const MDF_FACTORS: [u32; 3] = [2, 4, 8];
+/// Pyramid levels a synthesis stops before its finest.
+const SYNTH_STOPS: [u32; 2] = [1, 2];
+/// The synthesized entrance function's size (its exemplar is 64²) and the tiling it is laid
+/// with on the torus.
+const SYNTH_SIZE: u32 = 256;
+const QH_TILING: [f64; 2] = [6.0, 2.0];
 
 fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     let height = width * 3 / 4;
@@ -93,6 +105,18 @@ fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
     }
     n.insert("btf_nomdf".into(), render("capture.btf", false));
     n.insert("flip_nomdf".into(), flip("btf_full", "btf_nomdf"));
+    for f in MDF_FACTORS {
+        let mut m = n["mdf"].clone();
+        m["params"]["resolution"] = json!(64 / f);
+        n.insert(format!("mdf_r{f}"), m);
+        let mut r = render("capture.btf", true);
+        r["inputs"]["mdf"] = json!(format!("mdf_r{f}.mdf"));
+        n.insert(format!("btf_mdf{f}"), r);
+        n.insert(
+            format!("flip_mdf{f}"),
+            flip("btf_full", &format!("btf_mdf{f}")),
+        );
+    }
 
     n.insert("ring".into(), json!({ "kind": "mesh.primitive", "params": { "shape": "torus", "size": 0.9, "minor": 0.35, "segments": [64, 32] } }));
     // Two media on the torus: marble scatters far (its longest mean free path ~8.5 mm), ketchup
@@ -134,6 +158,32 @@ fn scene(width: u32, eye: [f64; 3]) -> Map<String, Value> {
         "shadow_sss_full".into(),
         sss_render("sss", &camera, json!({ "light": low })),
     );
+    // A synthesized entrance function (from the bumps' normal map, an RGB texture with detail
+    // at every scale) on a quasi-homogeneous marble torus, full and stopped early.
+    n.insert(
+        "normals".into(),
+        json!({ "kind": "heightfield.normals", "inputs": { "height": "surface.height" } }),
+    );
+    let synth = |stop: u32| {
+        json!({ "kind": "synthesis.texture", "inputs": { "exemplar": "normals.preview" }, "params": {
+        "width": SYNTH_SIZE, "height": SYNTH_SIZE, "levels": 3, "stop_level": stop, "patch_sizes": [16, 8],
+        "iterations": 2, "periodic": true, "seed": 3 } })
+    };
+    let qh = |stop: u32| {
+        json!({ "kind": "qh.render", "inputs": { "mesh": "ring.mesh", "lrf": "capture.btf", "material": "sss_material.material",
+        "profile": "sss_profile.profile", "entrance": format!("synth_{stop}.image") }, "params": {
+        "camera": camera, "light": { "direction": [-0.4, 0.8, 0.6], "intensity": 5.0 }, "tiling": QH_TILING,
+        "mm_per_unit": 20.0, "threshold": 0.0, "max_points": 20000, "shadow_resolution": 512 } })
+    };
+    n.insert("synth_0".into(), synth(0));
+    n.insert("qh_0".into(), qh(0));
+    n.insert("qh_scene".into(), json!({ "kind": "scene.footprint", "inputs": { "mesh": "ring.mesh", "texture": "synth_0.image" },
+        "params": { "camera": camera, "tiling": QH_TILING, "mm_per_unit": 20.0 } }));
+    for k in SYNTH_STOPS {
+        n.insert(format!("synth_{k}"), synth(k));
+        n.insert(format!("qh_{k}"), qh(k));
+        n.insert(format!("flip_qh_{k}"), flip("qh_0", &format!("qh_{k}")));
+    }
     n
 }
 
@@ -214,6 +264,8 @@ fn main() {
     };
     let mut btf: Vec<Value> = Vec::new();
     let mut mdf: Vec<Value> = Vec::new();
+    let mut mdf_resolution: Vec<Value> = Vec::new();
+    let mut synthesis: Vec<Value> = Vec::new();
     let mut sss: Vec<Value> = Vec::new();
     let mut shadows: Vec<Value> = Vec::new();
     let mut shadow_sizes: Vec<(&str, &str, String, f64, f64, u32)> = Vec::new();
@@ -343,6 +395,24 @@ fn main() {
             "seconds": seconds(&rep, "btf_nomdf"), "full_seconds": full_s,
             "frame_ms": frame_ms(&rep, "btf_nomdf"), "full_frame_ms": frame_ms(&rep, "btf_full"),
         }));
+        for f in MDF_FACTORS {
+            mdf_resolution.push(json!({
+                "distance": d, "texels_per_pixel": tpp, "factor": f,
+                "shell_pixels": shell, "silhouette_fraction": silhouette,
+                "flip": metric(&rep, &format!("flip_mdf{f}"), "mean"),
+                "flip_at_ppd": at_ppds(&rep, &format!("flip_mdf{f}")),
+                "seconds": seconds(&rep, &format!("mdf_r{f}")), "full_seconds": seconds(&rep, "mdf"),
+            }));
+        }
+        let synth_tpp = metric(&rep, "qh_scene", "texture_texels_per_pixel");
+        for k in SYNTH_STOPS {
+            synthesis.push(json!({
+                "distance": d, "texels_per_pixel": synth_tpp, "stop_level": k,
+                "flip": metric(&rep, &format!("flip_qh_{k}"), "mean"),
+                "flip_at_ppd": at_ppds(&rep, &format!("flip_qh_{k}")),
+                "seconds": seconds(&rep, &format!("synth_{k}")), "full_seconds": seconds(&rep, "synth_0"),
+            }));
+        }
         for (base, full, id, px, t, size) in shadow_sizes.drain(..) {
             shadows.push(json!({
                 "distance": d, "renderer": if base == "btf_shadow" { "mesh" } else { "sss" },
@@ -396,6 +466,8 @@ fn main() {
         "width": width,
         "btf": btf,
         "mdf_off": mdf,
+        "mdf_resolution": mdf_resolution,
+        "synthesis": synthesis,
         "sss": sss,
         "shadows": shadows,
     });

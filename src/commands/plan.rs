@@ -129,6 +129,25 @@ fn probe_graph(file: &GraphFile, render: &str, kind: RenderKind) -> GraphFile {
         }
     }
     let mut out = file.clone();
+    let mut keep = BTreeSet::new();
+    // One probe more per texture a decision needs measured, on the render's mesh and camera.
+    for (i, src) in plan::texture_sources(file, render).iter().enumerate() {
+        let id = format!("{PROBE}_texture{i}");
+        let mut t = std::collections::BTreeMap::new();
+        if let Some(m) = inputs.get("mesh") {
+            t.insert("mesh".to_string(), m.clone());
+        }
+        t.insert("texture".to_string(), src.clone());
+        out.nodes.push((
+            id.clone(),
+            NodeDecl {
+                kind: "scene.footprint".into(),
+                params: params.clone(),
+                inputs: t,
+            },
+        ));
+        keep.extend(ancestors(&out, &id));
+    }
     out.nodes.push((
         PROBE.into(),
         NodeDecl {
@@ -137,7 +156,7 @@ fn probe_graph(file: &GraphFile, render: &str, kind: RenderKind) -> GraphFile {
             inputs,
         },
     ));
-    let keep = ancestors(&out, PROBE);
+    keep.extend(ancestors(&out, PROBE));
     out.nodes.retain(|(id, _)| keep.contains(id));
     out
 }
@@ -196,7 +215,18 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         .node(PROBE)
         .map(|n| n.metrics.clone())
         .unwrap_or_default();
-    let scene = Scene::from_metrics(&metrics);
+    let mut scene = Scene::from_metrics(&metrics);
+    for (i, src) in plan::texture_sources(&file, &args.render)
+        .iter()
+        .enumerate()
+    {
+        if let Some(v) = report
+            .node(&format!("{PROBE}_texture{i}"))
+            .and_then(|n| plan::TextureView::from_metrics(&n.metrics))
+        {
+            scene.textures.insert(src.clone(), v);
+        }
+    }
 
     let chain = kind
         .btf_port()

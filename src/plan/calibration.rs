@@ -125,6 +125,27 @@ pub struct Shadows {
     pub time: Curve,
 }
 
+/// The MDF tabulated `factor` times coarser than its height field.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MdfResolution {
+    pub factor: u32,
+    /// FLIP per unit of [`band_fraction`], against the full table's texels per pixel.
+    pub flip_per_contour: Curve,
+    /// Tabulation time over the full table's (the median of the measurements: it does not
+    /// depend on the view).
+    pub time: Option<f64>,
+}
+
+/// A synthesized texture stopped `stop_level` pyramid levels before its finest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SynthesisStop {
+    pub stop_level: u32,
+    /// FLIP of the render against the full texture's texels per pixel.
+    pub flip: Curve,
+    /// Synthesis time over the full synthesis's (the median of the measurements).
+    pub time: Option<f64>,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration {
     /// `render.mesh` (and `qh.render`'s local term) and `sss.render`, by density, sparsest
@@ -135,6 +156,10 @@ pub struct Calibration {
     /// FLIP of leaving the MDF out per unit of [`band_fraction`].
     pub mdf_off_per_contour: Curve,
     pub mdf_off_time: Curve,
+    /// Coarser MDF tables, coarsest first.
+    pub mdf_resolution: Vec<MdfResolution>,
+    /// Synthesis stopped early, earliest (smallest output) first.
+    pub synthesis: Vec<SynthesisStop>,
     pub sss: Vec<SssCandidate>,
     /// The classical dipole profile's computing time over PBD's, where measured.
     pub dipole_profile_time: Option<f64>,
@@ -253,6 +278,54 @@ impl Calibration {
                 .map(|r| (num(r, "shell_pixels").log2(), time(r)))
                 .collect(),
         );
+        // A node's own time over the full model's: the median over the rows that measured it
+        // (view-independent nodes are timed once and cached after).
+        let median_ratio = |rows: &[&Value]| -> Option<f64> {
+            let mut v: Vec<f64> = rows
+                .iter()
+                .map(|r| num(r, "seconds") / num(r, "full_seconds"))
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied()
+        };
+        let mdf_res_rows = rows("mdf_resolution")?;
+        let mut mdf_resolution: Vec<MdfResolution> = grouped(mdf_res_rows.iter().map(|r| {
+            let band = band_fraction(num(r, "silhouette_fraction"), num(r, "shell_pixels"));
+            let x = num(r, "texels_per_pixel").log2();
+            (num(r, "factor") as u32, (x, flip(r) / band), (x, 0.0))
+        }))
+        .into_iter()
+        .map(|(factor, flip_per_contour, _)| MdfResolution {
+            factor,
+            flip_per_contour,
+            time: median_ratio(
+                &mdf_res_rows
+                    .iter()
+                    .filter(|r| num(r, "factor") as u32 == factor)
+                    .collect::<Vec<_>>(),
+            ),
+        })
+        .collect();
+        mdf_resolution.sort_by_key(|m| std::cmp::Reverse(m.factor));
+        let synth_rows = rows("synthesis")?;
+        let mut synthesis: Vec<SynthesisStop> = grouped(synth_rows.iter().map(|r| {
+            let x = num(r, "texels_per_pixel").log2();
+            (num(r, "stop_level") as u32, (x, flip(r)), (x, 0.0))
+        }))
+        .into_iter()
+        .map(|(stop_level, flip, _)| SynthesisStop {
+            stop_level,
+            flip,
+            time: median_ratio(
+                &synth_rows
+                    .iter()
+                    .filter(|r| num(r, "stop_level") as u32 == stop_level)
+                    .collect::<Vec<_>>(),
+            ),
+        })
+        .collect();
+        synthesis.sort_by_key(|m| std::cmp::Reverse(m.stop_level));
         let sss: Vec<SssCandidate> = grouped(rows("sss")?.iter().map(|r| {
             let option = match r["option"].as_str() {
                 Some("brdf") => SssOption::Brdf,
@@ -320,6 +393,8 @@ impl Calibration {
             btf,
             mdf_off_per_contour,
             mdf_off_time,
+            mdf_resolution,
+            synthesis,
             sss,
             dipole_profile_time,
             ppd: chosen,
@@ -339,6 +414,26 @@ mod tests {
         assert!(c.btf.len() >= 20);
         assert!(c.btf.iter().all(|o| o.flip.points.len() >= 6));
         assert!(c.mdf_off_per_contour.points.len() >= 6);
+        assert_eq!(
+            c.mdf_resolution
+                .iter()
+                .map(|m| m.factor)
+                .collect::<Vec<_>>(),
+            [8, 4, 2]
+        );
+        assert!(c
+            .mdf_resolution
+            .iter()
+            .all(|m| m.flip_per_contour.points.len() >= 6
+                && m.time.is_some_and(|t| t > 0.0 && t < 1.0)));
+        assert_eq!(
+            c.synthesis.iter().map(|m| m.stop_level).collect::<Vec<_>>(),
+            [2, 1]
+        );
+        assert!(c
+            .synthesis
+            .iter()
+            .all(|m| m.flip.points.len() >= 6 && m.time.is_some_and(|t| t > 0.0 && t < 1.0)));
         assert!(c.sss.iter().any(|s| s.option == SssOption::Brdf));
         assert!(c.sss.iter().any(|s| s.option == SssOption::Dipole));
         assert!(c

@@ -11,11 +11,15 @@
 //!   candidate whose error, predicted by the measured model ([`calibration`]), fits it:
 //!   - BTF: PCA in YCbCr at rank r (chroma r/4) and level λ, by memory; none fits → the raw BTF;
 //!   - MDF: left out when its predicted error fits (always when the shell projects under half a
-//!     pixel);
+//!     pixel); where kept, tabulated 8, 4 or 2 times coarser than its height field (the
+//!     coarsest that still has a texel per pixel and is predicted within the share);
 //!   - subsurface: the BRDF approximation, or the brute-force gather with samples 4, 2, 1 or ½
 //!     pixel footprints apart (never closer than the default spacing), by render time; none
 //!     fits → the full model's gather (brute force, default spacing). Scattering under half a
 //!     pixel is always the BRDF approximation.
+//!   - synthesis (a `synthesis.texture` the renderer reads): stopped 1 or 2 pyramid levels early
+//!     (2 or 4 times fewer texels per side) when that still gives a texel per pixel and is
+//!     predicted within a tenth of the budget.
 //!
 //! A prediction beyond the calibrated range (a view nearer or farther than any calibrated one)
 //! is not trusted: there the stage keeps the graph's own model, except for the half-pixel rules
@@ -46,6 +50,63 @@ pub struct Scene {
     pub mfp_mm: Option<f64>,
     pub mfp_min_mm: Option<f64>,
     pub mfp_pixels: Option<f64>,
+    /// Other textures over the tile, by the output that gives them ("node.port"): the MDF's
+    /// height field, a synthesis's exemplar and target guide ([`texture_sources`]).
+    pub textures: BTreeMap<String, TextureView>,
+}
+
+/// What the view shows of a texture over the tile (`scene.footprint` with `texture`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TextureView {
+    pub texels_per_pixel: f64,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl TextureView {
+    pub fn from_metrics(m: &BTreeMap<String, f64>) -> Option<TextureView> {
+        let g = |k: &str| m.get(k).copied().filter(|v| v.is_finite() && *v > 0.0);
+        Some(TextureView {
+            texels_per_pixel: g("texture_texels_per_pixel")?,
+            width: g("texture_width")? as usize,
+            height: g("texture_height")? as usize,
+        })
+    }
+
+    /// Texels per pixel of a `w` × `h` texture over the same tile: they go as the square root
+    /// of the texel count (the footprint's texel is the geometric mean of its sides).
+    pub fn at(&self, w: usize, h: usize) -> f64 {
+        let ratio = (w * h) as f64 / (self.width * self.height).max(1) as f64;
+        self.texels_per_pixel * ratio.sqrt()
+    }
+}
+
+/// The outputs ("node.port") whose texels per pixel the decisions need, each measured by a probe
+/// of its own: the height field an `mdf.tabulate` feeding `render` reads, and the exemplar and
+/// target guide of each `synthesis.texture` whose image `render` reads.
+pub fn texture_sources(file: &GraphFile, render: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let Some(r) = file.node(render) else {
+        return out;
+    };
+    for from in r.inputs.values() {
+        let Some(n) = from.split_once('.').and_then(|(id, _)| file.node(id)) else {
+            continue;
+        };
+        let ports: &[&str] = match n.kind.as_str() {
+            "mdf.tabulate" => &["height"],
+            "synthesis.texture" => &["exemplar", "target_guide"],
+            _ => &[],
+        };
+        for p in ports {
+            if let Some(src) = n.inputs.get(*p) {
+                if !out.contains(src) {
+                    out.push(src.clone());
+                }
+            }
+        }
+    }
+    out
 }
 
 impl Scene {
@@ -66,6 +127,7 @@ impl Scene {
             mfp_mm: g("mfp_mm"),
             mfp_min_mm: g("mfp_min_mm"),
             mfp_pixels: g("mfp_pixels"),
+            textures: BTreeMap::new(),
         }
     }
 
@@ -90,6 +152,19 @@ impl Scene {
             if let Some(v) = v {
                 o.insert(k.into(), json!(v));
             }
+        }
+        if !self.textures.is_empty() {
+            let t: Map<String, Value> = self
+                .textures
+                .iter()
+                .map(|(k, v)| {
+                    (
+                        k.clone(),
+                        json!({ "texels_per_pixel": v.texels_per_pixel, "width": v.width, "height": v.height }),
+                    )
+                })
+                .collect();
+            o.insert("textures".into(), Value::Object(t));
         }
         Value::Object(o)
     }
@@ -319,6 +394,9 @@ pub fn plan(
         if let Some(d) = decide_mdf(&cx, &mut out, mdf_share) {
             decisions.push(d);
             shares.push(("mdf", mdf_share));
+            if let Some(d) = decide_mdf_resolution(&cx, &mut out, mdf_share) {
+                decisions.push(d);
+            }
         }
     }
     if matches!(kind, RenderKind::Sss | RenderKind::Qh) {
@@ -334,6 +412,7 @@ pub fn plan(
     if let Some(d) = decide_shadows(&cx, &mut out, b) {
         decisions.push(d);
     }
+    decisions.extend(decide_synthesis(&cx, &mut out, b));
     prune(&mut out, file, render);
     Ok(Plan {
         decisions,
@@ -422,6 +501,262 @@ fn decide_mdf(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
         predicted_error: predicted,
         predicted_cost: time,
     })
+}
+
+/// The MDF's table, where kept: tabulated 8, 4 or 2 times coarser than its height field — the
+/// coarsest that still has a texel per pixel where the view sees the tile finest (the resolution
+/// the footprint needs) and that the measured model predicts within the stage's share: the MDF
+/// was kept because leaving it out costs more than the share, and a coarser table is the
+/// stage's next cheaper model. `None` where the render has no MDF, the budget asks for the full
+/// model, or the table is not tabulated from a height field.
+fn decide_mdf_resolution(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
+    let Stage {
+        model,
+        file,
+        render,
+        scene,
+        full,
+        ..
+    } = *cx;
+    if full {
+        return None;
+    }
+    let from = out.node(render)?.inputs.get("mdf")?.clone();
+    let (id, port) = from.split_once('.')?;
+    let node = file.node(id).filter(|n| n.kind == "mdf.tabulate")?;
+    let height = node.inputs.get("height")?;
+    let Some(tex) = scene.textures.get(height) else {
+        return Some(Decision {
+            stage: "mdf_resolution",
+            choice: json!({ "resolution": node.params.get("resolution") }),
+            reason: "the height field's texels per pixel are unknown: the table is kept".into(),
+            predicted_error: Some(0.0),
+            predicted_cost: None,
+        });
+    };
+    let width = node
+        .params
+        .get("resolution")
+        .and_then(Value::as_u64)
+        .map_or(tex.width, |w| w as usize);
+    let height_texels = (width as f64 * tex.height as f64 / tex.width as f64).round() as usize;
+    let tpp = tex.at(width, height_texels);
+    let band = scene
+        .silhouette_fraction
+        .zip(scene.shell_pixels)
+        .map(|(s, px)| calibration::band_fraction(s, px));
+    let limit = share;
+    let mut why_not = Vec::new();
+    let pick = model.mdf_resolution.iter().find_map(|c| {
+        let coarse = width / c.factor as usize;
+        if coarse < 8 || (c.factor as f64) > tpp {
+            return None;
+        }
+        let (e, inside) = c.flip_per_contour.at(tpp)?;
+        let e = (e * band?).min(1.0);
+        if inside && e <= limit {
+            Some((c, coarse, e))
+        } else {
+            why_not.push(format!(
+                "{}× coarser is predicted at FLIP {e:.4}{}",
+                c.factor,
+                range_note(inside)
+            ));
+            None
+        }
+    });
+    let Some((c, coarse, e)) = pick else {
+        let detail = if why_not.is_empty() {
+            String::new()
+        } else {
+            format!("; {}", why_not.join(", "))
+        };
+        return Some(Decision {
+            stage: "mdf_resolution",
+            choice: json!({ "resolution": width }),
+            reason: format!(
+                "the table has {tpp:.2} texels per pixel where the tile is seen finest: kept at {width} texels (a coarser one must keep a texel per pixel and stay within {share:.3}{detail})"
+            ),
+            predicted_error: Some(0.0),
+            predicted_cost: None,
+        });
+    };
+    let mut params = node.params.clone();
+    params.insert("resolution".into(), json!(coarse));
+    let copy = format!("{PREFIX}mdf");
+    upsert(out, &copy, "mdf.tabulate", params, node.inputs.clone());
+    out.node_mut(render)?
+        .inputs
+        .insert("mdf".into(), format!("{copy}.{port}"));
+    let mut cost = json!({ "table_entries_vs_full": 1.0 / (c.factor * c.factor) as f64 });
+    if let Some(t) = c.time {
+        cost["tabulation_time_vs_full"] = json!(t);
+    }
+    Some(Decision {
+        stage: "mdf_resolution",
+        choice: json!({ "resolution": coarse }),
+        reason: format!(
+            "the table has {tpp:.2} texels per pixel where the tile is seen finest: tabulated {}× coarser ({coarse} texels, not {width}), predicted at FLIP {e:.4}, within this stage's {share:.3}",
+            c.factor
+        ),
+        predicted_error: Some(e),
+        predicted_cost: Some(cost),
+    })
+}
+
+/// Each `synthesis.texture` whose image the render reads: stopped 2 or 1 pyramid levels before
+/// its finest (its output 4 or 2 times smaller per side, the full run's own coarser result) —
+/// the earliest that still gives a texel per pixel where the view sees the tile finest (no more
+/// output texels than the view shows) and that the measured model predicts within a tenth of the
+/// budget; with a budget of 1 or more, the earliest whose patches fit. In a copy the render
+/// reads, never in place (other consumers may want the full texture).
+fn decide_synthesis(cx: &Stage, out: &mut GraphFile, b: f64) -> Vec<Decision> {
+    use mesoflow_nodes::synthesis::{optimize, texture};
+    let Stage {
+        model,
+        file,
+        render,
+        scene,
+        full,
+        cheapest,
+        ..
+    } = *cx;
+    let mut decisions = Vec::new();
+    let Some(r) = file.node(render) else {
+        return decisions;
+    };
+    if full {
+        return decisions;
+    }
+    let sources: BTreeSet<String> = r
+        .inputs
+        .values()
+        .filter_map(|f| f.split_once('.'))
+        .filter(|(id, _)| file.node(id).is_some_and(|n| n.kind == "synthesis.texture"))
+        .map(|(id, _)| id.to_string())
+        .collect();
+    for id in sources {
+        let Some(node) = file.node(&id) else { continue };
+        let Ok(p) = serde_json::from_value::<texture::Params>(Value::Object(node.params.clone()))
+        else {
+            continue;
+        };
+        let view = |port: &str| node.inputs.get(port).and_then(|s| scene.textures.get(s));
+        let Some(ex) = view("exemplar") else {
+            decisions.push(Decision {
+                stage: "synthesis",
+                choice: json!({ "node": id, "stop_level": p.stop_level }),
+                reason: format!("`{id}`'s exemplar is not measured: kept"),
+                predicted_error: Some(0.0),
+                predicted_cost: None,
+            });
+            continue;
+        };
+        let default = view("target_guide").map_or((ex.width, ex.height), |g| (g.width, g.height));
+        let w = if p.width == 0 {
+            default.0
+        } else {
+            p.width as usize
+        };
+        let h = if p.height == 0 {
+            default.1
+        } else {
+            p.height as usize
+        };
+        let tpp = ex.at(w, h);
+        let mut sizes: Vec<usize> = p.patch_sizes.iter().map(|&z| z as usize).collect();
+        sizes.sort_unstable_by(|a, b| b.cmp(a));
+        sizes.dedup();
+        let fits = |k: u32| {
+            let s = optimize::Settings {
+                width: w,
+                height: h,
+                levels: p.levels as usize,
+                stop: k as usize,
+                sizes: sizes.clone(),
+                iterations: 1,
+                exponent: p.exponent,
+                periodic: p.periodic,
+                rounds: 1,
+                seed: 0,
+            };
+            k < p.levels
+                && optimize::plan((ex.width, ex.height), (w, h), &s)
+                    .last()
+                    .is_some_and(|(l, _)| *l == k as usize)
+        };
+        let limit = 0.1 * b;
+        let pick: Option<(u32, Option<f64>, Option<f64>)> = if cheapest {
+            (p.stop_level + 1..p.levels)
+                .rev()
+                .find(|&k| fits(k))
+                .map(|k| {
+                    let c = model.synthesis.iter().find(|c| c.stop_level == k);
+                    (
+                        k,
+                        c.and_then(|c| c.flip.at(tpp)).map(|e| e.0),
+                        c.and_then(|c| c.time),
+                    )
+                })
+        } else {
+            model.synthesis.iter().find_map(|c| {
+                let k = c.stop_level;
+                if k <= p.stop_level || (1u64 << k) as f64 > tpp || !fits(k) {
+                    return None;
+                }
+                let (e, inside) = c.flip.at(tpp)?;
+                (inside && e <= limit).then_some((k, Some(e), c.time))
+            })
+        };
+        let Some((k, e, time)) = pick else {
+            decisions.push(Decision {
+                stage: "synthesis",
+                choice: json!({ "node": id, "stop_level": p.stop_level }),
+                reason: format!(
+                    "`{id}`'s {w} × {h} output has {tpp:.2} texels per pixel where the tile is seen finest: kept (stopping a level early must keep a texel per pixel, fit its patches and be predicted within a tenth of {b:.3})"
+                ),
+                predicted_error: Some(0.0),
+                predicted_cost: None,
+            });
+            continue;
+        };
+        let copy = format!("{PREFIX}{id}");
+        let mut params = node.params.clone();
+        params.insert("stop_level".into(), json!(k));
+        upsert(out, &copy, "synthesis.texture", params, node.inputs.clone());
+        if let Some(rn) = out.node_mut(render) {
+            for from in rn.inputs.values_mut() {
+                if let Some((src, port)) = from.split_once('.') {
+                    if src == id {
+                        *from = format!("{copy}.{port}");
+                    }
+                }
+            }
+        }
+        let (ow, oh) = (w >> k, h >> k);
+        let mut cost = json!({ "texels_vs_full": (ow * oh) as f64 / (w * h) as f64 });
+        if let Some(t) = time {
+            cost["synthesis_time_vs_full"] = json!(t);
+        }
+        let why = if cheapest {
+            "a budget of 1 or more: the earliest stop whose patches fit".to_string()
+        } else {
+            format!(
+                "predicted at FLIP {:.4}, within a tenth of {b:.3}",
+                e.unwrap_or(f64::NAN)
+            )
+        };
+        decisions.push(Decision {
+            stage: "synthesis",
+            choice: json!({ "node": id, "stop_level": k, "size": [ow, oh] }),
+            reason: format!(
+                "`{id}`'s {w} × {h} output has {tpp:.2} texels per pixel where the tile is seen finest: stopped {k} level(s) early ({ow} × {oh}), {why}"
+            ),
+            predicted_error: e,
+            predicted_cost: Some(cost),
+        });
+    }
+    decisions
 }
 
 /// The BTF's model: raw, or a PCA basis of `rank` (luma) and `chroma_rank` at `level`.
@@ -1470,5 +1805,156 @@ mod tests {
         .unwrap();
         assert_eq!(p.file.node("r").unwrap().params["threshold"], json!(0.0));
         assert_eq!(p.file.node("pr").unwrap().params["model"], json!("pbd"));
+    }
+
+    #[test]
+    fn the_mdf_table_coarsens_to_a_texel_per_pixel_within_its_share() {
+        let f = graph();
+        let chain = btf_chain(&f, "r", "btf").unwrap();
+        let mut chosen = 0;
+        for shell in [1.0, 3.0, 8.0] {
+            let mut last_factor = 1;
+            for tpp in [0.5, 1.0, 1.9, 2.5, 4.5, 9.0, 30.0] {
+                for b in [0.0, 0.02, 0.1, 0.3] {
+                    let mut s = scene(tpp, shell);
+                    // The height field has the BTF's 64 texels: the same texels per pixel.
+                    s.textures.insert(
+                        "hf.height".into(),
+                        TextureView {
+                            texels_per_pixel: tpp,
+                            width: 64,
+                            height: 64,
+                        },
+                    );
+                    let p = plan(
+                        &f,
+                        "r",
+                        RenderKind::Mesh,
+                        &s,
+                        Some(&chain),
+                        Budget::flip(b),
+                        Split::Equal,
+                    )
+                    .unwrap();
+                    // The graph's own table is never changed (a full render may share it).
+                    assert!(p
+                        .file
+                        .node("mdf")
+                        .is_none_or(|n| n.params.get("resolution").is_none()));
+                    let Some(d) = p.decisions.iter().find(|d| d.stage == "mdf_resolution") else {
+                        // Only where the MDF is left out, or for the full model.
+                        assert!(b == 0.0 || !p.file.node("r").unwrap().inputs.contains_key("mdf"));
+                        continue;
+                    };
+                    let r = p.file.node("r").unwrap();
+                    let Some(copy) = p.file.node("plan_mdf") else {
+                        assert_eq!(r.inputs["mdf"], "mdf.mdf");
+                        assert_eq!(d.predicted_error, Some(0.0));
+                        continue;
+                    };
+                    chosen += 1;
+                    assert_eq!(r.inputs["mdf"], "plan_mdf.mdf");
+                    assert_eq!(copy.inputs["height"], "hf.height");
+                    let res = copy.params["resolution"].as_u64().unwrap();
+                    let factor = 64 / res;
+                    // A texel per pixel kept, and invisible by the measured model.
+                    assert!(factor as f64 <= tpp, "tpp {tpp}: {d:?}");
+                    let share = p.shares.iter().find(|s| s.0 == "mdf").unwrap().1;
+                    assert!(d.predicted_error.unwrap() <= share + 1e-15, "{d:?}");
+                    if b == 0.3 {
+                        assert!(factor >= last_factor, "coarser as the view recedes: {d:?}");
+                        last_factor = factor;
+                    }
+                }
+            }
+        }
+        assert!(chosen > 0);
+    }
+
+    #[test]
+    fn synthesis_stops_early_only_where_the_view_cannot_show_its_texels() {
+        let f = GraphFile::parse(
+            r#"{"mesoflow": 1, "nodes": {
+              "hf": {"kind": "heightfield.procedural"},
+              "n": {"kind": "heightfield.normals", "inputs": {"height": "hf.height"}},
+              "capture": {"kind": "btf.capture", "inputs": {"height": "hf.height"}},
+              "syn": {"kind": "synthesis.texture", "inputs": {"exemplar": "n.preview"},
+                      "params": {"width": 256, "height": 256, "levels": 3, "patch_sizes": [16, 8]}},
+              "m": {"kind": "sss.material", "params": {"preset": "marble"}},
+              "pr": {"kind": "sss.profile", "inputs": {"material": "m.material"}},
+              "torus": {"kind": "mesh.primitive"},
+              "r": {"kind": "qh.render", "inputs": {"mesh": "torus.mesh", "lrf": "capture.btf", "material": "m.material",
+                    "profile": "pr.profile", "entrance": "syn.image"}},
+              "png": {"kind": "image.write", "inputs": {"image": "syn.image"}, "params": {"path": "syn.png"}}
+            }}"#,
+        )
+        .unwrap();
+        assert_eq!(texture_sources(&f, "r"), ["n.preview"]);
+        let chain = btf_chain(&f, "r", "lrf").unwrap();
+        let mut stops = Vec::new();
+        for tpp in [0.5, 1.5, 2.5, 5.0, 12.0, 40.0] {
+            for b in [0.0, 0.02, 0.1, 0.4, 1e9] {
+                let mut s = scene(1.0, 1.0);
+                s.mfp_pixels = Some(10.0);
+                s.textures.insert(
+                    "n.preview".into(),
+                    TextureView {
+                        // The 64² exemplar's; the 256² output has 4× as many per pixel.
+                        texels_per_pixel: tpp / 4.0,
+                        width: 64,
+                        height: 64,
+                    },
+                );
+                let p = plan(
+                    &f,
+                    "r",
+                    RenderKind::Qh,
+                    &s,
+                    Some(&chain),
+                    Budget::flip(b),
+                    Split::Equal,
+                )
+                .unwrap();
+                // The graph's own node is kept for its other reader, unchanged.
+                assert!(p
+                    .file
+                    .node("syn")
+                    .unwrap()
+                    .params
+                    .get("stop_level")
+                    .is_none());
+                let d = p.decisions.iter().find(|d| d.stage == "synthesis");
+                if b == 0.0 {
+                    assert!(d.is_none());
+                    continue;
+                }
+                let d = d.unwrap();
+                let r = p.file.node("r").unwrap();
+                let k = match p.file.node("plan_syn") {
+                    None => {
+                        assert_eq!(r.inputs["entrance"], "syn.image");
+                        0
+                    }
+                    Some(c) => {
+                        assert_eq!(r.inputs["entrance"], "plan_syn.image");
+                        c.params["stop_level"].as_u64().unwrap()
+                    }
+                };
+                if b >= 1.0 {
+                    // The cheapest: level 2's exemplar is 16², an 8-pixel patch fits (half of
+                    // it); there is no level 3.
+                    assert_eq!(k, 2, "{d:?}");
+                    continue;
+                }
+                if k > 0 {
+                    assert!((1u64 << k) as f64 <= tpp, "tpp {tpp}: {d:?}");
+                    assert!(d.predicted_error.unwrap() <= 0.1 * b, "{d:?}");
+                }
+                stops.push((tpp, b, k));
+            }
+        }
+        // Under two texels per pixel nothing stops early; somewhere farther something does.
+        assert!(stops.iter().filter(|s| s.0 < 2.0).all(|s| s.2 == 0));
+        assert!(stops.iter().any(|s| s.2 > 0), "{stops:?}");
     }
 }
