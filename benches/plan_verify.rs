@@ -5,7 +5,8 @@
 //! `popping.csv` (where a decision changes between neighbouring distances, the FLIP between
 //! the two plans' renders from the nearer camera), and the charts `flip_vs_distance`,
 //! `speedup_vs_distance` and `calibration` (SVG and PNG) to the output folder, and prints the
-//! misses.
+//! misses. Then the same sweep on `graphs/plan_qh.json` (a quasi-homogeneous torus with a
+//! synthesized entrance function, which the synthesis decision acts on): `sweep_qh.csv`.
 //!
 //! `cargo bench --bench plan_verify -- [--out DIR] [--width W]`
 
@@ -93,6 +94,23 @@ fn main() {
     std::fs::write(out.join("sweep_equal.csv"), table(&equal)).unwrap();
     for (p, v) in &viewers {
         std::fs::write(out.join(format!("sweep_ppd{p}.csv")), table(v)).unwrap();
+    }
+    let qh = plan_sweep::sweep_qh(&out.join("qh"), width);
+    std::fs::write(out.join("sweep_qh.csv"), table(&qh)).unwrap();
+    println!(
+        "qh (synthesized texture)  {:>3} of {}      {:.2}x",
+        within(&qh),
+        qh.len(),
+        far_median(&qh)
+    );
+    for r in qh.iter().filter(|r| r.flip > r.budget) {
+        println!(
+            "qh miss at distance {} budget {}: FLIP {:.4} ({:.2}× the budget)",
+            r.distance,
+            r.budget,
+            r.flip,
+            r.flip / r.budget
+        );
     }
     let csv = table(&rows);
     std::fs::write(out.join("sweep.csv"), &csv).unwrap();

@@ -60,6 +60,20 @@ fn small(graph: &str) -> Vec<String> {
             v.extend(sss(&["sss_full", "sss_view"]));
             v
         }
+        "plan_qh" => {
+            let mut v: Vec<String> = vec![
+                "surface.size=16".into(),
+                format!("lrf.views={DIRS}"),
+                format!("lrf.lights={DIRS}"),
+                "torus.segments=[32,16]".into(),
+                "entrance.width=64".into(),
+                "entrance.height=64".into(),
+                "entrance.patch_sizes=[8,4]".into(),
+                "entrance.iterations=1".into(),
+            ];
+            v.extend(sss(&["qh_full", "qh_view"]));
+            v
+        }
         "qh_fit" => vec![
             "measured.photons=20000".into(),
             "fit_mc.photons=40000".into(),

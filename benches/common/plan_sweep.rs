@@ -182,3 +182,98 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
     }
     rows
 }
+
+/// The same sweep on `graphs/plan_qh.json`: a quasi-homogeneous torus whose entrance function
+/// is a synthesized texture (so the synthesis decision is measured too), planned for `qh_view`
+/// at FLIP's default viewing condition.
+#[allow(dead_code)]
+pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let height = width * 3 / 4;
+    std::fs::create_dir_all(out).unwrap();
+    let graph = root.join("graphs/plan_qh.json");
+    let cache = out.join("cache");
+    let mut rows = Vec::new();
+    for &d in &DISTANCES {
+        let eye = eye(d);
+        for &b in &BUDGETS {
+            let case = out.join(format!("d{d}_b{b}"));
+            std::fs::create_dir_all(&case).unwrap();
+            let planned = case.join("planned.json");
+            let budget = format!("flip={b}");
+            let mut a: Vec<String> = vec![
+                "plan".into(),
+                graph.display().to_string(),
+                "--render".into(),
+                "qh_view".into(),
+                "--budget".into(),
+                budget,
+                "-o".into(),
+                planned.display().to_string(),
+                "--quiet".into(),
+                "--cache-dir".into(),
+                cache.display().to_string(),
+            ];
+            for id in ["qh_full", "qh_view"] {
+                a.push("--set".into());
+                a.push(format!("{id}.camera.eye={eye}"));
+                a.push("--set".into());
+                a.push(format!("{id}.camera.resolution=[{width},{height}]"));
+            }
+            mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
+            let plan: Value =
+                serde_json::from_str(&std::fs::read_to_string(case.join("plan.json")).unwrap())
+                    .unwrap();
+            let run_out = case.join("out");
+            mesoflow(&[
+                "run",
+                planned.to_str().unwrap(),
+                "--output",
+                "qh_flip.mean",
+                "--output",
+                "qh_full.image",
+                "--output",
+                "qh_view.image",
+                "--quiet",
+                "--out-dir",
+                run_out.to_str().unwrap(),
+                "--cache-dir",
+                cache.to_str().unwrap(),
+            ]);
+            let report: Value = serde_json::from_str(
+                &std::fs::read_to_string(run_out.join("report.json")).unwrap(),
+            )
+            .unwrap();
+            let decisions = plan["decisions"]
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .map(|d| format!("{}:{}", d["stage"].as_str().unwrap_or(""), d["choice"]))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+                .unwrap_or_default();
+            let secs = |id: &str| {
+                node(&report, id)["timings"]["seconds"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN)
+            };
+            // The texture's own cost where the plan stopped it early (the full one is computed
+            // once for every case, so its time is in the first case's report only).
+            rows.push(Row {
+                distance: d,
+                budget: b,
+                object: "qh",
+                flip: node(&report, "qh_flip")["metrics"]["mean"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+                predicted: plan["predicted_error"].as_f64(),
+                full_s: secs("qh_full"),
+                view_s: secs("qh_view"),
+                decisions,
+            });
+            eprintln!("qh: d = {d}, budget {b}: done");
+        }
+    }
+    rows
+}
