@@ -7,43 +7,14 @@
 
 mod common;
 
-use common::{mesoflow, report, Scratch};
+use common::{mesoflow, peer_python, read_npy, report, Scratch};
 use mesoflow_nodes::image::flip::{evaluate, Mode, Params};
 use mesoflow_nodes::types::{srgb_to_linear, Image};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn peer_python() -> Option<PathBuf> {
-    let candidate = std::env::var_os("MESOFLOW_PEER_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("target/peer-venv/bin/python")
-        });
-    let ok = Command::new(&candidate)
-        .args(["-c", "import flip_evaluator, skimage, scipy"])
-        .output()
-        .map(|o| o.status.success())
-        .unwrap_or(false);
-    if ok {
-        return Some(candidate);
-    }
-    let msg = format!(
-        "no Python with flip-evaluator, scikit-image and scipy at {} (set MESOFLOW_PEER_PYTHON, or run .ci/run once)",
-        candidate.display()
-    );
-    assert!(
-        std::env::var("MESOFLOW_REQUIRE_PEERS").as_deref() != Ok("1"),
-        "{msg}"
-    );
-    eprintln!("skipped: {msg}");
-    None
-}
-
 fn read_image(path: &Path) -> Image {
-    let bytes = std::fs::read(path).unwrap();
-    let npy = npyz::NpyFile::new(&bytes[..]).unwrap();
-    let shape: Vec<usize> = npy.shape().iter().map(|d| *d as usize).collect();
-    let data: Vec<f32> = npy.into_vec().unwrap();
+    let (shape, data) = read_npy(path);
     Image {
         width: shape[1],
         height: shape[0],
@@ -84,7 +55,7 @@ const RENDERS: &str = r#"{
 
 #[test]
 fn flip_matches_nvidias_implementation() {
-    let Some(python) = peer_python() else {
+    let Some(python) = peer_python("flip_evaluator, skimage, scipy") else {
         return;
     };
     let s = Scratch::new();

@@ -24,8 +24,11 @@ pub fn registry() -> Registry {
     r.register(crate::io::image_read::ImageRead);
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);
+    r.register(crate::mesh::displace::Displace);
+    r.register(crate::mesh::write::MeshWrite);
     r.register(crate::mesh::read::Read);
     r.register(crate::render::render_mesh::RenderMesh);
+    r.register(crate::render::reference::Reference);
     r.register(crate::io::image_write::ImageWrite);
     r.register(crate::io::npy_write::NpyWrite);
     r.register(crate::sss::material::Material);

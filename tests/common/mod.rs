@@ -120,3 +120,41 @@ pub fn npy_bytes(descr: &str, fortran: bool, shape: &[usize], payload: &[u8]) ->
     bytes.extend_from_slice(payload);
     bytes
 }
+
+/// The Python the peers run from, if it can `import` every module of `imports` (comma
+/// separated): `MESOFLOW_PEER_PYTHON`, else `target/peer-venv/bin/python` (what `.ci/run`
+/// makes). Without one the caller says so and passes, unless `MESOFLOW_REQUIRE_PEERS=1` (set by
+/// CI), where this fails.
+pub fn peer_python(imports: &str) -> Option<PathBuf> {
+    let candidate = std::env::var_os("MESOFLOW_PEER_PYTHON")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("target/peer-venv/bin/python")
+        });
+    let ok = Command::new(&candidate)
+        .args(["-c", &format!("import {imports}")])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if ok {
+        return Some(candidate);
+    }
+    let msg = format!(
+        "no Python that can import {imports} at {} (set MESOFLOW_PEER_PYTHON, or run .ci/run once)",
+        candidate.display()
+    );
+    assert!(
+        std::env::var("MESOFLOW_REQUIRE_PEERS").as_deref() != Ok("1"),
+        "{msg}"
+    );
+    eprintln!("skipped: {msg}");
+    None
+}
+
+/// An `.npy` of f32 as (shape, values).
+pub fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
+    let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let npy = npyz::NpyFile::new(&bytes[..]).expect("an .npy file");
+    let shape: Vec<usize> = npy.shape().iter().map(|d| *d as usize).collect();
+    (shape, npy.into_vec().expect("f32 values"))
+}

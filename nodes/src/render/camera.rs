@@ -127,7 +127,13 @@ impl Camera {
 
     /// Origin and unit direction of the ray through pixel (x, y)'s centre.
     pub fn ray(&self, x: u32, y: u32) -> (V3, V3) {
-        let (sx, sy) = self.screen(x as f64 + 0.5, y as f64 + 0.5);
+        self.ray_at(x as f64 + 0.5, y as f64 + 0.5)
+    }
+
+    /// Origin and unit direction of the ray through continuous pixel coordinates (x, y) (pixel
+    /// (i, j) spans [i, i + 1] × [j, j + 1]).
+    pub fn ray_at(&self, x: f64, y: f64) -> (V3, V3) {
+        let (sx, sy) = self.screen(x, y);
         if self.orthographic {
             let o = add(
                 self.eye,

@@ -6,6 +6,7 @@ pub mod gpu_render;
 pub mod layers;
 pub mod light;
 pub mod material;
+pub mod reference;
 pub mod render_mesh;
 pub mod scene_footprint;
 pub mod shade;
