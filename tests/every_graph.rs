@@ -96,6 +96,17 @@ fn small(graph: &str) -> Vec<String> {
             v.extend(sss(&["marble", "skin", "marble_reference"]));
             v
         }
+        "truth" => vec![
+            "surface.size=16".into(),
+            format!("capture.views={DIRS}"),
+            format!("capture.lights={DIRS}"),
+            format!("mdf.views={DIRS}"),
+            "torus.segments=[24,12]".into(),
+            "truth.camera.resolution=[32,24]".into(),
+            "truth.samples=4".into(),
+            "ours.camera.resolution=[32,24]".into(),
+            "ours.shadow_resolution=128".into(),
+        ],
         "weathering" => vec!["sample.size=24".into()],
         "weathering_transfer" => vec![
             "sample.size=32".into(),

@@ -1,6 +1,9 @@
 //! `image.compare`: the error of an image against a reference of the same size — RMSE, PSNR
 //! (against the reference's peak), mean and max absolute error, the fraction of pixels off by more
-//! than 1% of the peak, and a false-colour-free difference image (|a − b| per channel).
+//! than 1% of the peak, and a false-colour-free difference image (|a − b| per channel). Against
+//! a ground truth also the relative RMSE and the bias (over the object's pixels where masks say
+//! which they are) and, with both images' masks, the intersection over union of what each
+//! covers: whether the silhouettes agree.
 
 use crate::btf::pca::psnr;
 use crate::types::Image;
@@ -21,12 +24,14 @@ impl Node for Compare {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "image.compare",
-            version: 1,
-            doc: "Error of an image against a reference: RMSE, PSNR, mean/max absolute error, fraction of pixels off by > 1% of the peak, difference image.",
+            version: 2,
+            doc: "Error of an image against a reference: RMSE, PSNR, mean/max absolute error, fraction of pixels off by > 1% of the peak, difference image; relative RMSE and bias (over the masks' union), silhouette IoU (with both masks).",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("reference", Image::TYPE, "the reference image"),
                 Port::input("image", Image::TYPE, "the image to measure"),
+                Port::optional("reference_mask", Image::TYPE, "where the reference shows the object (first channel > 0.5), e.g. render.reference's coverage"),
+                Port::optional("mask", Image::TYPE, "where the image shows the object, e.g. render.mesh's mask"),
             ],
             outputs: vec![
                 Port::output("rmse", "Scalar", "root-mean-square error over all samples"),
@@ -35,6 +40,9 @@ impl Node for Compare {
                 Port::output("max_abs", "Scalar", "largest absolute error"),
                 Port::output("differing", "Scalar", "fraction of pixels with a channel off by > 1% of the peak"),
                 Port::output("difference", Image::TYPE, "|image − reference| per channel"),
+                Port::optional_output("relative_rmse", "Scalar", "RMSE over the RMS of the reference, over the masks' union (all pixels without masks); absent for a black reference"),
+                Port::optional_output("bias", "Scalar", "sum of the image over sum of the reference, minus 1, over the same pixels; absent for a black reference"),
+                Port::optional_output("iou", "Scalar", "pixels both masks cover over pixels either covers (with both masks; 1 when neither covers any)"),
             ],
             disk_cache: false,
         }
@@ -52,14 +60,96 @@ impl Node for Compare {
                 ),
             ));
         }
+        let masks = [
+            ("reference_mask", inputs.opt::<Image>("reference_mask")?),
+            ("mask", inputs.opt::<Image>("mask")?),
+        ];
+        for (port, m) in masks {
+            if let Some(m) = m {
+                if (m.width, m.height) != (r.width, r.height) || m.channels == 0 {
+                    return Err(NodeError::input(
+                        port,
+                        format!(
+                            "{}×{} does not match the reference's {}×{}",
+                            m.width, m.height, r.width, r.height
+                        ),
+                    ));
+                }
+            }
+        }
         let e = errors(r, a);
-        Ok(Outputs::new()
+        let t = against_truth(r, a, masks[0].1, masks[1].1);
+        let mut out = Outputs::new()
             .with("rmse", Scalar(e.rmse))
             .with("psnr", Scalar(psnr(e.peak, e.rmse)))
             .with("mean_abs", Scalar(e.mean_abs))
             .with("max_abs", Scalar(e.max_abs))
             .with("differing", Scalar(e.differing))
-            .with("difference", e.difference))
+            .with("difference", e.difference);
+        if let Some(v) = t.relative_rmse {
+            out = out.with("relative_rmse", Scalar(v));
+        }
+        if let Some(v) = t.bias {
+            out = out.with("bias", Scalar(v));
+        }
+        if let Some(v) = t.iou {
+            out = out.with("iou", Scalar(v));
+        }
+        Ok(out)
+    }
+}
+
+/// Errors against a ground truth: relative RMSE and bias over the masks' union (every pixel
+/// without masks), and the masks' intersection over union.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AgainstTruth {
+    pub relative_rmse: Option<f64>,
+    pub bias: Option<f64>,
+    pub iou: Option<f64>,
+}
+
+/// Sums in pixel order, so the result does not depend on threads.
+pub fn against_truth(
+    r: &Image,
+    a: &Image,
+    reference_mask: Option<&Image>,
+    mask: Option<&Image>,
+) -> AgainstTruth {
+    let on = |m: Option<&Image>, px: usize| m.map(|m| m.data[px * m.channels] > 0.5);
+    let (mut sq, mut ref_sq, mut sum, mut ref_sum) = (0f64, 0f64, 0f64, 0f64);
+    let (mut both, mut either) = (0usize, 0usize);
+    let c = r.channels.max(1);
+    for px in 0..r.width * r.height {
+        let (mr, ma) = (on(reference_mask, px), on(mask, px));
+        if let (Some(x), Some(y)) = (mr, ma) {
+            both += (x && y) as usize;
+            either += (x || y) as usize;
+        }
+        let selected = match (mr, ma) {
+            (None, None) => true,
+            (x, y) => x.unwrap_or(false) || y.unwrap_or(false),
+        };
+        if !selected {
+            continue;
+        }
+        for k in 0..c {
+            let (x, y) = (r.data[px * c + k] as f64, a.data[px * c + k] as f64);
+            sq += (y - x) * (y - x);
+            ref_sq += x * x;
+            sum += y;
+            ref_sum += x;
+        }
+    }
+    AgainstTruth {
+        relative_rmse: (ref_sq > 0.0).then(|| (sq / ref_sq).sqrt()),
+        bias: (ref_sum > 0.0).then(|| sum / ref_sum - 1.0),
+        iou: (reference_mask.is_some() && mask.is_some()).then(|| {
+            if either == 0 {
+                1.0
+            } else {
+                both as f64 / either as f64
+            }
+        }),
     }
 }
 
@@ -129,5 +219,33 @@ mod tests {
         assert!((e.rmse - (0.25f64 / 6.0).sqrt()).abs() < 1e-7);
         assert!((e.max_abs - 0.5).abs() < 1e-7);
         assert_eq!(e.differing, 0.5);
+    }
+
+    #[test]
+    fn truth_errors_are_over_the_masks_union() {
+        // Four grey pixels; the reference covers pixels 0–1, the image 1–2: IoU 1/3. Over pixels
+        // 0–2 the reference is (1, 1, 0) and the image (1, 2, 1) per channel: relative RMSE
+        // √((0 + 1 + 1)/(1 + 1)) = 1, bias 4/2 − 1 = 1.
+        let grey = |v: [f32; 4]| Image {
+            width: 4,
+            height: 1,
+            channels: 1,
+            data: v.to_vec(),
+        };
+        let r = grey([1.0, 1.0, 0.0, 5.0]);
+        let a = grey([1.0, 2.0, 1.0, 0.0]);
+        let (rm, am) = (grey([1.0, 1.0, 0.0, 0.0]), grey([0.0, 1.0, 1.0, 0.0]));
+        let t = against_truth(&r, &a, Some(&rm), Some(&am));
+        assert!((t.iou.unwrap() - 1.0 / 3.0).abs() < 1e-12);
+        assert!((t.relative_rmse.unwrap() - 1.0).abs() < 1e-12);
+        assert!((t.bias.unwrap() - 1.0).abs() < 1e-12);
+        // Without masks: every pixel, and no IoU; a black reference has no relative error.
+        let t = against_truth(&r, &a, None, None);
+        assert!(t.iou.is_none());
+        assert!((t.bias.unwrap() - (4.0 / 7.0 - 1.0)).abs() < 1e-12);
+        let black = grey([0.0; 4]);
+        assert!(against_truth(&black, &a, None, None)
+            .relative_rmse
+            .is_none());
     }
 }

@@ -89,8 +89,9 @@ impl Node for RenderMesh {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "render.mesh",
-            version: 2,
-            doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image.",
+            // 3: the mask output; lights beyond the sampled cone extrapolated, not clamped.
+            version: 3,
+            doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
                 Port::input("mesh", Mesh::TYPE, "the mesh, top of the mesostructure shell"),
@@ -101,6 +102,7 @@ impl Node for RenderMesh {
                 vec![
                     Port::output("image", Image::TYPE, "linear HDR RGB"),
                     Port::output("coverage", "Scalar", "fraction of pixels showing mesostructure"),
+                    Port::output("mask", Image::TYPE, "1 where a pixel shows mesostructure, else 0 (one channel)"),
                 ],
                 footprint::output_ports(true),
             ]
@@ -196,11 +198,11 @@ impl Node for RenderMesh {
             background: p.background,
             parallax: p.parallax,
         };
-        let (data, coverage, ms, gpu_ms) = match ctx.gpu() {
+        let (data, mask, ms, gpu_ms) = match ctx.gpu() {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
             None => {
                 let start = Instant::now();
-                let mut frame = (Vec::new(), 0.0);
+                let mut frame = (Vec::new(), Vec::new());
                 // One counter for all frames: each frame's screen tiles add to its total.
                 let watch = Counter::new(ctx, 0);
                 for _ in 0..p.frames {
@@ -237,7 +239,16 @@ impl Node for RenderMesh {
                     data,
                 },
             )
-            .with("coverage", Scalar(coverage));
+            .with("coverage", Scalar(coverage(&mask)))
+            .with(
+                "mask",
+                Image {
+                    width: w as usize,
+                    height: h as usize,
+                    channels: 1,
+                    data: mask,
+                },
+            );
         Ok(footprint::with_metrics(out, fp.as_ref()))
     }
 }
@@ -257,13 +268,18 @@ pub fn shadow_camera(scene: &Scene, size: u32) -> Result<Camera, NodeError> {
     Camera::enclosing(c, r, dir, from, size).map_err(|e| NodeError::param("light", e))
 }
 
-/// One frame on the CPU: (RGB data, coverage).
+/// The fraction of a mask's pixels that are set.
+pub fn coverage(mask: &[f32]) -> f64 {
+    mask.iter().filter(|m| **m > 0.5).count() as f64 / mask.len().max(1) as f64
+}
+
+/// One frame on the CPU: (RGB data, mask).
 pub fn render_cpu(
     scene: &Scene,
     camera: &Camera,
     p: &Params,
     watch: &Counter,
-) -> Result<(Vec<f32>, f64), NodeError> {
+) -> Result<(Vec<f32>, Vec<f32>), NodeError> {
     let count = p.layers.max(1) as usize;
     let shadow = if p.shadows {
         if p.shadow_resolution == 0 || p.shadow_resolution > CPU_MAX_SIDE {
@@ -292,23 +308,26 @@ pub fn render_cpu(
             (colour.unwrap_or(scene.background), colour.is_some())
         })
         .collect();
-    let covered = pixels.iter().filter(|p| p.1).count();
+    let mask = pixels.iter().map(|p| p.1 as u8 as f32).collect();
     let data = pixels
         .iter()
         .flat_map(|(c, _)| c.map(|v| v as f32))
         .collect();
-    Ok((data, covered as f64 / (w * h) as f64))
+    Ok((data, mask))
 }
 
-/// `frames` frames on the GPU: (RGB data, coverage, wall ms per frame, GPU ms per frame from
-/// timestamp queries where the device has them).
+/// A rendered frame on the GPU: RGB data, mask, wall ms per frame, GPU ms per frame from
+/// timestamp queries where the device has them.
+type GpuFrame = (Vec<f32>, Vec<f32>, f64, Option<f64>);
+
+/// `frames` frames on the GPU.
 pub fn render_gpu(
     ctx: &NodeContext,
     gpu: &mesoflow_runtime::Gpu,
     scene: &Scene,
     camera: &Camera,
     p: &Params,
-) -> Result<(Vec<f32>, f64, f64, Option<f64>), NodeError> {
+) -> Result<GpuFrame, NodeError> {
     use super::gpu_render::GpuRenderer;
     GpuRenderer::check_size(gpu, "camera", camera.width, camera.height)?;
     let shadow = if p.shadows {
@@ -343,13 +362,15 @@ pub fn render_gpu(
     }
     let ms = start.elapsed().as_secs_f64() * 1e3 / timed as f64;
     let gpu_ms = (gpu_frames > 0).then(|| gpu_total / gpu_frames as f64);
-    let pixels = rgba.len() / 4;
-    let covered = rgba.chunks_exact(4).filter(|c| c[3] > 0.5).count();
+    let mask = rgba
+        .chunks_exact(4)
+        .map(|c| (c[3] > 0.5) as u8 as f32)
+        .collect();
     let data = rgba
         .chunks_exact(4)
         .flat_map(|c| [c[0], c[1], c[2]])
         .collect();
-    Ok((data, covered as f64 / pixels.max(1) as f64, ms, gpu_ms))
+    Ok((data, mask, ms, gpu_ms))
 }
 
 #[cfg(test)]
@@ -723,8 +744,11 @@ mod tests {
             let cam = Camera::new(&p.camera).unwrap();
             let ctx = NodeContext::detached(None);
             match gpu {
-                Some(g) => render_gpu(&ctx, g, &scene, &cam, p).map(|(d, c, _, t)| (d, c, t)),
-                None => render_cpu(&scene, &cam, p, &Counter::none()).map(|(d, c)| (d, c, None)),
+                Some(g) => {
+                    render_gpu(&ctx, g, &scene, &cam, p).map(|(d, m, _, t)| (d, coverage(&m), t))
+                }
+                None => render_cpu(&scene, &cam, p, &Counter::none())
+                    .map(|(d, m)| (d, coverage(&m), None)),
             }
         };
         // The MDF must matter in this scene, or agreement with it would prove nothing.
