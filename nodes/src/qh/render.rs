@@ -117,7 +117,8 @@ impl Node for QhRender {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "qh.render",
-            version: 3,
+            // 4: lights beyond the sampled cone extrapolated in the local term.
+            version: 4,
             doc: "Quasi-homogeneous material on a mesh (thesis eq. 5.60): local reflectance (BTF) plus the homogeneous diffusion gather scaled by mesostructure entrance and exiting functions (images, or from a height field).",
             device: DevicePreference::Gpu,
             inputs: vec![

@@ -444,6 +444,10 @@ impl<'a> GpuRenderer<'a> {
             ],
             None => [1.0, 1.0, 0.0, 0.0],
         });
+        u.extend(match mat.light_rings {
+            Some((c1, c0)) => [c1 as f32, c0 as f32, 0.0, 1.0],
+            None => [1.0, 1.0, 0.0, 0.0],
+        });
         let (kind, ycc) = match &mat.source {
             Source::Raw(_) => (0, 0),
             Source::Basis { basis, .. } => (1, (basis.color == ColorSpace::YCbCr) as u32),

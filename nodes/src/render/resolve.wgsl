@@ -17,6 +17,7 @@ struct Params {
     misc: vec4<f32>,       // tiling u, shell, shadow bias, tiling v
     background: vec4<f32>, // rgb, w = 1 for parallax (lookup at the hit's texel)
     mdf: vec4<f32>,        // width, height, depth, present
+    rings: vec4<f32>,      // cos θ of the outermost and next light rings, w = 1 to extrapolate
     mat: vec4<u32>,        // kind (0 raw, 1 basis), width, height, ycbcr
     dirs: vec4<u32>,       // btf views, btf lights, mdf views, layers
     offs: vec4<u32>,       // vertices, mode (0 shadow depth, 1 shade), shadows, owners offset
@@ -125,11 +126,18 @@ struct Blend {
 };
 
 // The three nearest of `count` directions at dirs[base..] to q; exact within 1e-4 rad.
-fn blend(base: u32, count: u32, q: vec3<f32>) -> Blend {
+// `ring` ≥ 0 keeps only the directions within 0.01 rad of that polar angle (material.rs's
+// blend_ring); a negative `ring` keeps all.
+fn blend(base: u32, count: u32, q: vec3<f32>, ring: f32) -> Blend {
     var bi = vec3<u32>(NONE, NONE, NONE);
     var ba = vec3<f32>(1e9, 1e9, 1e9);
+    var kept = 0u;
     for (var i = 0u; i < count; i = i + 1u) {
         let d = vec3<f32>(dirs[base + 3u * i], dirs[base + 3u * i + 1u], dirs[base + 3u * i + 2u]);
+        if (ring >= 0.0 && abs(acos(clamp(d.z, -1.0, 1.0)) - ring) >= 0.01) {
+            continue;
+        }
+        kept = kept + 1u;
         let a = acos(clamp(dot(d, q), -1.0, 1.0));
         if (a < ba.x) {
             ba = vec3<f32>(a, ba.x, ba.y);
@@ -144,7 +152,7 @@ fn blend(base: u32, count: u32, q: vec3<f32>) -> Blend {
     }
     var b: Blend;
     b.idx = bi;
-    b.count = min(count, 3u);
+    b.count = min(kept, 3u);
     if (ba.x < 1e-4) {
         b.count = 1u;
         b.w = vec3<f32>(1.0, 0.0, 0.0);
@@ -234,11 +242,32 @@ fn texel(pair: u32, x: u32, y: u32) -> vec3<f32> {
     return c;
 }
 
+// Beyond the outermost light ring: the two outer rings at the light's azimuth, extended
+// affinely in cos θ and floored at 0 (material.rs).
 fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+    let c1 = P.rings.x;
+    let c0 = P.rings.y;
+    if (P.rings.w < 0.5 || wi.z >= c1 - 1e-9) {
+        return btf_eval_sampled(uv, wo, wi, -1.0);
+    }
+    let h = length(wi.xy);
+    var cs = vec2<f32>(1.0, 0.0);
+    if (h > 1e-12) {
+        cs = wi.xy / h;
+    }
+    let s1 = sqrt(max(1.0 - c1 * c1, 0.0));
+    let s0 = sqrt(max(1.0 - c0 * c0, 0.0));
+    let e1 = btf_eval_sampled(uv, wo, vec3<f32>(s1 * cs.x, s1 * cs.y, c1), acos(clamp(c1, -1.0, 1.0)));
+    let e0 = btf_eval_sampled(uv, wo, vec3<f32>(s0 * cs.x, s0 * cs.y, c0), acos(clamp(c0, -1.0, 1.0)));
+    let t = (wi.z - c1) / (c1 - c0);
+    return max(e1 + (e1 - e0) * t, vec3<f32>(0.0));
+}
+
+fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, ring: f32) -> vec3<f32> {
     let nv = P.dirs.x;
     let nl = P.dirs.y;
-    let bv = blend(0u, nv, wo);
-    let bl = blend(P.offs2.y, nl, wi);
+    let bv = blend(0u, nv, wo, -1.0);
+    let bl = blend(P.offs2.y, nl, wi, ring);
     var pairs = array<u32, 9>();
     var weights = array<f32, 9>();
     var total = 0.0;
@@ -279,7 +308,7 @@ fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
     let mw = u32(P.mdf.x);
     let mh = u32(P.mdf.y);
     let tp = taps(s.uv, mw, mh);
-    let bv = blend(P.offs2.z, P.dirs.z, wo);
+    let bv = blend(P.offs2.z, P.dirs.z, wo, -1.0);
     var sum = 0.0;
     var weight = 0.0;
     for (var a = 0u; a < bv.count; a = a + 1u) {
