@@ -120,13 +120,15 @@ impl Node for Displace {
         let (lo, hi) = hf.min_max();
         let (lo, hi) = (lo as f64, hi as f64);
         let depth = match p.depth {
-            Some(d) if d + 1e-9 < hi - lo => return Err(NodeError::param(
-                "depth",
-                format!(
+            Some(d) if d + 1e-9 < hi - lo => {
+                return Err(NodeError::param(
+                    "depth",
+                    format!(
                     "{d} texels is less than the height range {:.4}: the shell must hold the tile",
                     hi - lo
                 ),
-            )),
+                ))
+            }
             Some(d) => d,
             None => hi - lo,
         };
