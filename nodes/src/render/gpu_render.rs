@@ -56,6 +56,8 @@ pub struct GpuRenderer<'a> {
     resolve: wgpu::ComputePipeline,
     /// Offsets into `tables` and `dirs` (owners, blocks, pair_of; lights, mdf views).
     offsets: [u32; 5],
+    /// Where the views', lights' and MDF views' ring tables start in `dirs` (NONE: none).
+    ring_offsets: [u32; 3],
     triangles: u32,
     centre: [f64; 3],
     radius: f64,
@@ -88,6 +90,20 @@ impl<'a> GpuRenderer<'a> {
             dirs.extend(l.views.iter().flatten().map(|v| *v as f32));
             mdf_data = l.mdf.data.clone();
         }
+        // The ring tables of the bilinear direction lookup (rings.rs), after the directions.
+        let mut table = |r: Option<&super::rings::Rings>| match r {
+            Some(r) => {
+                let at = dirs.len() as u32;
+                dirs.extend(r.encode());
+                at
+            }
+            None => NONE,
+        };
+        let ring_offsets = [
+            table(mat.view_table.as_ref()),
+            table(mat.light_table.as_ref()),
+            table(scene.mdf.as_ref().and_then(|l| l.rings.as_ref())),
+        ];
         let limit = device.limits().max_storage_buffer_binding_size;
         for (what, bytes) in [
             ("the material", material.len() * 4),
@@ -200,6 +216,7 @@ impl<'a> GpuRenderer<'a> {
                 lights_off,
                 mdf_dirs_off,
             ],
+            ring_offsets,
             triangles: m.triangles() as u32,
             centre,
             radius,
@@ -453,7 +470,7 @@ impl<'a> GpuRenderer<'a> {
             Source::Basis { basis, .. } => (1, (basis.color == ColorSpace::YCbCr) as u32),
         };
         let [owners_off, blocks_off, pair_of_off, lights_off, mdf_dirs_off] = self.offsets;
-        let ints: [u32; 16] = [
+        let ints: [u32; 20] = [
             kind,
             mat.width as u32,
             mat.height as u32,
@@ -470,6 +487,10 @@ impl<'a> GpuRenderer<'a> {
             lights_off,
             mdf_dirs_off,
             pair_of_off,
+            self.ring_offsets[0],
+            self.ring_offsets[1],
+            self.ring_offsets[2],
+            0,
         ];
         let mut bytes: Vec<u8> = bytemuck::cast_slice(&u).to_vec();
         bytes.extend_from_slice(bytemuck::cast_slice(&ints));

@@ -1,13 +1,15 @@
 //! What the renderer samples: a BTF (raw or PCA basis) and an optional MDF, behind one lookup
 //! with the interpolation scheme documented here (the GPU shader follows it line for line).
 //!
-//! **Directions.** A query direction is matched against the sampled directions (the BTF's
-//! distinct views and distinct lights, the MDF's views) by angle. If the nearest is within
-//! 1e-4 rad it is used alone (exact reproduction of measured directions); otherwise the three
-//! nearest (fewer if fewer exist) are blended with weights ∝ 1/angle. The BTF blends the 3 × 3
+//! **Directions.** A query direction is looked up among the sampled directions (the BTF's
+//! distinct views and distinct lights, the MDF's views). Sets sampled in rings of equal θ
+//! (UBO2003's 81, any θ × φ grid) are interpolated bilinearly in θ and φ between the bracketing
+//! rings and, on each, the bracketing directions (`rings.rs`); other sets blend the three
+//! nearest (fewer if fewer exist) with weights ∝ 1/angle. Either way a sampled direction within
+//! 1e-4 rad is used alone (exact reproduction of measured directions). The BTF blends the
 //! (view, light) pairs with the product weights, skipping pairs it does not have and
 //! renormalising. This is defined for any direction set, including a single direction, and for
-//! queries outside the sampled cone (grazing views beyond θ = 75° take the nearest rings).
+//! queries outside the sampled cone (grazing views beyond θ = 75° take the outermost ring).
 //!
 //! **Lights beyond the sampled cone** (θ past the most oblique sampled light, 75° for UBO2003)
 //! are extrapolated, not clamped: the value at the light's azimuth on the outermost ring (cos
@@ -21,10 +23,20 @@
 //! u = (x + 0.5)/W, v = 1 − (y + 0.5)/H of one tile. The MDF blends only its finite entries and
 //! reports +∞ when they carry less than half the weight (a ray that mostly misses misses).
 
+use super::rings::Rings;
 use crate::types::{Btf, BtfBasis, Centring, ColorSpace, Direction, Mdf};
 
 /// Up to three (index, weight) pairs, weights summing to 1.
 pub type Blend = Vec<(usize, f64)>;
+
+/// The blend of `q` over `dirs`: bilinear over their rings where they have them, else the
+/// nearest three.
+pub fn lookup(dirs: &[[f64; 3]], rings: Option<&Rings>, q: [f64; 3]) -> Blend {
+    match rings {
+        Some(r) => r.blend(dirs, q),
+        None => blend(dirs, q),
+    }
+}
 
 /// Nearest-direction blend of `q` (unit vector, tangent frame) over `dirs` (unit vectors).
 pub fn blend(dirs: &[[f64; 3]], q: [f64; 3]) -> Blend {
@@ -100,6 +112,9 @@ pub struct Material<'a> {
     pub pair_of: Vec<Option<usize>>,
     /// cos θ of the outermost light ring and of the next ring in, where the lights have two.
     pub light_rings: Option<(f64, f64)>,
+    /// The views' and lights' rings, where they are ring-structured.
+    pub view_table: Option<Rings>,
+    pub light_table: Option<Rings>,
 }
 
 /// cos θ of the most oblique direction and of the most oblique one at least 0.01 rad less so.
@@ -139,12 +154,15 @@ impl<'a> Material<'a> {
             pair_of[v * lights.len() + l].get_or_insert(p);
         }
         let lights: Vec<[f64; 3]> = lights.iter().map(|d| d.vector()).collect();
+        let views: Vec<[f64; 3]> = views.iter().map(|d| d.vector()).collect();
         Material {
             source,
             width,
             height,
-            views: views.iter().map(|d| d.vector()).collect(),
+            view_table: Rings::of(&views),
+            views,
             light_rings: outer_rings(&lights),
+            light_table: Rings::of(&lights),
             lights,
             pair_of,
         }
@@ -198,7 +216,8 @@ impl<'a> Material<'a> {
     /// light beyond the sampled cone is extrapolated (see the module's doc).
     pub fn eval(&self, u: f64, v: f64, wo: [f64; 3], wi: [f64; 3]) -> [f64; 3] {
         let Some((c1, c0)) = self.light_rings.filter(|r| wi[2] < r.0 - 1e-9) else {
-            return self.eval_sampled(u, v, wo, blend(&self.lights, wi));
+            let bl = lookup(&self.lights, self.light_table.as_ref(), wi);
+            return self.eval_sampled(u, v, wo, bl);
         };
         let h = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
         let (cp, sp) = if h > 1e-12 {
@@ -211,15 +230,25 @@ impl<'a> Material<'a> {
             [s * cp, s * sp, c]
         };
         // Each ring's value at the light's azimuth from that ring's samples only.
-        let e1 = self.eval_sampled(u, v, wo, blend_ring(&self.lights, ring(c1), c1));
-        let e0 = self.eval_sampled(u, v, wo, blend_ring(&self.lights, ring(c0), c0));
+        let (b1, b0) = match &self.light_table {
+            Some(t) => {
+                let (n, phi) = (t.rings.len(), sp.atan2(cp));
+                (t.on_ring(n - 1, phi), t.on_ring(n - 2, phi))
+            }
+            None => (
+                blend_ring(&self.lights, ring(c1), c1),
+                blend_ring(&self.lights, ring(c0), c0),
+            ),
+        };
+        let e1 = self.eval_sampled(u, v, wo, b1);
+        let e0 = self.eval_sampled(u, v, wo, b0);
         let t = (wi[2] - c1) / (c1 - c0);
         [0, 1, 2].map(|k| (e1[k] + (e1[k] - e0[k]) * t).max(0.0))
     }
 
     /// [`Material::eval`] within the sampled directions, the lights blended by `bl`.
     fn eval_sampled(&self, u: f64, v: f64, wo: [f64; 3], bl: Blend) -> [f64; 3] {
-        let bv = blend(&self.views, wo);
+        let bv = lookup(&self.views, self.view_table.as_ref(), wo);
         let mut weights: Vec<(usize, f64)> = Vec::with_capacity(9);
         for &(vi, wv) in &bv {
             for &(li, wl) in &bl {
@@ -253,12 +282,15 @@ impl<'a> Material<'a> {
 pub struct MdfLookup<'a> {
     pub mdf: &'a Mdf,
     pub views: Vec<[f64; 3]>,
+    pub rings: Option<Rings>,
 }
 
 impl<'a> MdfLookup<'a> {
     pub fn new(mdf: &'a Mdf) -> Self {
+        let views: Vec<[f64; 3]> = mdf.views.iter().map(|d| d.vector()).collect();
         MdfLookup {
-            views: mdf.views.iter().map(|d| d.vector()).collect(),
+            rings: Rings::of(&views),
+            views,
             mdf,
         }
     }
@@ -267,7 +299,7 @@ impl<'a> MdfLookup<'a> {
     pub fn eval(&self, u: f64, v: f64, wo: [f64; 3]) -> f64 {
         let taps = texel_taps(u, v, self.mdf.width, self.mdf.height);
         let (mut sum, mut weight) = (0.0, 0.0);
-        for (k, wk) in blend(&self.views, wo) {
+        for (k, wk) in lookup(&self.views, self.rings.as_ref(), wo) {
             for &(x, y, tw) in &taps {
                 let d = self.mdf.at(k, x as isize, y as isize) as f64;
                 if d.is_finite() && tw > 0.0 {

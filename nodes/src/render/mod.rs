@@ -8,5 +8,6 @@ pub mod light;
 pub mod material;
 pub mod reference;
 pub mod render_mesh;
+pub mod rings;
 pub mod scene_footprint;
 pub mod shade;

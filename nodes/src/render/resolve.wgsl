@@ -22,6 +22,7 @@ struct Params {
     dirs: vec4<u32>,       // btf views, btf lights, mdf views, layers
     offs: vec4<u32>,       // vertices, mode (0 shadow depth, 1 shade), shadows, owners offset
     offs2: vec4<u32>,      // blocks offset in `tables`, light dirs offset, mdf dirs offset, pair_of offset
+    rings_at: vec4<u32>,   // ring tables in `dirs` of the views, lights, MDF views (NONE: not rings)
 };
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -120,10 +121,110 @@ fn local_up(v: vec3<f32>) -> vec3<f32> {
 }
 
 struct Blend {
-    idx: vec3<u32>,
-    w: vec3<f32>,
+    idx: array<u32, 4>,
+    w: array<f32, 4>,
     count: u32,
 };
+
+const TAU: f32 = 6.283185307179586;
+
+fn wrap_angle(x: f32) -> f32 {
+    return x - TAU * floor(x / TAU);
+}
+
+// The header of ring r in the ring table at dirs[table..] (rings.rs's encode: ring count, then
+// per ring θ, member count, members' (φ, index)).
+fn ring_at(table: u32, r: u32) -> u32 {
+    var o = table + 1u;
+    for (var k = 0u; k < r; k = k + 1u) {
+        o = o + 2u + 2u * u32(dirs[o + 1u]);
+    }
+    return o;
+}
+
+fn push(b: ptr<function, Blend>, i: u32, w: f32) {
+    (*b).idx[(*b).count] = i;
+    (*b).w[(*b).count] = w;
+    (*b).count = (*b).count + 1u;
+}
+
+// Ring (header at o) at azimuth phi: the two members bracketing it, linear in φ, times scale.
+fn on_ring(b: ptr<function, Blend>, o: u32, phi: f32, scale: f32) {
+    let c = u32(dirs[o + 1u]);
+    if (c == 1u) {
+        push(b, u32(dirs[o + 3u]), scale);
+        return;
+    }
+    var j = c;
+    for (var k = 0u; k < c; k = k + 1u) {
+        if (dirs[o + 2u + 2u * k] > phi) {
+            j = k;
+            break;
+        }
+    }
+    var ia = j - 1u;
+    var ib = j;
+    if (j == 0u || j == c) {
+        ia = c - 1u;
+        ib = 0u;
+    }
+    let pa = dirs[o + 2u + 2u * ia];
+    let pb = dirs[o + 2u + 2u * ib];
+    let span = wrap_angle(pb - pa);
+    var t = 0.0;
+    if (span > 0.0) {
+        t = clamp(wrap_angle(phi - pa) / span, 0.0, 1.0);
+    }
+    push(b, u32(dirs[o + 3u + 2u * ia]), scale * (1.0 - t));
+    push(b, u32(dirs[o + 3u + 2u * ib]), scale * t);
+}
+
+// The blend of q over `count` directions at dirs[base..]: bilinear over their ring table at
+// dirs[table..] (rings.rs), or the nearest three where the set has none (table = NONE).
+fn lookup(base: u32, count: u32, table: u32, q: vec3<f32>) -> Blend {
+    if (table == NONE) {
+        return blend(base, count, q, -1.0);
+    }
+    let theta = acos(clamp(q.z, -1.0, 1.0));
+    let phi = wrap_angle(atan2(q.y, q.x));
+    let n = u32(dirs[table]);
+    var below = 0u;
+    var o = table + 1u;
+    var oa = o;
+    var ob = o;
+    for (var r = 0u; r < n; r = r + 1u) {
+        if (dirs[o] <= theta) {
+            below = r + 1u;
+            oa = o;
+        } else if (below == r) {
+            ob = o;
+        }
+        o = o + 2u + 2u * u32(dirs[o + 1u]);
+    }
+    var b: Blend;
+    b.count = 0u;
+    if (below == 0u) {
+        on_ring(&b, table + 1u, phi, 1.0);
+    } else if (below == n) {
+        on_ring(&b, oa, phi, 1.0);
+    } else {
+        let s = (theta - dirs[oa]) / (dirs[ob] - dirs[oa]);
+        on_ring(&b, oa, phi, 1.0 - s);
+        on_ring(&b, ob, phi, s);
+    }
+    for (var k = 0u; k < b.count; k = k + 1u) {
+        let i = b.idx[k];
+        let d = vec3<f32>(dirs[base + 3u * i], dirs[base + 3u * i + 1u], dirs[base + 3u * i + 2u]);
+        if (acos(clamp(dot(d, q), -1.0, 1.0)) < 1e-4) {
+            var one: Blend;
+            one.count = 1u;
+            one.idx[0] = i;
+            one.w[0] = 1.0;
+            return one;
+        }
+    }
+    return b;
+}
 
 // The three nearest of `count` directions at dirs[base..] to q; exact within 1e-4 rad.
 // `ring` ≥ 0 keeps only the directions within 0.01 rad of that polar angle (material.rs's
@@ -151,11 +252,13 @@ fn blend(base: u32, count: u32, q: vec3<f32>, ring: f32) -> Blend {
         }
     }
     var b: Blend;
-    b.idx = bi;
+    b.idx[0] = bi.x;
+    b.idx[1] = bi.y;
+    b.idx[2] = bi.z;
     b.count = min(kept, 3u);
     if (ba.x < 1e-4) {
         b.count = 1u;
-        b.w = vec3<f32>(1.0, 0.0, 0.0);
+        b.w[0] = 1.0;
         return b;
     }
     var inv = vec3<f32>(1.0 / ba.x, 0.0, 0.0);
@@ -165,7 +268,10 @@ fn blend(base: u32, count: u32, q: vec3<f32>, ring: f32) -> Blend {
     if (b.count > 2u) {
         inv.z = 1.0 / ba.z;
     }
-    b.w = inv / (inv.x + inv.y + inv.z);
+    let w = inv / (inv.x + inv.y + inv.z);
+    b.w[0] = w.x;
+    b.w[1] = w.y;
+    b.w[2] = w.z;
     return b;
 }
 
@@ -248,7 +354,7 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
     let c1 = P.rings.x;
     let c0 = P.rings.y;
     if (P.rings.w < 0.5 || wi.z >= c1 - 1e-9) {
-        return btf_eval_sampled(uv, wo, wi, -1.0);
+        return btf_eval_sampled(uv, wo, lookup(P.offs2.y, P.dirs.y, P.rings_at.y, wi));
     }
     let h = length(wi.xy);
     var cs = vec2<f32>(1.0, 0.0);
@@ -257,19 +363,32 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
     }
     let s1 = sqrt(max(1.0 - c1 * c1, 0.0));
     let s0 = sqrt(max(1.0 - c0 * c0, 0.0));
-    let e1 = btf_eval_sampled(uv, wo, vec3<f32>(s1 * cs.x, s1 * cs.y, c1), acos(clamp(c1, -1.0, 1.0)));
-    let e0 = btf_eval_sampled(uv, wo, vec3<f32>(s0 * cs.x, s0 * cs.y, c0), acos(clamp(c0, -1.0, 1.0)));
+    var b1: Blend;
+    var b0: Blend;
+    b1.count = 0u;
+    b0.count = 0u;
+    let table = P.rings_at.y;
+    if (table != NONE) {
+        let n = u32(dirs[table]);
+        let phi = wrap_angle(atan2(cs.y, cs.x));
+        on_ring(&b1, ring_at(table, n - 1u), phi, 1.0);
+        on_ring(&b0, ring_at(table, n - 2u), phi, 1.0);
+    } else {
+        b1 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s1 * cs.x, s1 * cs.y, c1), acos(clamp(c1, -1.0, 1.0)));
+        b0 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s0 * cs.x, s0 * cs.y, c0), acos(clamp(c0, -1.0, 1.0)));
+    }
+    let e1 = btf_eval_sampled(uv, wo, b1);
+    let e0 = btf_eval_sampled(uv, wo, b0);
     let t = (wi.z - c1) / (c1 - c0);
     return max(e1 + (e1 - e0) * t, vec3<f32>(0.0));
 }
 
-fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, ring: f32) -> vec3<f32> {
+fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, bl: Blend) -> vec3<f32> {
     let nv = P.dirs.x;
     let nl = P.dirs.y;
-    let bv = blend(0u, nv, wo, -1.0);
-    let bl = blend(P.offs2.y, nl, wi, ring);
-    var pairs = array<u32, 9>();
-    var weights = array<f32, 9>();
+    let bv = lookup(0u, nv, P.rings_at.x, wo);
+    var pairs = array<u32, 16>();
+    var weights = array<f32, 16>();
     var total = 0.0;
     var m = 0u;
     for (var a = 0u; a < bv.count; a = a + 1u) {
@@ -308,7 +427,7 @@ fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
     let mw = u32(P.mdf.x);
     let mh = u32(P.mdf.y);
     let tp = taps(s.uv, mw, mh);
-    let bv = blend(P.offs2.z, P.dirs.z, wo, -1.0);
+    let bv = lookup(P.offs2.z, P.dirs.z, P.rings_at.z, wo);
     var sum = 0.0;
     var weight = 0.0;
     for (var a = 0u; a < bv.count; a = a + 1u) {
