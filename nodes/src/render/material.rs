@@ -19,6 +19,14 @@
 //! capture's cosine and visibility), where clamping to the last ring made pixels lit at 82–90°
 //! about twice too bright. A direction set with a single ring keeps the clamp.
 //!
+//! **Parallax-compensated view blend.** Each sampled view's image shows, at a texel, the
+//! mesostructure its own ray meets there: a view 15° away sees a point several texels over.
+//! Given the depth of the hit along the query's ray (the MDF distance d, in tile units per axis),
+//! each blended view is looked up where its ray meets the same point: shifted by
+//! d·(−ω_o.xy + ω_o.z · v_k.xy / v_k.z) from the entry texel (zero for the query's own
+//! direction), so neighbouring views agree before they are blended. Without a depth (no MDF, a
+//! ray that misses, or `parallax` lookups at the hit texel) every view reads the entry texel.
+//!
 //! **Texels.** Bilinear and periodic at texel centres: texel (x, y) (row 0 at the top) sits at
 //! u = (x + 0.5)/W, v = 1 − (y + 0.5)/H of one tile. The MDF blends only its finite entries and
 //! reports +∞ when they carry less than half the weight (a ray that mostly misses misses).
@@ -215,9 +223,23 @@ impl<'a> Material<'a> {
     /// Radiance factor at (u, v) for local view `wo` and light `wi` (unit, tangent frame); a
     /// light beyond the sampled cone is extrapolated (see the module's doc).
     pub fn eval(&self, u: f64, v: f64, wo: [f64; 3], wi: [f64; 3]) -> [f64; 3] {
+        self.eval_at_depth(u, v, wo, wi, None)
+    }
+
+    /// [`Material::eval`] with the views blended where each meets the query's hit, `depth` (the
+    /// hit's distance along the view ray, in tile units along u and v) below the entry point.
+    pub fn eval_at_depth(
+        &self,
+        u: f64,
+        v: f64,
+        wo: [f64; 3],
+        wi: [f64; 3],
+        depth: Option<[f64; 2]>,
+    ) -> [f64; 3] {
+        let at = Lookup { u, v, wo, depth };
         let Some((c1, c0)) = self.light_rings.filter(|r| wi[2] < r.0 - 1e-9) else {
             let bl = lookup(&self.lights, self.light_table.as_ref(), wi);
-            return self.eval_sampled(u, v, wo, bl);
+            return self.eval_sampled(&at, bl);
         };
         let h = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
         let (cp, sp) = if h > 1e-12 {
@@ -240,30 +262,42 @@ impl<'a> Material<'a> {
                 blend_ring(&self.lights, ring(c0), c0),
             ),
         };
-        let e1 = self.eval_sampled(u, v, wo, b1);
-        let e0 = self.eval_sampled(u, v, wo, b0);
+        let e1 = self.eval_sampled(&at, b1);
+        let e0 = self.eval_sampled(&at, b0);
         let t = (wi[2] - c1) / (c1 - c0);
         [0, 1, 2].map(|k| (e1[k] + (e1[k] - e0[k]) * t).max(0.0))
     }
 
     /// [`Material::eval`] within the sampled directions, the lights blended by `bl`.
-    fn eval_sampled(&self, u: f64, v: f64, wo: [f64; 3], bl: Blend) -> [f64; 3] {
+    fn eval_sampled(&self, at: &Lookup, bl: Blend) -> [f64; 3] {
+        let wo = at.wo;
         let bv = lookup(&self.views, self.view_table.as_ref(), wo);
-        let mut weights: Vec<(usize, f64)> = Vec::with_capacity(9);
+        let mut weights: Vec<(usize, usize, f64)> = Vec::with_capacity(16);
         for &(vi, wv) in &bv {
             for &(li, wl) in &bl {
                 if let Some(p) = self.pair_of[vi * self.lights.len() + li] {
-                    weights.push((p, wv * wl));
+                    weights.push((vi, p, wv * wl));
                 }
             }
         }
-        let total: f64 = weights.iter().map(|w| w.1).sum();
+        let total: f64 = weights.iter().map(|w| w.2).sum();
         if total <= 0.0 {
             return [0.0; 3];
         }
-        let taps = texel_taps(u, v, self.width, self.height);
         let mut out = [0.0; 3];
-        for (p, w) in weights {
+        for (vi, p, w) in weights {
+            let (u, v) = match at.depth {
+                Some(d) => {
+                    let vk = self.views[vi];
+                    let k = wo[2] / vk[2].max(1e-3);
+                    (
+                        at.u + d[0] * (vk[0] * k - wo[0]),
+                        at.v + d[1] * (vk[1] * k - wo[1]),
+                    )
+                }
+                None => (at.u, at.v),
+            };
+            let taps = texel_taps(u, v, self.width, self.height);
             for &(x, y, tw) in &taps {
                 if tw == 0.0 {
                     continue;
@@ -276,6 +310,15 @@ impl<'a> Material<'a> {
         }
         out
     }
+}
+
+/// Where a BTF lookup is made: the entry point (u, v), the local view, and the hit's depth
+/// below it for the parallax-compensated view blend.
+struct Lookup {
+    u: f64,
+    v: f64,
+    wo: [f64; 3],
+    depth: Option<[f64; 2]>,
 }
 
 /// The MDF as the renderer samples it.

@@ -350,11 +350,11 @@ fn texel(pair: u32, x: u32, y: u32) -> vec3<f32> {
 
 // Beyond the outermost light ring: the two outer rings at the light's azimuth, extended
 // affinely in cos θ and floored at 0 (material.rs).
-fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
+fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> vec3<f32> {
     let c1 = P.rings.x;
     let c0 = P.rings.y;
     if (P.rings.w < 0.5 || wi.z >= c1 - 1e-9) {
-        return btf_eval_sampled(uv, wo, lookup(P.offs2.y, P.dirs.y, P.rings_at.y, wi));
+        return btf_eval_sampled(uv, wo, depth, lookup(P.offs2.y, P.dirs.y, P.rings_at.y, wi));
     }
     let h = length(wi.xy);
     var cs = vec2<f32>(1.0, 0.0);
@@ -377,17 +377,20 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>) -> vec3<f32> {
         b1 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s1 * cs.x, s1 * cs.y, c1), acos(clamp(c1, -1.0, 1.0)));
         b0 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s0 * cs.x, s0 * cs.y, c0), acos(clamp(c0, -1.0, 1.0)));
     }
-    let e1 = btf_eval_sampled(uv, wo, b1);
-    let e0 = btf_eval_sampled(uv, wo, b0);
+    let e1 = btf_eval_sampled(uv, wo, depth, b1);
+    let e0 = btf_eval_sampled(uv, wo, depth, b0);
     let t = (wi.z - c1) / (c1 - c0);
     return max(e1 + (e1 - e0) * t, vec3<f32>(0.0));
 }
 
-fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, bl: Blend) -> vec3<f32> {
+// `depth`: the hit's distance along the view ray in tile units (u, v), 0 for none; each view
+// is read where its ray meets the same point (material.rs's parallax-compensated view blend).
+fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>, bl: Blend) -> vec3<f32> {
     let nv = P.dirs.x;
     let nl = P.dirs.y;
     let bv = lookup(0u, nv, P.rings_at.x, wo);
     var pairs = array<u32, 16>();
+    var views = array<u32, 16>();
     var weights = array<f32, 16>();
     var total = 0.0;
     var m = 0u;
@@ -396,6 +399,7 @@ fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, bl: Blend) -> vec3<f32> {
             let p = tables[P.offs2.w + bv.idx[a] * nl + bl.idx[b]];
             if (p != NONE) {
                 pairs[m] = p;
+                views[m] = bv.idx[a];
                 weights[m] = bv.w[a] * bl.w[b];
                 total = total + weights[m];
                 m = m + 1u;
@@ -405,9 +409,16 @@ fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, bl: Blend) -> vec3<f32> {
     if (total <= 0.0) {
         return vec3<f32>(0.0);
     }
-    let tp = taps(uv, P.mat.y, P.mat.z);
     var acc = vec3<f32>(0.0);
     for (var i = 0u; i < m; i = i + 1u) {
+        var at = uv;
+        if (depth.x > 0.0 || depth.y > 0.0) {
+            let vi = views[i];
+            let vk = vec3<f32>(dirs[3u * vi], dirs[3u * vi + 1u], dirs[3u * vi + 2u]);
+            let k = wo.z / max(vk.z, 1e-3);
+            at = uv + depth * (vk.xy * k - wo.xy);
+        }
+        let tp = taps(at, P.mat.y, P.mat.z);
         for (var k = 0u; k < 4u; k = k + 1u) {
             let tw = tap_weight(tp, k);
             if (tw == 0.0) {
@@ -453,6 +464,7 @@ struct Hit {
     t_front: f32,
     s: Surface,
     wo: vec3<f32>,
+    depth: vec2<f32>,
 };
 
 fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
@@ -478,8 +490,11 @@ fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
             h.t = f.x + df.x;
             h.t_front = f.x;
             h.s = s;
+            h.depth = vec2<f32>(0.0, 0.0);
             if (P.background.w > 0.5) {
                 h.s.uv = s.uv - df.y * wo.xy / P.mdf.xy;
+            } else if (P.mdf.w > 0.5 && df.y > 0.0) {
+                h.depth = df.y / P.mdf.xy;
             }
             h.wo = wo;
             return h;
@@ -545,6 +560,6 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
         out[px] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
         return;
     }
-    let c = btf_eval(hit.s.uv, hit.wo, wi) * (P.light.w * falloff);
+    let c = btf_eval(hit.s.uv, hit.wo, wi, hit.depth) * (P.light.w * falloff);
     out[px] = vec4<f32>(c, 1.0);
 }

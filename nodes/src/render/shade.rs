@@ -101,6 +101,18 @@ impl Scene<'_> {
     /// Where the ray `(o, d)` first meets mesostructure, as (distance, distance to the front
     /// face, surface frame at the front face, local view); `None` if it passes every layer.
     pub fn hit(&self, layers: &Layers, px: usize, d: V3) -> Option<(f64, f64, Surface, V3)> {
+        self.hit_with_depth(layers, px, d)
+            .map(|h| (h.0, h.1, h.2, h.3))
+    }
+
+    /// [`Scene::hit`] with the hit's depth along the view ray in tile units along u and v (for
+    /// the parallax-compensated view blend; `None` without an MDF or with `parallax` lookups).
+    fn hit_with_depth(
+        &self,
+        layers: &Layers,
+        px: usize,
+        d: V3,
+    ) -> Option<(f64, f64, Surface, V3, Option<[f64; 2]>)> {
         let plane = layers.width * layers.height;
         for k in 0..layers.count {
             let Some(f) = layers.front[k * plane + px] else {
@@ -119,12 +131,18 @@ impl Scene<'_> {
             };
             if df.is_finite() && f.t + df < tb {
                 let mut s = s;
-                if let (true, Some(m)) = (self.parallax, &self.mdf) {
-                    // The hit lies d·(−ω_o.x, −ω_o.y) texels from the entry point.
-                    s.uv[0] -= dtex * wo[0] / m.mdf.width as f64;
-                    s.uv[1] -= dtex * wo[1] / m.mdf.height as f64;
+                let mut depth = None;
+                if let Some(m) = &self.mdf {
+                    let tile = [dtex / m.mdf.width as f64, dtex / m.mdf.height as f64];
+                    if self.parallax {
+                        // The hit lies d·(−ω_o.x, −ω_o.y) texels from the entry point.
+                        s.uv[0] -= tile[0] * wo[0];
+                        s.uv[1] -= tile[1] * wo[1];
+                    } else if dtex > 0.0 {
+                        depth = Some(tile);
+                    }
                 }
-                return Some((f.t + df, f.t, s, wo));
+                return Some((f.t + df, f.t, s, wo, depth));
             }
         }
         None
@@ -140,7 +158,7 @@ impl Scene<'_> {
         d: V3,
         shadow: Option<&ShadowMap>,
     ) -> Option<[f64; 3]> {
-        let (_, t_front, s, wo) = self.hit(layers, px, d)?;
+        let (_, t_front, s, wo, depth) = self.hit_with_depth(layers, px, d)?;
         let p = add(o, mul(d, t_front));
         let (to_light, irradiance) = self.light.at(p);
         let wi = Self::local(&s, to_light);
@@ -151,7 +169,7 @@ impl Scene<'_> {
         if !visible {
             return Some([0.0; 3]);
         }
-        let f = self.material.eval(s.uv[0], s.uv[1], wo, wi);
+        let f = self.material.eval_at_depth(s.uv[0], s.uv[1], wo, wi, depth);
         Some(f.map(|c| c * irradiance))
     }
 }
