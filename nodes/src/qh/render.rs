@@ -229,6 +229,7 @@ pub fn render(
         shell: 0.0,
         background: p.background,
         parallax: false,
+        sides: Vec::new(),
     };
     let shadow = if p.shadows {
         Some(sss_render::shadow_map(

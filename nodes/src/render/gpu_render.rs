@@ -58,6 +58,8 @@ pub struct GpuRenderer<'a> {
     offsets: [u32; 5],
     /// Where the views', lights' and MDF views' ring tables start in `dirs` (NONE: none).
     ring_offsets: [u32; 3],
+    /// Where the side walls start in `mesh`, and how many.
+    sides_at: [u32; 2],
     triangles: u32,
     centre: [f64; 3],
     radius: f64,
@@ -75,6 +77,9 @@ impl<'a> GpuRenderer<'a> {
         mesh_f.extend(m.normals.iter().flatten());
         mesh_f.extend(m.uvs.iter().flatten());
         mesh_f.extend(m.tangents.iter().flatten());
+        // The shell's side walls at the open boundary (shade.rs), four corners each.
+        let sides_at = [mesh_f.len() as u32, scene.sides.len() as u32];
+        mesh_f.extend(scene.sides.iter().flatten().flatten().map(|v| *v as f32));
         let mat = scene.material;
         let mut tables: Vec<u32> = m.indices.clone();
         let pair_of_off = tables.len() as u32;
@@ -217,6 +222,7 @@ impl<'a> GpuRenderer<'a> {
                 mdf_dirs_off,
             ],
             ring_offsets,
+            sides_at,
             triangles: m.triangles() as u32,
             centre,
             radius,
@@ -470,7 +476,7 @@ impl<'a> GpuRenderer<'a> {
             Source::Basis { basis, .. } => (1, (basis.color == ColorSpace::YCbCr) as u32),
         };
         let [owners_off, blocks_off, pair_of_off, lights_off, mdf_dirs_off] = self.offsets;
-        let ints: [u32; 20] = [
+        let ints: [u32; 24] = [
             kind,
             mat.width as u32,
             mat.height as u32,
@@ -490,6 +496,10 @@ impl<'a> GpuRenderer<'a> {
             self.ring_offsets[0],
             self.ring_offsets[1],
             self.ring_offsets[2],
+            0,
+            self.sides_at[0],
+            self.sides_at[1],
+            0,
             0,
         ];
         let mut bytes: Vec<u8> = bytemuck::cast_slice(&u).to_vec();

@@ -12,7 +12,7 @@ use super::footprint;
 use super::layers;
 use super::light::{Light, LightParams};
 use super::material::{Material, MdfLookup, Source};
-use super::shade::{Scene, ShadowMap};
+use super::shade::{shell_sides, Scene, ShadowMap};
 use crate::geometry::{bounding_sphere, normalize, sub};
 use crate::progress::Counter;
 use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
@@ -197,6 +197,7 @@ impl Node for RenderMesh {
             shell: p.shell,
             background: p.background,
             parallax: p.parallax,
+            sides: shell_sides(mesh, p.shell),
         };
         let (data, mask, ms, gpu_ms) = match ctx.gpu() {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
@@ -574,6 +575,68 @@ mod tests {
     }
 
     #[test]
+    fn an_open_planes_edge_is_carved_by_the_shells_side_on_cpu_and_gpu() {
+        // Closed form: the 2 × 2 plane over a flat mesostructure at the shell's bottom (0.1 below
+        // it), seen orthographically at 45° in x. A ray entering the top at x reaches the bottom
+        // at x − 0.1, so entries within 0.1 of the far edge leave through the shell's side and
+        // miss: 0.1 of the plane's 2-unit width, 5% of its coverage. Without the side walls (the
+        // first version) the MDF carved nothing there.
+        let btf = test_btf(8, &[[0.0, 0.0]], &[[0.0, 0.0]]);
+        let p = Params {
+            camera: CameraParams {
+                eye: [3.0, 0.0, 3.0],
+                target: [0.0, 0.0, 0.0],
+                orthographic: Some(1.6),
+                resolution: [200, 200],
+                ..Default::default()
+            },
+            shell: 0.1,
+            ..plane_params(200)
+        };
+        let (_, plain) = render(plane(), Arc::new(btf.clone()), None, &p).unwrap();
+        let (_, deep) = render(plane(), Arc::new(btf.clone()), Some(sunken_mdf(4.0)), &p).unwrap();
+        let lost = (plain - deep) / plain;
+        // The plane's edge is pixelated (about 141 pixels across at 45°: 0.7% of its width).
+        assert!(
+            (lost - 0.05).abs() < 0.01,
+            "lost fraction {lost}, expected 0.05"
+        );
+        // The GPU path carves the same edge.
+        for backends in [wgpu::Backends::PRIMARY, wgpu::Backends::GL] {
+            let Ok(gpu) = mesoflow_runtime::Gpu::with_backends(backends) else {
+                continue;
+            };
+            let mdf = sunken_mdf(4.0);
+            let material = Material::new(Source::Raw(&btf));
+            let mesh = plane();
+            let scene = Scene {
+                mesh: &mesh,
+                material: &material,
+                mdf: Some(MdfLookup::new(&mdf)),
+                light: Light::new(&p.light).unwrap(),
+                tiling: p.tiling,
+                shell: p.shell,
+                background: p.background,
+                parallax: false,
+                sides: shell_sides(&mesh, p.shell),
+            };
+            let cam = Camera::new(&p.camera).unwrap();
+            let ctx = NodeContext::detached(None);
+            match render_gpu(&ctx, &gpu, &scene, &cam, &p) {
+                Ok((_, m, _, _)) => {
+                    let g = coverage(&m);
+                    assert!(
+                        (g - deep).abs() < 0.002,
+                        "{}: {g} vs CPU {deep}",
+                        gpu.describe()
+                    );
+                }
+                Err(e) => eprintln!("skipping {}: {e}", gpu.describe()),
+            }
+        }
+    }
+
+    #[test]
     fn parallax_moves_the_lookup_by_the_mdf_offset() {
         // A 45° orthographic view (φ = 0) of the plane's centre over a flat MDF sunk 4 texels:
         // d = 4/cos 45° along the ray, i.e. 4 texels towards −u; on an 8-texel tile that is
@@ -591,7 +654,6 @@ mod tests {
         })
         .unwrap();
         let layers = super::layers::trace(&mesh, &cam, 1, &Counter::none());
-        let (_, d) = cam.ray(0, 0);
         for (parallax, want_u) in [(false, 0.5), (true, 0.0)] {
             let scene = Scene {
                 mesh: &mesh,
@@ -602,8 +664,10 @@ mod tests {
                 shell: 0.1,
                 background: [0.0; 3],
                 parallax,
+                sides: Vec::new(),
             };
-            let (_, _, s, wo) = scene.hit(&layers, 0, d).unwrap();
+            let (o, d) = cam.ray(0, 0);
+            let (_, _, s, wo) = scene.hit(&layers, 0, o, d).unwrap();
             assert!((wo[0] - 0.5f64.sqrt()).abs() < 1e-9 && wo[1].abs() < 1e-9);
             assert!(
                 (s.uv[0] - want_u).abs() < 1e-6 && (s.uv[1] - 0.5).abs() < 1e-6,
@@ -740,6 +804,7 @@ mod tests {
                 shell: p.shell,
                 background: p.background,
                 parallax: p.parallax,
+                sides: shell_sides(&torus, p.shell),
             };
             let cam = Camera::new(&p.camera).unwrap();
             let ctx = NodeContext::detached(None);

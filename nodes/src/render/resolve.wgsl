@@ -23,6 +23,7 @@ struct Params {
     offs: vec4<u32>,       // vertices, mode (0 shadow depth, 1 shade), shadows, owners offset
     offs2: vec4<u32>,      // blocks offset in `tables`, light dirs offset, mdf dirs offset, pair_of offset
     rings_at: vec4<u32>,   // ring tables in `dirs` of the views, lights, MDF views (NONE: not rings)
+    sides: vec4<u32>,      // the shell's side walls in `mesh`: offset, count (four corners each)
 };
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -467,7 +468,56 @@ struct Hit {
     depth: vec2<f32>,
 };
 
-fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
+// Möller–Trumbore: the distance along (o, d) to triangle p0 p1 p2, or -1.
+fn tri_hit(o: vec3<f32>, d: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>) -> f32 {
+    let e1 = p1 - p0;
+    let e2 = p2 - p0;
+    let pv = cross(d, e2);
+    let det = dot(e1, pv);
+    if (abs(det) <= 1e-12 * length(e1) * length(e2)) {
+        return -1.0;
+    }
+    let inv = 1.0 / det;
+    let s = o - p0;
+    let b1 = dot(s, pv) * inv;
+    if (b1 < 0.0 || b1 > 1.0) {
+        return -1.0;
+    }
+    let q = cross(s, e1);
+    let b2 = dot(d, q) * inv;
+    if (b2 < 0.0 || b1 + b2 > 1.0) {
+        return -1.0;
+    }
+    return dot(e2, q) * inv;
+}
+
+fn corner(o: u32, k: u32) -> vec3<f32> {
+    let i = o + 3u * k;
+    return vec3<f32>(mesh[i], mesh[i + 1u], mesh[i + 2u]);
+}
+
+// The nearest distance beyond `after` at which (o, d) crosses a side wall (shade.rs's side_exit).
+fn side_exit(o: vec3<f32>, d: vec3<f32>, after: f32) -> f32 {
+    var best = inf();
+    for (var q = 0u; q < P.sides.y; q = q + 1u) {
+        let base = P.sides.x + 12u * q;
+        let a = corner(base, 0u);
+        let b = corner(base, 1u);
+        let c = corner(base, 2u);
+        let e = corner(base, 3u);
+        let t1 = tri_hit(o, d, a, b, c);
+        if (t1 > after && t1 < best) {
+            best = t1;
+        }
+        let t2 = tri_hit(o, d, a, c, e);
+        if (t2 > after && t2 < best) {
+            best = t2;
+        }
+    }
+    return best;
+}
+
+fn find_hit(x: u32, y: u32, o: vec3<f32>, d: vec3<f32>) -> Hit {
     var h: Hit;
     h.found = false;
     for (var k = 0u; k < P.dirs.w; k = k + 1u) {
@@ -484,6 +534,9 @@ fn find_hit(x: u32, y: u32, d: vec3<f32>) -> Hit {
             let sb = surface(b);
             let outward = local_up(local(sb, d));
             tb = b.x - mdf_distance(sb, outward).x;
+        } else {
+            // No back face: bounded by the shell's side, where the mesh has one.
+            tb = side_exit(o, d, f.x);
         }
         if (df.x < 3.0e38 && f.x + df.x < tb) {
             h.found = true;
@@ -536,7 +589,7 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
         return;
     }
     let ray = cam_ray(P.cam, g.x, g.y);
-    let hit = find_hit(g.x, g.y, ray.d);
+    let hit = find_hit(g.x, g.y, ray.o, ray.d);
     let px = g.y * w + g.x;
     if (P.offs.y == 0u) {
         out[px] = vec4<f32>(select(inf(), hit.t, hit.found), 0.0, 0.0, 0.0);

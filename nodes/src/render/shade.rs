@@ -4,7 +4,11 @@
 //! for the local view) and back face (t_b, d_b for the ray leaving through it) bound one pass
 //! through the shell; the ray meets mesostructure in it when t_f + d_f < t_b − d_b (thesis
 //! ch. 4; an open mesh has t_b = ∞). Otherwise the next layer is tried; a ray that passes all
-//! of them shows the background, which is what carves the silhouette.
+//! of them shows the background, which is what carves the silhouette. At an open mesh's
+//! boundary the shell has a side: the band under each boundary edge (an edge of one triangle
+//! only, welded by position), from the edge down `shell` along its vertices' normals. A layer
+//! without a back face is bounded by where its ray leaves through a side wall, so a ray that
+//! would reach the mesostructure only beyond the mesh's edge misses.
 //!
 //! MDF distances are in MDF texels; one texel of depth is `shell / mdf.depth` world units. A hit
 //! is shaded, as in the thesis, at (x, t_f + d_f): with the BTF at the entry texel x, whose
@@ -44,7 +48,68 @@ pub struct Scene<'a> {
     pub background: [f64; 3],
     /// Shade at the hit's texel instead of the entry texel (for parallax-free BTFs).
     pub parallax: bool,
+    /// The shell's side walls at the mesh's open boundary ([`shell_sides`]).
+    pub sides: Vec<[V3; 4]>,
 }
+
+/// The shell's side walls: for every boundary edge (a, b) — an edge of one triangle only, its
+/// ends welded by position — the quad a, b, b − shell·n_b, a − shell·n_a. Empty for a closed
+/// mesh or a zero shell.
+pub fn shell_sides(mesh: &Mesh, shell: f64) -> Vec<[V3; 4]> {
+    if shell <= 0.0 {
+        return Vec::new();
+    }
+    let key = |i: usize| mesh.positions[i].map(f32::to_bits);
+    // Per edge, keyed by its ends' positions: one of its (a, b) and how many triangles use it.
+    type Ends = ([u32; 3], [u32; 3]);
+    let mut count: std::collections::HashMap<Ends, (usize, usize, u32)> =
+        std::collections::HashMap::new();
+    for t in 0..mesh.triangles() {
+        let c = mesh.corners(t);
+        for (a, b) in [(c[0], c[1]), (c[1], c[2]), (c[2], c[0])] {
+            let (ka, kb) = (key(a), key(b));
+            if ka == kb {
+                continue;
+            }
+            let e = if ka < kb { (ka, kb) } else { (kb, ka) };
+            count.entry(e).or_insert((a, b, 0)).2 += 1;
+        }
+    }
+    let mut edges: Vec<(usize, usize)> = count
+        .into_values()
+        .filter(|e| e.2 == 1)
+        .map(|e| (e.0, e.1))
+        .collect();
+    edges.sort_unstable();
+    let f = |v: [f32; 3]| v.map(|x| x as f64);
+    edges
+        .into_iter()
+        .map(|(a, b)| {
+            let (pa, pb) = (f(mesh.positions[a]), f(mesh.positions[b]));
+            let na = normalize(f(mesh.normals[a])).unwrap_or([0.0, 0.0, 1.0]);
+            let nb = normalize(f(mesh.normals[b])).unwrap_or([0.0, 0.0, 1.0]);
+            [pa, pb, sub(pb, mul(nb, shell)), sub(pa, mul(na, shell))]
+        })
+        .collect()
+}
+
+/// The nearest distance beyond `after` at which the ray (o, d) crosses a side wall; ∞ for none.
+pub fn side_exit(sides: &[[V3; 4]], o: V3, d: V3, after: f64) -> f64 {
+    let mut best = f64::INFINITY;
+    for q in sides {
+        for (p0, p1, p2) in [(q[0], q[1], q[2]), (q[0], q[2], q[3])] {
+            if let Some((t, ..)) = super::layers::intersect(o, d, p0, p1, p2) {
+                if t > after && t < best {
+                    best = t;
+                }
+            }
+        }
+    }
+    best
+}
+
+/// A hit as [`Scene::hit`] gives it, and its depth for the parallax-compensated view blend.
+type DeepHit = (f64, f64, Surface, V3, Option<[f64; 2]>);
 
 /// Position, texture coordinate and tangent frame (t, b, n) at a visibility sample.
 pub struct Surface {
@@ -100,19 +165,14 @@ impl Scene<'_> {
 
     /// Where the ray `(o, d)` first meets mesostructure, as (distance, distance to the front
     /// face, surface frame at the front face, local view); `None` if it passes every layer.
-    pub fn hit(&self, layers: &Layers, px: usize, d: V3) -> Option<(f64, f64, Surface, V3)> {
-        self.hit_with_depth(layers, px, d)
+    pub fn hit(&self, layers: &Layers, px: usize, o: V3, d: V3) -> Option<(f64, f64, Surface, V3)> {
+        self.hit_with_depth(layers, px, o, d)
             .map(|h| (h.0, h.1, h.2, h.3))
     }
 
     /// [`Scene::hit`] with the hit's depth along the view ray in tile units along u and v (for
     /// the parallax-compensated view blend; `None` without an MDF or with `parallax` lookups).
-    fn hit_with_depth(
-        &self,
-        layers: &Layers,
-        px: usize,
-        d: V3,
-    ) -> Option<(f64, f64, Surface, V3, Option<[f64; 2]>)> {
+    fn hit_with_depth(&self, layers: &Layers, px: usize, o: V3, d: V3) -> Option<DeepHit> {
         let plane = layers.width * layers.height;
         for k in 0..layers.count {
             let Some(f) = layers.front[k * plane + px] else {
@@ -127,7 +187,8 @@ impl Scene<'_> {
                     let out = local_up(Self::local(&sb, d));
                     b.t - self.mdf_distance(&sb, out).0
                 }
-                None => f64::INFINITY,
+                // No back face: bounded by the shell's side, where the mesh has one.
+                None => side_exit(&self.sides, o, d, f.t),
             };
             if df.is_finite() && f.t + df < tb {
                 let mut s = s;
@@ -158,7 +219,7 @@ impl Scene<'_> {
         d: V3,
         shadow: Option<&ShadowMap>,
     ) -> Option<[f64; 3]> {
-        let (_, t_front, s, wo, depth) = self.hit_with_depth(layers, px, d)?;
+        let (_, t_front, s, wo, depth) = self.hit_with_depth(layers, px, o, d)?;
         let p = add(o, mul(d, t_front));
         let (to_light, irradiance) = self.light.at(p);
         let wi = Self::local(&s, to_light);
@@ -196,8 +257,8 @@ impl ShadowMap {
         let depth = (0..(w * h) as usize)
             .into_par_iter()
             .map(|px| {
-                let (_, d) = camera.ray(px as u32 % w, px as u32 / w);
-                scene.hit(layers, px, d).map_or(f64::INFINITY, |h| h.0)
+                let (o, d) = camera.ray(px as u32 % w, px as u32 / w);
+                scene.hit(layers, px, o, d).map_or(f64::INFINITY, |h| h.0)
             })
             .collect();
         ShadowMap {
