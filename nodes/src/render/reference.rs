@@ -7,7 +7,9 @@
 //!
 //! Radiometry is `btf.capture`'s times the light's irradiance: a sample that sees the surface at
 //! x with shading normal n returns E · f(ωi, ωo) · max(0, n·ωi) · V(x, ωi). Surfaces are
-//! one-sided: a sample that meets a triangle from behind returns black. Rays are traced through
+//! one-sided: a sample that meets a triangle from behind returns black. With a `normals` input
+//! (a tangent-space normal map over the tile, `heightfield.normals`'s) the shading normal is the
+//! map's, in the mesh's tangent frame: normal mapping, what a user without a BTF would render. Rays are traced through
 //! a compressed wide BVH (the `obvhs` crate) and intersected in f64 with the mesh's own
 //! triangles. Every pixel is computed on its own from seeded sub-pixel positions, so the image
 //! has the same bits whatever the thread count.
@@ -17,7 +19,7 @@ use super::light::{Light, LightParams};
 use super::material::texel_taps;
 use crate::btf::brdf::{self, Model};
 use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
-use crate::types::{Image, Mesh};
+use crate::types::{Image, Mesh, NormalMap};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use obvhs::cwbvh::CwBvh;
@@ -82,11 +84,12 @@ impl Node for Reference {
         NodeSpec {
             kind: "render.reference",
             version: 1,
-            doc: "Ground truth: direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance, N samples per pixel, box filter, on the CPU.",
+            doc: "Ground truth (or, with a normal map, normal mapping): direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance, N samples per pixel, box filter, on the CPU.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("mesh", Mesh::TYPE, "the geometry, its normals the shading normals"),
                 Port::optional("albedo", Image::TYPE, "diffuse albedo over the tile (RGB), instead of `albedo`"),
+                Port::optional("normals", NormalMap::TYPE, "tangent-space normals over the tile: normal mapping"),
             ],
             outputs: vec![
                 Port::output("image", Image::TYPE, "linear HDR radiance, RGB"),
@@ -143,6 +146,15 @@ impl Node for Reference {
                 ));
             }
         }
+        let normals = inputs.opt::<NormalMap>("normals")?;
+        if let Some(n) = normals {
+            if n.width == 0 || n.height == 0 || n.data.iter().any(|v| !v.is_finite()) {
+                return Err(NodeError::input(
+                    "normals",
+                    "expected a non-empty map of finite normals",
+                ));
+            }
+        }
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let light = Light::new(&p.light)?;
         let start = Instant::now();
@@ -153,7 +165,7 @@ impl Node for Reference {
             .into_par_iter()
             .map(|y| {
                 let row = (0..w)
-                    .map(|x| pixel(&scene, &camera, &light, p, albedo, x, y))
+                    .map(|x| pixel(&scene, &camera, &light, p, (albedo, normals), x, y))
                     .collect();
                 let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                 ctx.progress(n, h as u64);
@@ -201,7 +213,7 @@ fn pixel(
     camera: &Camera,
     light: &Light,
     p: &Params,
-    albedo: Option<&Image>,
+    (albedo, normals): (Option<&Image>, Option<&NormalMap>),
     x: usize,
     y: usize,
 ) -> ([f64; 3], f64, u64) {
@@ -236,7 +248,10 @@ fn pixel(
             continue; // one-sided: seen from behind
         }
         let (pos, ns) = scene.mesh.interpolate(hit.tri, hit.b1, hit.b2);
-        let ns = normalize(ns).unwrap_or(ng);
+        let mut ns = normalize(ns).unwrap_or(ng);
+        if let Some(map) = normals {
+            ns = mapped_normal(scene.mesh, &hit, ns, map, p.tiling);
+        }
         let (wi, irradiance) = light.at(pos);
         let cos_i = dot(ns, wi);
         if cos_i <= 0.0 || dot(ns, wo) <= 0.0 {
@@ -263,6 +278,32 @@ fn pixel(
     }
     let inv = 1.0 / n as f64;
     (mul(sum, inv), hits as f64 * inv, rays)
+}
+
+/// The normal map's normal at the hit, in the mesh's tangent frame around `n` (tangent
+/// orthogonalised against it, bitangent n × t with the tangent's handedness).
+fn mapped_normal(mesh: &Mesh, hit: &Hit, n: V3, map: &NormalMap, tiling: [f64; 2]) -> V3 {
+    let w = [1.0 - hit.b1 - hit.b2, hit.b1, hit.b2];
+    let c = mesh.corners(hit.tri);
+    let mut t = [0.0; 3];
+    for j in 0..3 {
+        let q = mesh.tangents[c[j]];
+        t = add(t, mul([q[0] as f64, q[1] as f64, q[2] as f64], w[j]));
+    }
+    let hand = mesh.tangents[c[0]][3] as f64;
+    let Some(t) = normalize(sub(t, mul(n, dot(n, t)))) else {
+        return n;
+    };
+    let b = mul(cross(n, t), hand);
+    let uv = uv_at(mesh, hit.tri, hit.b1, hit.b2);
+    let mut m = [0.0; 3];
+    for (x, y, tw) in texel_taps(uv[0] * tiling[0], uv[1] * tiling[1], map.width, map.height) {
+        let i = (y * map.width + x) * 3;
+        for (k, mk) in m.iter_mut().enumerate() {
+            *mk += tw * map.data[i + k] as f64;
+        }
+    }
+    normalize(add(add(mul(t, m[0]), mul(b, m[1])), mul(n, m[2]))).unwrap_or(n)
 }
 
 fn uv_at(mesh: &Mesh, t: usize, b1: f64, b2: f64) -> [f64; 2] {
@@ -507,6 +548,50 @@ mod tests {
             "{} vs {want}",
             centre[0]
         );
+    }
+
+    #[test]
+    fn a_normal_map_tilts_the_shading_normal_in_the_tangent_frame() {
+        // A constant map tilted 30° towards +u (the plane's +x): lit from 30° towards +x the
+        // shading normal faces the light, E · ρ/π; lit from 30° towards −x, E · ρ/π · cos 60°.
+        let a = 30f64.to_radians();
+        let map = NormalMap {
+            width: 2,
+            height: 2,
+            data: [a.sin() as f32, 0.0, a.cos() as f32].repeat(4),
+        };
+        for (sign, cos) in [(1.0, 1.0), (-1.0, 0.5)] {
+            let p = Params {
+                camera: ortho([0.0, 0.0, 3.0], 4),
+                light: LightParams {
+                    direction: [sign * a.sin(), 0.0, a.cos()],
+                    position: None,
+                    intensity: 2.0,
+                },
+                albedo: [0.5; 3],
+                samples: 1,
+                ..Default::default()
+            };
+            let out = Reference
+                .run(
+                    &NodeContext::detached(None),
+                    &p,
+                    &Inputs::new()
+                        .with("mesh", Arc::new(plane()))
+                        .with("normals", Arc::new(map.clone())),
+                )
+                .unwrap();
+            let img = out
+                .get("image")
+                .and_then(|v| v.as_any().downcast_ref::<Image>())
+                .unwrap();
+            let want = 2.0 * 0.5 / PI * cos;
+            assert!(
+                (img.data[0] as f64 - want).abs() < 1e-5,
+                "{} vs {want}",
+                img.data[0]
+            );
+        }
     }
 
     #[test]
