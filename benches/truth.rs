@@ -23,11 +23,14 @@ mod args;
 mod chart;
 #[path = "common/cli.rs"]
 mod cli;
+#[path = "common/truth_scenes.rs"]
+mod truth_scenes;
 
 use cli::{mesoflow, node};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use truth_scenes::plane_sets;
 
 struct Case {
     name: String,
@@ -37,31 +40,8 @@ struct Case {
     btf: Option<String>,
 }
 
-/// The plane: 2 × 2 units, 4 tiles each way (1/128 unit a texel), seen obliquely.
-fn plane_sets(width: u32, mdf: bool) -> Vec<String> {
-    let h = width * 3 / 4;
-    let mut v = vec![
-        "torus.shape=plane".to_string(),
-        "torus.size=2".into(),
-        "torus.segments=[16,16]".into(),
-        "true_surface.tiling=[4,4]".into(),
-        "ours.tiling=[4,4]".into(),
-        // 6 texels of height at 1/128 unit a texel.
-        "true_surface.shell=0.046875".into(),
-        "ours.shell=0.046875".into(),
-    ];
-    for id in ["truth", "ours", "macro"] {
-        v.push(format!(
-            "{id}.camera={{\"eye\": [0.0, -2.3, 1.7], \"target\": [0.0, 0.0, 0.0], \"fov\": 50, \"resolution\": [{width}, {h}]}}"
-        ));
-        v.push(format!(
-            "{id}.light={{\"direction\": [0.45, 0.3, 0.84], \"intensity\": {}}}",
-            if id == "macro" { 1.0 } else { 3.0 }
-        ));
-    }
-    v.push(format!("ours.use_mdf={mdf}"));
-    v
-}
+/// The render nodes of the bench's graph: the truth, ours and the macro cosine.
+const RENDERS: [&str; 3] = ["truth", "ours", "macro"];
 
 fn size_sets(width: u32) -> Vec<String> {
     let h = width * 3 / 4;
@@ -272,8 +252,8 @@ fn main() {
         case("torus_mdf", vec![]),
         case("torus_no_mdf", vec!["ours.use_mdf=false".into()]),
         case("torus_2_texel_mdf", two_texel),
-        case("plane_mdf", plane_sets(width, true)),
-        case("plane_no_mdf", plane_sets(width, false)),
+        case("plane_mdf", plane_sets(width, true, &RENDERS)),
+        case("plane_no_mdf", plane_sets(width, false, &RENDERS)),
     ];
     let mut csv = String::from("case,relative_rmse,bias,silhouette_iou,flip,bias_lit_75_82,pixels_75_82,bias_lit_82_90,pixels_82_90,frame_ms\n");
     println!(

@@ -381,9 +381,9 @@ fn a_synthesized_texture_stops_early_only_where_the_view_cannot_show_it() {
     // Far, it has several per pixel: the synthesis stops a level early (64², the full run's own
     // coarser result), in a copy only the planned view reads, and the planned view stays within
     // the budget against the full model. The calibration measured stopping a level early at
-    // FLIP 0.021–0.039 whatever the distance (the renderer point-samples the texture, so the two
+    // FLIP 0.022–0.042 whatever the distance (the renderer point-samples the texture, so the two
     // textures' texels differ however small they look), so it fits a tenth only of budgets from
-    // about 0.21 (0.26 at this view's texels per pixel).
+    // about 0.22 (0.27 at this view's texels per pixel).
     let far = plan(
         &s,
         "far",
