@@ -383,31 +383,14 @@ impl<'a> Tracer<'a> {
         )
     }
 
-    /// Möller–Trumbore in f64: distance and barycentrics (of corners 1 and 2).
+    /// Möller–Trumbore in f64 (the CPU ray caster's): distance and barycentrics (of corners
+    /// 1 and 2).
     fn intersect(&self, t: usize, o: V3, d: V3) -> Option<(f64, f64, f64)> {
         let [a, b, c] = self
             .mesh
             .corners(t)
             .map(|i| self.mesh.positions[i].map(|x| x as f64));
-        let (e1, e2) = (sub(b, a), sub(c, a));
-        let pv = cross(d, e2);
-        let det = dot(e1, pv);
-        if det.abs() < 1e-300 {
-            return None;
-        }
-        let inv = 1.0 / det;
-        let s = sub(o, a);
-        let b1 = dot(s, pv) * inv;
-        if !(0.0..=1.0).contains(&b1) {
-            return None;
-        }
-        let q = cross(s, e1);
-        let b2 = dot(d, q) * inv;
-        if b2 < 0.0 || b1 + b2 > 1.0 {
-            return None;
-        }
-        let dist = dot(e2, q) * inv;
-        (dist > 0.0).then_some((dist, b1, b2))
+        super::layers::intersect(o, d, a, b, c).map(|(dist, b1, b2, _)| (dist, b1, b2))
     }
 
     fn ray(o: V3, d: V3, tmax: f64) -> Ray {
