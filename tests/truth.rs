@@ -55,15 +55,15 @@ fn measure(s: &Scratch, name: &str, sets: &[String]) -> (f64, f64) {
 #[test]
 fn renders_stay_as_close_to_the_true_mesostructure_as_measured() {
     let s = Scratch::new();
-    // The torus: the issue's bound on relative RMSE (0.30; measured 0.271) and a silhouette IoU
-    // of at least 0.985 (measured 0.989; the issue asks 0.99, not met yet).
+    // The torus: the issue's bounds, relative RMSE at most 0.30 (measured 0.269) and silhouette
+    // IoU at least 0.99 (measured 0.992; every node on the CPU, so the same bits every run).
     let (rmse, iou) = measure(&s, "torus", &[]);
     eprintln!("torus: relative RMSE {rmse:.4}, IoU {iou:.4}");
     assert!(rmse <= 0.30, "torus relative RMSE {rmse}");
-    assert!(iou >= 0.985, "torus IoU {iou}");
-    // The open plane: the shell's side carves its edge (IoU measured 0.951 with the MDF, 0.923
+    assert!(iou >= 0.99, "torus IoU {iou}");
+    // The open plane: the shell's side carves its edge (IoU measured 0.953 with the MDF, 0.923
     // without; the issue asks 0.97, not met yet), and the parallax-compensated view blend needs
-    // the MDF (relative RMSE measured 0.269 with it, 0.385 without).
+    // the MDF (relative RMSE measured 0.264 with it, 0.385 without).
     let renders = ["truth", "ours"];
     let (with_rmse, with_iou) = measure(
         &s,
