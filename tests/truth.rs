@@ -55,7 +55,7 @@ fn measure(s: &Scratch, name: &str, sets: &[String]) -> (f64, f64) {
 #[test]
 fn renders_stay_as_close_to_the_true_mesostructure_as_measured() {
     let s = Scratch::new();
-    // The torus: the bounds, relative RMSE at most 0.30 (measured 0.269) and silhouette
+    // The torus: the bounds, relative RMSE at most 0.30 (measured 0.266) and silhouette
     // IoU at least 0.99 (measured 0.992; every node on the CPU, so the same bits every run).
     let (rmse, iou) = measure(&s, "torus", &[]);
     eprintln!("torus: relative RMSE {rmse:.4}, IoU {iou:.4}");

@@ -349,8 +349,8 @@ fn texel(pair: u32, x: u32, y: u32) -> vec3<f32> {
     return c;
 }
 
-// Beyond the outermost light ring: the two outer rings at the light's azimuth, extended
-// affinely in cos θ and floored at 0 (material.rs).
+// Beyond the outermost light ring: the two outer rings at the light's azimuth, continued as a
+// power of cos θ (material.rs).
 fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> vec3<f32> {
     let c1 = P.rings.x;
     let c0 = P.rings.y;
@@ -380,8 +380,18 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> ve
     }
     let e1 = btf_eval_sampled(uv, wo, depth, b1);
     let e0 = btf_eval_sampled(uv, wo, depth, b0);
-    let t = (wi.z - c1) / (c1 - c0);
-    return max(e1 + (e1 - e0) * t, vec3<f32>(0.0));
+    // A power of cos θ through the two rings (material.rs).
+    let c = max(wi.z, 1e-6);
+    var out = vec3<f32>(0.0);
+    for (var k = 0u; k < 3u; k = k + 1u) {
+        if (e1[k] > 0.0 && e0[k] > 0.0) {
+            let p = max(log(e1[k] / e0[k]) / log(c1 / c0), 0.0);
+            out[k] = e1[k] * pow(c / c1, p);
+        } else {
+            out[k] = e1[k] * c / c1;
+        }
+    }
+    return out;
 }
 
 // `depth`: the hit's distance along the view ray in tile units (u, v), 0 for none; each view
