@@ -135,23 +135,10 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
                 "--cache-dir",
                 cache.to_str().unwrap(),
             ]);
-            let report: Value = serde_json::from_str(
-                &std::fs::read_to_string(run_out.join("report.json")).unwrap(),
-            )
-            .unwrap();
+            let report = read_report(&run_out);
             for ((object, full, view), plan_text) in OBJECTS.iter().zip([&btf_plan, &sss_plan]) {
                 let plan: Value = serde_json::from_str(plan_text).unwrap();
-                let decisions = plan["decisions"]
-                    .as_array()
-                    .map(|a| {
-                        a.iter()
-                            .map(|d| {
-                                format!("{}:{}", d["stage"].as_str().unwrap_or(""), d["choice"])
-                            })
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                    })
-                    .unwrap_or_default();
+                let decisions = decisions(&plan);
                 let flip = node(&report, &format!("{object}_flip"))["metrics"]["mean"]
                     .as_f64()
                     .unwrap_or(f64::NAN);
@@ -240,19 +227,8 @@ pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
                 "--cache-dir",
                 cache.to_str().unwrap(),
             ]);
-            let report: Value = serde_json::from_str(
-                &std::fs::read_to_string(run_out.join("report.json")).unwrap(),
-            )
-            .unwrap();
-            let decisions = plan["decisions"]
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .map(|d| format!("{}:{}", d["stage"].as_str().unwrap_or(""), d["choice"]))
-                        .collect::<Vec<_>>()
-                        .join(" ")
-                })
-                .unwrap_or_default();
+            let report = read_report(&run_out);
+            let decisions = decisions(&plan);
             let secs = |id: &str| {
                 node(&report, id)["timings"]["seconds"]
                     .as_f64()
@@ -276,4 +252,21 @@ pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
         }
     }
     rows
+}
+
+/// A plan's decisions as `stage:choice` pairs, for the sweep's table.
+fn decisions(plan: &Value) -> String {
+    plan["decisions"]
+        .as_array()
+        .map(|a| {
+            a.iter()
+                .map(|d| format!("{}:{}", d["stage"].as_str().unwrap_or(""), d["choice"]))
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .unwrap_or_default()
+}
+
+fn read_report(out: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
 }
