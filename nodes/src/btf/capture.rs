@@ -44,6 +44,11 @@ pub struct Params {
     pub preview_light: [f64; 2],
     /// Refuse a BTF larger than this (GB); default: 80% of physical memory.
     pub memory_budget_gb: Option<f64>,
+    /// View rays per texel along each axis, averaged: a camera's pixel integrates its whole
+    /// texel, so thin lit slivers on steep slopes under grazing light count by their area. 1
+    /// (the default) samples the texel's centre only.
+    #[schemars(range(min = 1, max = 16))]
+    pub samples: u32,
 }
 
 impl Default for Params {
@@ -59,6 +64,7 @@ impl Default for Params {
             preview_view: [0.0, 0.0],
             preview_light: [45.0, 0.0],
             memory_budget_gb: None,
+            samples: 1,
         }
     }
 }
@@ -89,6 +95,12 @@ impl Node for Capture {
     fn check(&self, p: &Params) -> Result<(), NodeError> {
         for (name, set) in [("views", &p.views), ("lights", &p.lights)] {
             set.validate().map_err(|e| NodeError::param(name, e))?;
+        }
+        if !(1..=16).contains(&p.samples) {
+            return Err(NodeError::param(
+                "samples",
+                "must be 1 to 16 rays per texel side",
+            ));
         }
         Ok(())
     }
@@ -134,7 +146,7 @@ impl Node for Capture {
             .zip(&pairs)
             .try_for_each(|(out, pair)| {
                 ctx.check_cancel()?;
-                let m = scene.render(pair, (width, height), scale, out);
+                let m = scene.render(pair, (width, height), scale, p.samples as usize, out);
                 missed.fetch_add(m, Ordering::Relaxed);
                 ctx.progress(done.fetch_add(1, Ordering::Relaxed) + 1, pairs.len() as u64);
                 Ok::<(), NodeError>(())
@@ -240,12 +252,14 @@ impl<'a> Scene<'a> {
         out
     }
 
-    /// Renders one pair into its three planes; returns the number of view rays that missed.
+    /// Renders one pair into its three planes, each texel the mean of `samples`² view rays on a
+    /// grid over it; returns the number of view rays that missed.
     fn render(
         &self,
         pair: &DirectionPair,
         (width, height): (usize, usize),
         (sx, sy): (f64, f64),
+        samples: usize,
         out: &mut [f32],
     ) -> u64 {
         let plane = width * height;
@@ -254,42 +268,61 @@ impl<'a> Scene<'a> {
         let wo = pair.view.vector();
         let wi = pair.light.vector();
         let (view_ray, light_ray) = (to_grid([-wo[0], -wo[1], -wo[2]]), to_grid(wi));
+        let n = samples.max(1);
+        let share = 1.0 / (n * n) as f64;
         let mut missed = 0;
         for y in 0..height {
             for x in 0..width {
-                let (u0, v0) = ((x as f64 + 0.5) * sx - 0.5, (y as f64 + 0.5) * sy - 0.5);
-                let hit = match self.caster.cast([u0, v0, self.top], view_ray, 0.0) {
-                    Ok(h) => h,
-                    Err(_) => {
-                        missed += 1;
-                        continue;
+                let mut sum = [0.0; 3];
+                for (i, j) in (0..n * n).map(|k| (k % n, k / n)) {
+                    let (fx, fy) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                    let (u0, v0) = ((x as f64 + fx) * sx - 0.5, (y as f64 + fy) * sy - 0.5);
+                    match self.shade([u0, v0], view_ray, light_ray, wi, wo) {
+                        Some(c) => (0..3).for_each(|k| sum[k] += c[k] * share),
+                        None => missed += 1,
                     }
-                };
-                let [gu, gv] = self.lerp(hit.u, hit.v, |i| self.grad[i]);
-                // Normal in the tangent frame: ∂h/∂x = gu, ∂h/∂y = −gv.
-                let len = (gu * gu + gv * gv + 1.0).sqrt();
-                let n = [-gu / len, gv / len, 1.0 / len];
-                let cos_i = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2];
-                if cos_i <= 0.0 {
-                    continue;
                 }
-                let lit = matches!(
-                    self.caster.cast([hit.u, hit.v, hit.z], light_ray, 1e-4),
-                    Err(Miss::Escaped)
-                );
-                if !lit {
-                    continue;
-                }
-                let rho = self.lerp(hit.u, hit.v, |i| {
-                    [self.albedo[0][i], self.albedo[1][i], self.albedo[2][i]]
-                });
-                for (c, r) in rho.iter().enumerate() {
-                    let f = brdf::eval(self.model, *r, self.rho_s, self.alpha, n, wi, wo);
-                    out[c * plane + y * width + x] = (f * cos_i) as f32;
+                for (c, v) in sum.iter().enumerate() {
+                    out[c * plane + y * width + x] = *v as f32;
                 }
             }
         }
         missed
+    }
+
+    /// Radiance of the mesostructure a view ray entering the top at grid point `at` meets;
+    /// `None` if it meets none.
+    fn shade(
+        &self,
+        at: [f64; 2],
+        view_ray: [f64; 3],
+        light_ray: [f64; 3],
+        wi: [f64; 3],
+        wo: [f64; 3],
+    ) -> Option<[f64; 3]> {
+        let hit = self
+            .caster
+            .cast([at[0], at[1], self.top], view_ray, 0.0)
+            .ok()?;
+        let [gu, gv] = self.lerp(hit.u, hit.v, |i| self.grad[i]);
+        // Normal in the tangent frame: ∂h/∂x = gu, ∂h/∂y = −gv.
+        let len = (gu * gu + gv * gv + 1.0).sqrt();
+        let n = [-gu / len, gv / len, 1.0 / len];
+        let cos_i = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2];
+        if cos_i <= 0.0 {
+            return Some([0.0; 3]);
+        }
+        let lit = matches!(
+            self.caster.cast([hit.u, hit.v, hit.z], light_ray, 1e-4),
+            Err(Miss::Escaped)
+        );
+        if !lit {
+            return Some([0.0; 3]);
+        }
+        let rho = self.lerp(hit.u, hit.v, |i| {
+            [self.albedo[0][i], self.albedo[1][i], self.albedo[2][i]]
+        });
+        Some(rho.map(|r| brdf::eval(self.model, r, self.rho_s, self.alpha, n, wi, wo) * cos_i))
     }
 }
 
@@ -437,6 +470,69 @@ mod tests {
         // The block's shadow is 10 / tan 75° ≈ 2.7 texels long behind it: there must be some.
         assert!(shadowed >= 8, "only {shadowed} shadowed texels");
         assert!(matched > 500);
+    }
+
+    #[test]
+    fn samples_average_the_texel_as_a_finer_capture_does() {
+        // n × n rays per texel are the n × n texels of a capture at n times the resolution,
+        // box-filtered: its point samples sit on the same grid (texel X of the fine capture at
+        // (X + 0.5)/n − 0.5, subsample i of texel x at x + (i + 0.5)/n − 0.5). The block's
+        // shadow and walls give texels that are partly lit, where the two differ from a single
+        // ray. Tolerance: the fine capture is rounded to f32 before averaging.
+        let n = 16;
+        let hf = field(n, |i, j| {
+            if (6..9).contains(&i) && (5..9).contains(&j) {
+                5.0
+            } else {
+                0.0
+            }
+        });
+        let base = Params {
+            views: DirectionSet::List(vec![[0.0, 0.0], [40.0, 200.0]]),
+            lights: DirectionSet::List(vec![[70.0, 30.0]]),
+            albedo: [1.0; 3],
+            ..Params::default()
+        };
+        let coarse = capture(
+            hf.clone(),
+            None,
+            &Params {
+                samples: 3,
+                ..base.clone()
+            },
+        )
+        .unwrap();
+        let single = capture(hf.clone(), None, &base).unwrap();
+        let fine = capture(
+            hf,
+            None,
+            &Params {
+                resolution: Some(3 * n as u32),
+                ..base
+            },
+        )
+        .unwrap();
+        let mut partial = 0;
+        for pair in 0..2 {
+            for y in 0..n {
+                for x in 0..n {
+                    let mean = (0..9)
+                        .map(|k| at(&fine, pair, 0, 3 * x + k % 3, 3 * y + k / 3))
+                        .sum::<f64>()
+                        / 9.0;
+                    let got = at(&coarse, pair, 0, x, y);
+                    assert!(
+                        (got - mean).abs() < 1e-6,
+                        "pair {pair} texel ({x}, {y}): {got} vs {mean}"
+                    );
+                    partial += ((got - at(&single, pair, 0, x, y)).abs() > 1e-3) as usize;
+                }
+            }
+        }
+        assert!(
+            partial >= 10,
+            "only {partial} texels differ from a single ray"
+        );
     }
 
     #[test]
