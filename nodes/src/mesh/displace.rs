@@ -192,7 +192,7 @@ fn displace(mesh: &Mesh, hf: &HeightField, p: &Params, n: usize, top: f64, depth
             .sum()
     };
     let f = |v: [f32; 3]| v.map(|x| x as f64);
-    let canon = seam_twins(mesh);
+    let canon = mesh.position_twins();
     // The point at weights (w0, w1, w2) of corners (a, b, c): position and normal interpolated
     // (from each corner's seam twin, so both sides of a seam agree), then moved along the normal.
     let point = |c: [usize; 3], w: [f64; 3]| -> ([f32; 3], [f32; 2]) {
@@ -266,23 +266,6 @@ fn displace(mesh: &Mesh, hf: &HeightField, p: &Params, n: usize, top: f64, depth
     };
     out.compute_tangents();
     out
-}
-
-/// Each vertex's seam twin: the first vertex at the same position (to a millionth of the mesh's
-/// size), itself where it has none.
-fn seam_twins(mesh: &Mesh) -> Vec<usize> {
-    let (lo, hi) = mesh.bounds();
-    let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
-    let quantum = (1e-6 * size).max(f64::MIN_POSITIVE);
-    let mut first: HashMap<[i64; 3], usize> = HashMap::new();
-    mesh.positions
-        .iter()
-        .enumerate()
-        .map(|(i, q)| {
-            let key = q.map(|x| (x as f64 / quantum).round() as i64);
-            *first.entry(key).or_insert(i)
-        })
-        .collect()
 }
 
 /// The key of the point `s` steps (of `n`) from `a` towards `b`, counted from the end whose seam

@@ -172,6 +172,107 @@ impl Mesh {
             .collect();
     }
 
+    /// Each vertex's twin: the first vertex within a millionth of the mesh's size of it (itself
+    /// where there is none), so copies of a position split at a UV seam count as one. Cells of
+    /// that size are searched with their neighbours, so two copies straddling a cell boundary
+    /// are still found.
+    pub fn position_twins(&self) -> Vec<usize> {
+        let (lo, hi) = self.bounds();
+        let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+        let tol = (1e-6 * size).max(f64::MIN_POSITIVE);
+        let cell = |q: [f32; 3]| q.map(|x| (x as f64 / tol).floor() as i64);
+        let mut first: std::collections::HashMap<[i64; 3], Vec<usize>> =
+            std::collections::HashMap::new();
+        let mut twin = Vec::with_capacity(self.positions.len());
+        for (i, &q) in self.positions.iter().enumerate() {
+            let c = cell(q);
+            let near = |j: usize| {
+                let r = self.positions[j];
+                (0..3).all(|k| ((r[k] - q[k]) as f64).abs() <= tol)
+            };
+            let mut found = None;
+            'search: for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        let key = [c[0] + dx, c[1] + dy, c[2] + dz];
+                        if let Some(j) = first
+                            .get(&key)
+                            .and_then(|l| l.iter().copied().find(|&j| near(j)))
+                        {
+                            found = Some(j);
+                            break 'search;
+                        }
+                    }
+                }
+            }
+            match found {
+                Some(j) => twin.push(j),
+                None => {
+                    first.entry(c).or_default().push(i);
+                    twin.push(i);
+                }
+            }
+        }
+        twin
+    }
+
+    /// World length of one unit of texture coordinate along u and along v at each vertex: the
+    /// lengths of the triangles' ∂P/∂u and ∂P/∂v, averaged over the vertex's triangles by their
+    /// area. [0, 0] at a vertex whose triangles all have degenerate UVs (unknown).
+    pub fn uv_scale(&self) -> Vec<[f32; 2]> {
+        let n = self.positions.len();
+        let mut acc = vec![[0f64; 3]; n];
+        for t in 0..self.triangles() {
+            let [a, b, c] = self.corners(t);
+            let (e1, e2) = (
+                sub(self.positions[b], self.positions[a]),
+                sub(self.positions[c], self.positions[a]),
+            );
+            let (du1, dv1) = (
+                self.uvs[b][0] - self.uvs[a][0],
+                self.uvs[b][1] - self.uvs[a][1],
+            );
+            let (du2, dv2) = (
+                self.uvs[c][0] - self.uvs[a][0],
+                self.uvs[c][1] - self.uvs[a][1],
+            );
+            let det = du1 * dv2 - du2 * dv1;
+            let area = dot(cross(e1, e2), cross(e1, e2)).sqrt();
+            if det.abs() < 1e-20 || !det.is_finite() || area.is_nan() || area <= 0.0 {
+                continue;
+            }
+            let r = 1.0 / det;
+            let len = |v: [f32; 3]| dot(v, v).sqrt() as f64;
+            let dpdu = len([
+                (e1[0] * dv2 - e2[0] * dv1) * r,
+                (e1[1] * dv2 - e2[1] * dv1) * r,
+                (e1[2] * dv2 - e2[2] * dv1) * r,
+            ]);
+            let dpdv = len([
+                (e2[0] * du1 - e1[0] * du2) * r,
+                (e2[1] * du1 - e1[1] * du2) * r,
+                (e2[2] * du1 - e1[2] * du2) * r,
+            ]);
+            if !(dpdu.is_finite() && dpdv.is_finite()) {
+                continue;
+            }
+            for v in [a, b, c] {
+                acc[v][0] += area as f64 * dpdu;
+                acc[v][1] += area as f64 * dpdv;
+                acc[v][2] += area as f64;
+            }
+        }
+        acc.into_iter()
+            .map(|[u, v, w]| {
+                if w > 0.0 {
+                    [(u / w) as f32, (v / w) as f32]
+                } else {
+                    [0.0, 0.0]
+                }
+            })
+            .collect()
+    }
+
     /// Structural checks: index range, attribute counts, finite values.
     pub fn check(&self) -> Result<(), String> {
         let n = self.positions.len();
@@ -292,6 +393,44 @@ mod tests {
         m.uvs = vec![[0., 1.], [1., 1.], [1., 0.], [0., 0.]];
         m.compute_tangents();
         assert_eq!(m.tangents[0][3], -1.0);
+    }
+
+    #[test]
+    fn position_twins_join_copies_across_cell_boundaries() {
+        // Two copies a hair apart on either side of a multiple of the tolerance, and a distinct
+        // point: the copies are twins whichever side of a cell boundary they fall.
+        let eps = 1e-7f32;
+        let m = Mesh {
+            positions: vec![
+                [0.0, 0.0, 0.0],
+                [1.0, 0.5, 0.0],
+                [0.5 - eps, 1.0, 0.0],
+                [0.5 + eps, 1.0, 0.0],
+            ],
+            ..Default::default()
+        };
+        assert_eq!(m.position_twins(), vec![0, 1, 2, 2]);
+    }
+
+    #[test]
+    fn uv_scale_is_the_world_length_of_a_texture_unit() {
+        // A 3 × 1 rectangle mapped to the unit square: u spans 3 units, v spans 1.
+        let mut m = Mesh {
+            positions: vec![[0., 0., 0.], [3., 0., 0.], [3., 1., 0.], [0., 1., 0.]],
+            uvs: vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]],
+            indices: vec![0, 1, 2, 0, 2, 3],
+            ..Default::default()
+        };
+        m.compute_normals();
+        for s in m.uv_scale() {
+            assert!(
+                (s[0] - 3.0).abs() < 1e-6 && (s[1] - 1.0).abs() < 1e-6,
+                "{s:?}"
+            );
+        }
+        // Degenerate UVs: unknown.
+        m.uvs = vec![[0.5, 0.5]; 4];
+        assert!(m.uv_scale().iter().all(|s| *s == [0.0, 0.0]));
     }
 
     #[test]
