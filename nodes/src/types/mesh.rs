@@ -114,6 +114,32 @@ impl Mesh {
             .collect();
     }
 
+    /// Triangle `t`'s ∂P/∂u and ∂P/∂v; `None` where its UVs are degenerate.
+    fn uv_derivatives(&self, t: usize) -> Option<([f32; 3], [f32; 3])> {
+        let [a, b, c] = self.corners(t);
+        let (e1, e2) = (
+            sub(self.positions[b], self.positions[a]),
+            sub(self.positions[c], self.positions[a]),
+        );
+        let (du1, dv1) = (
+            self.uvs[b][0] - self.uvs[a][0],
+            self.uvs[b][1] - self.uvs[a][1],
+        );
+        let (du2, dv2) = (
+            self.uvs[c][0] - self.uvs[a][0],
+            self.uvs[c][1] - self.uvs[a][1],
+        );
+        let det = du1 * dv2 - du2 * dv1;
+        if det.abs() < 1e-20 || !det.is_finite() {
+            return None;
+        }
+        let r = 1.0 / det;
+        Some((
+            [0, 1, 2].map(|k| (e1[k] * dv2 - e2[k] * dv1) * r),
+            [0, 1, 2].map(|k| (e2[k] * du1 - e1[k] * du2) * r),
+        ))
+    }
+
     /// Per-vertex tangent frames from the UV parametrisation (Lengyel's method: accumulate each
     /// triangle's ∂P/∂u and ∂P/∂v, orthogonalise against the normal). A vertex whose triangles
     /// all have degenerate UVs gets an arbitrary tangent perpendicular to its normal, so the frame
@@ -122,35 +148,10 @@ impl Mesh {
         let n = self.positions.len();
         let (mut su, mut sv) = (vec![[0f32; 3]; n], vec![[0f32; 3]; n]);
         for t in 0..self.triangles() {
-            let [a, b, c] = self.corners(t);
-            let (e1, e2) = (
-                sub(self.positions[b], self.positions[a]),
-                sub(self.positions[c], self.positions[a]),
-            );
-            let (du1, dv1) = (
-                self.uvs[b][0] - self.uvs[a][0],
-                self.uvs[b][1] - self.uvs[a][1],
-            );
-            let (du2, dv2) = (
-                self.uvs[c][0] - self.uvs[a][0],
-                self.uvs[c][1] - self.uvs[a][1],
-            );
-            let det = du1 * dv2 - du2 * dv1;
-            if det.abs() < 1e-20 || !det.is_finite() {
+            let Some((dpdu, dpdv)) = self.uv_derivatives(t) else {
                 continue;
-            }
-            let r = 1.0 / det;
-            let dpdu = [
-                (e1[0] * dv2 - e2[0] * dv1) * r,
-                (e1[1] * dv2 - e2[1] * dv1) * r,
-                (e1[2] * dv2 - e2[2] * dv1) * r,
-            ];
-            let dpdv = [
-                (e2[0] * du1 - e1[0] * du2) * r,
-                (e2[1] * du1 - e1[1] * du2) * r,
-                (e2[2] * du1 - e1[2] * du2) * r,
-            ];
-            for v in [a, b, c] {
+            };
+            for v in self.corners(t) {
                 for k in 0..3 {
                     su[v][k] += dpdu[k];
                     sv[v][k] += dpdv[k];
@@ -228,32 +229,13 @@ impl Mesh {
                 sub(self.positions[b], self.positions[a]),
                 sub(self.positions[c], self.positions[a]),
             );
-            let (du1, dv1) = (
-                self.uvs[b][0] - self.uvs[a][0],
-                self.uvs[b][1] - self.uvs[a][1],
-            );
-            let (du2, dv2) = (
-                self.uvs[c][0] - self.uvs[a][0],
-                self.uvs[c][1] - self.uvs[a][1],
-            );
-            let det = du1 * dv2 - du2 * dv1;
             let area = dot(cross(e1, e2), cross(e1, e2)).sqrt();
-            if det.abs() < 1e-20 || !det.is_finite() || area.is_nan() || area <= 0.0 {
+            let Some((du, dv)) = self.uv_derivatives(t) else {
                 continue;
-            }
-            let r = 1.0 / det;
+            };
             let len = |v: [f32; 3]| dot(v, v).sqrt() as f64;
-            let dpdu = len([
-                (e1[0] * dv2 - e2[0] * dv1) * r,
-                (e1[1] * dv2 - e2[1] * dv1) * r,
-                (e1[2] * dv2 - e2[2] * dv1) * r,
-            ]);
-            let dpdv = len([
-                (e2[0] * du1 - e1[0] * du2) * r,
-                (e2[1] * du1 - e1[1] * du2) * r,
-                (e2[2] * du1 - e1[2] * du2) * r,
-            ]);
-            if !(dpdu.is_finite() && dpdv.is_finite()) {
+            let (dpdu, dpdv) = (len(du), len(dv));
+            if area.is_nan() || area <= 0.0 || !(dpdu.is_finite() && dpdv.is_finite()) {
                 continue;
             }
             for v in [a, b, c] {
