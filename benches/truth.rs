@@ -57,13 +57,8 @@ fn graph(root: &Path, case: &Case) -> Value {
     let mut g: Value =
         serde_json::from_str(&std::fs::read_to_string(root.join("graphs/truth.json")).unwrap())
             .unwrap();
+    truth_scenes::add_measures(&mut g);
     let nodes = g["nodes"].as_object_mut().unwrap();
-    let mut macro_ = nodes["truth"].clone();
-    macro_["inputs"]["mesh"] = json!("torus.mesh");
-    let pi = std::f64::consts::PI;
-    macro_["params"]["albedo"] = json!([pi, pi, pi]);
-    macro_["params"]["light"]["intensity"] = json!(1.0);
-    nodes.insert("macro".into(), macro_);
     // What a user without a BTF would render: the plain mesh with the tile's normal map.
     nodes.insert(
         "nm_normals".into(),
@@ -83,18 +78,6 @@ fn graph(root: &Path, case: &Case) -> Value {
         "nm_flip".into(),
         json!({ "kind": "image.flip", "inputs": { "reference": "truth.image", "test": "nm.image" }, "params": { "object_only": true } }),
     );
-    for (id, from) in [
-        ("truth_npy", "truth.image"),
-        ("ours_npy", "ours.image"),
-        ("truth_mask_npy", "truth.coverage"),
-        ("ours_mask_npy", "ours.mask"),
-        ("macro_npy", "macro.image"),
-    ] {
-        nodes.insert(
-            id.into(),
-            json!({ "kind": "npy.write", "inputs": { "value": from }, "params": { "path": format!("{id}.npy") } }),
-        );
-    }
     for (id, v) in &case.nodes {
         nodes.insert(id.clone(), v.clone());
     }
@@ -184,28 +167,7 @@ fn run_case(root: &Path, out: &Path, cache: &Path, width: u32, case: &Case) -> M
         read_npy(&run_out.join("ours_mask_npy.npy")),
     );
     let cosine = read_npy(&run_out.join("macro_npy.npy"));
-    let mut bins = [(0.0, 0.0, 0usize); 2];
-    for px in 0..tm.len() {
-        if tm[px] < 0.999 || om[px] < 0.5 {
-            continue;
-        }
-        let c = cosine[px * 3] as f64;
-        if c <= 0.0 {
-            continue;
-        }
-        let angle = c.min(1.0).acos().to_degrees();
-        let bin = match angle {
-            a if (75.0..82.0).contains(&a) => 0,
-            a if a >= 82.0 => 1,
-            _ => continue,
-        };
-        for k in 0..3 {
-            bins[bin].0 += ours[px * 3 + k] as f64;
-            bins[bin].1 += truth[px * 3 + k] as f64;
-        }
-        bins[bin].2 += 1;
-    }
-    let grazing = bins.map(|(o, t, n)| (if t > 0.0 { o / t - 1.0 } else { f64::NAN }, n));
+    let grazing = truth_scenes::grazing_bias(&truth, &ours, &tm, &om, &cosine);
     std::fs::copy(
         run_out.join("truth_ours_difference.png"),
         out.join(format!("{}.png", case.name)),

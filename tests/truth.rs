@@ -1,21 +1,34 @@
 //! How close to the truth, held in CI: `graphs/truth.json` as the README measures it (the torus
 //! under bumps 6 texels high, a ubo81 Lambert BTF, the MDF, 320 × 240, every node on the CPU)
 //! and its open plane with and without the MDF, against the true mesostructure rendered by
-//! `render.reference`. The bounds are the issue's where this renderer meets them, else a
-//! margin over what `cargo bench --bench truth` measured, so that a change that loses accuracy
-//! fails here.
+//! `render.reference`. The bounds are the issue's (relative RMSE at most 0.30, IoU at least
+//! 0.99 on the torus, pixels lit at 75–90° within ±10% on average, the open plane's IoU at least
+//! 0.97), and a margin over what `cargo bench --bench truth` measured where the issue sets none,
+//! so that a change that loses accuracy fails here.
 
 mod common;
 
 #[path = "../benches/common/truth_scenes.rs"]
 mod truth_scenes;
 
-use common::{mesoflow, report, Scratch};
+use common::{mesoflow, read_npy, report, Scratch};
 use serde_json::Value;
 use std::path::Path;
 
-fn measure(s: &Scratch, name: &str, sets: &[String]) -> (f64, f64) {
-    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/truth.json");
+struct Measured {
+    rmse: f64,
+    iou: f64,
+    /// Bias of the pixels lit at 75–82° and 82–90° from the macro normal, and their counts.
+    grazing: [(f64, usize); 2],
+}
+
+fn measure(s: &Scratch, name: &str, sets: &[String]) -> Measured {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut g: Value =
+        serde_json::from_str(&std::fs::read_to_string(root.join("graphs/truth.json")).unwrap())
+            .unwrap();
+    truth_scenes::add_measures(&mut g);
+    let graph = s.write(&format!("{name}.json"), &g.to_string());
     let out = s.path(name);
     let mut args: Vec<String> = vec![
         "run".into(),
@@ -32,6 +45,10 @@ fn measure(s: &Scratch, name: &str, sets: &[String]) -> (f64, f64) {
         "--output".into(),
         "compare.iou".into(),
     ];
+    for (id, _) in truth_scenes::NPY {
+        args.push("--output".into());
+        args.push(format!("{id}.files"));
+    }
     for kv in sets {
         args.push("--set".into());
         args.push(kv.clone());
@@ -49,36 +66,61 @@ fn measure(s: &Scratch, name: &str, sets: &[String]) -> (f64, f64) {
         .find(|n| n["id"] == "compare")
         .unwrap();
     let m = |k: &str| compare["metrics"][k].as_f64().unwrap_or(f64::NAN);
-    (m("relative_rmse"), m("iou"))
+    let npy = |id: &str| read_npy(&out.join(format!("{id}.npy"))).1;
+    Measured {
+        rmse: m("relative_rmse"),
+        iou: m("iou"),
+        grazing: truth_scenes::grazing_bias(
+            &npy("truth_npy"),
+            &npy("ours_npy"),
+            &npy("truth_mask_npy"),
+            &npy("ours_mask_npy"),
+            &npy("macro_npy"),
+        ),
+    }
 }
 
 #[test]
 fn renders_stay_as_close_to_the_true_mesostructure_as_measured() {
     let s = Scratch::new();
-    // The torus: the issue's bounds, relative RMSE at most 0.30 (measured 0.266) and silhouette
-    // IoU at least 0.99 (measured 0.992; every node on the CPU, so the same bits every run).
-    let (rmse, iou) = measure(&s, "torus", &[]);
-    eprintln!("torus: relative RMSE {rmse:.4}, IoU {iou:.4}");
-    assert!(rmse <= 0.30, "torus relative RMSE {rmse}");
-    assert!(iou >= 0.99, "torus IoU {iou}");
-    // The open plane: the shell's side carves its edge (IoU measured 0.953 with the MDF, 0.923
-    // without; the issue asks 0.97, not met yet), and the parallax-compensated view blend needs
-    // the MDF (relative RMSE measured 0.264 with it, 0.385 without).
-    let renders = ["truth", "ours"];
-    let (with_rmse, with_iou) = measure(
+    // The torus: the issue's bounds (measured: relative RMSE 0.199, IoU 0.993, pixels lit at
+    // 75–82° +6.8%, 82–90° +1.3%; every node on the CPU, so the same bits every run).
+    let t = measure(&s, "torus", &[]);
+    eprintln!(
+        "torus: relative RMSE {:.4}, IoU {:.4}, lit at 75–82° {:+.3} ({} px), 82–90° {:+.3} ({} px)",
+        t.rmse, t.iou, t.grazing[0].0, t.grazing[0].1, t.grazing[1].0, t.grazing[1].1
+    );
+    assert!(t.rmse <= 0.30, "torus relative RMSE {}", t.rmse);
+    assert!(t.iou >= 0.99, "torus IoU {}", t.iou);
+    for (range, (bias, pixels)) in ["75–82°", "82–90°"].iter().zip(t.grazing) {
+        // Hundreds of pixels in each range, or the average says little.
+        assert!(pixels > 500, "{pixels} pixels lit at {range}");
+        assert!(bias.abs() <= 0.10, "pixels lit at {range}: bias {bias:+.3}");
+    }
+    // The open plane: the shell's sides carve its far edge and extend its near one (IoU
+    // measured 0.996 with the MDF, 0.923 without), and the parallax-compensated view blend
+    // needs the MDF (relative RMSE measured 0.177 with it, 0.362 without).
+    let renders = ["truth", "ours", "macro"];
+    let with = measure(
         &s,
         "plane_mdf",
         &truth_scenes::plane_sets(320, true, &renders),
     );
-    let (without_rmse, without_iou) =
-        measure(&s, "plane", &truth_scenes::plane_sets(320, false, &renders));
+    let without = measure(&s, "plane", &truth_scenes::plane_sets(320, false, &renders));
     eprintln!(
-        "plane: MDF relative RMSE {with_rmse:.4}, IoU {with_iou:.4}; without {without_rmse:.4}, {without_iou:.4}"
+        "plane: MDF relative RMSE {:.4}, IoU {:.4}; without {:.4}, {:.4}",
+        with.rmse, with.iou, without.rmse, without.iou
     );
-    assert!(with_iou >= 0.945, "plane IoU with the MDF {with_iou}");
-    assert!(with_iou > without_iou + 0.02, "{with_iou} vs {without_iou}");
+    assert!(with.iou >= 0.97, "plane IoU with the MDF {}", with.iou);
     assert!(
-        with_rmse <= 0.29,
-        "plane relative RMSE with the MDF {with_rmse}"
+        with.iou > without.iou + 0.02,
+        "{} vs {}",
+        with.iou,
+        without.iou
+    );
+    assert!(
+        with.rmse <= 0.22,
+        "plane relative RMSE with the MDF {}",
+        with.rmse
     );
 }

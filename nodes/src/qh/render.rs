@@ -230,6 +230,7 @@ pub fn render(
         background: p.background,
         parallax: false,
         sides: Vec::new(),
+        aspect: Vec::new(),
     };
     let shadow = if p.shadows {
         Some(sss_render::shadow_map(

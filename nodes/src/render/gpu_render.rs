@@ -77,9 +77,19 @@ impl<'a> GpuRenderer<'a> {
         mesh_f.extend(m.normals.iter().flatten());
         mesh_f.extend(m.uvs.iter().flatten());
         mesh_f.extend(m.tangents.iter().flatten());
+        // The texel aspect per vertex (1, 1 where the scene has none).
+        if scene.aspect.len() == m.positions.len() {
+            mesh_f.extend(scene.aspect.iter().flatten());
+        } else {
+            mesh_f.extend(std::iter::repeat_n(1.0f32, 2 * m.positions.len()));
+        }
         // The shell's side walls at the open boundary (shade.rs), four corners each.
         let sides_at = [mesh_f.len() as u32, scene.sides.len() as u32];
-        mesh_f.extend(scene.sides.iter().flatten().flatten().map(|v| *v as f32));
+        // Per wall: its four corners, then its triangle and the corner slots of its edge.
+        for side in &scene.sides {
+            mesh_f.extend(side.q.iter().flatten().map(|v| *v as f32));
+            mesh_f.extend([side.tri as f32, side.ends[0] as f32, side.ends[1] as f32]);
+        }
         let mat = scene.material;
         let mut tables: Vec<u32> = m.indices.clone();
         let pair_of_off = tables.len() as u32;

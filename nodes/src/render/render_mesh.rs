@@ -12,7 +12,7 @@ use super::footprint;
 use super::layers;
 use super::light::{Light, LightParams};
 use super::material::{Material, MdfLookup, Source};
-use super::shade::{shell_sides, Scene, ShadowMap};
+use super::shade::{shell_sides, texel_aspect, Scene, ShadowMap};
 use crate::geometry::{bounding_sphere, normalize, sub};
 use crate::progress::Counter;
 use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
@@ -90,7 +90,8 @@ impl Node for RenderMesh {
         NodeSpec {
             kind: "render.mesh",
             // 3: the mask output; lights beyond the sampled cone extrapolated, not clamped.
-            version: 3,
+            // 4: directions looked up in the tile's own proportions where the UVs stretch it.
+            version: 4,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -198,6 +199,7 @@ impl Node for RenderMesh {
             background: p.background,
             parallax: p.parallax,
             sides: shell_sides(mesh, p.shell),
+            aspect: texel_aspect(mesh, p.tiling, p.shell, mdf),
         };
         let (data, mask, ms, gpu_ms) = match ctx.gpu() {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
@@ -575,59 +577,73 @@ mod tests {
     }
 
     #[test]
-    fn an_open_planes_edge_is_carved_by_the_shells_side_on_cpu_and_gpu() {
+    fn an_open_planes_shell_has_sides_rays_leave_and_enter_by_on_cpu_and_gpu() {
         // Closed form: the 2 × 2 plane over a flat mesostructure at the shell's bottom (0.1 below
-        // it), seen orthographically at 45° in x. A ray entering the top at x reaches the bottom
-        // at x − 0.1, so entries within 0.1 of the far edge leave through the shell's side and
-        // miss: 0.1 of the plane's 2-unit width, 5% of its coverage. Without the side walls (the
-        // first version) the MDF carved nothing there.
+        // it), seen orthographically at 45° from +x. What shows is that bottom: a ray entering
+        // the top at x reaches it at x − 0.1, so entries within 0.1 of the far edge leave
+        // through the shell's far side and miss, and rays passing under the near edge enter
+        // through its side and meet the bottom up to 0.1 beyond it. The outline is the plain
+        // plane's moved by 0.1: 5% of its pixels lost at the far edge, 5% gained at the near
+        // one. (Without side walls nothing was lost; with walls that only bounded rays from
+        // the top, nothing was gained.)
         let btf = test_btf(8, &[[0.0, 0.0]], &[[0.0, 0.0]]);
         let p = Params {
             camera: CameraParams {
                 eye: [3.0, 0.0, 3.0],
                 target: [0.0, 0.0, 0.0],
-                orthographic: Some(1.6),
+                // Not 1.6: its rows' centres would run exactly along the walls at y = ±1,
+                // where f32 and f64 decide a ray in the wall's plane differently.
+                orthographic: Some(1.61),
                 resolution: [200, 200],
                 ..Default::default()
             },
             shell: 0.1,
             ..plane_params(200)
         };
-        let (_, plain) = render(plane(), Arc::new(btf.clone()), None, &p).unwrap();
-        let (_, deep) = render(plane(), Arc::new(btf.clone()), Some(sunken_mdf(4.0)), &p).unwrap();
-        let lost = (plain - deep) / plain;
-        // The plane's edge is pixelated (about 141 pixels across at 45°: 0.7% of its width).
+        let mdf = sunken_mdf(4.0);
+        let material = Material::new(Source::Raw(&btf));
+        let mesh = plane();
+        let scene = |with_mdf: bool| Scene {
+            mesh: &mesh,
+            material: &material,
+            mdf: with_mdf.then(|| MdfLookup::new(&mdf)),
+            light: Light::new(&p.light).unwrap(),
+            tiling: p.tiling,
+            shell: p.shell,
+            background: p.background,
+            parallax: false,
+            sides: shell_sides(&mesh, p.shell),
+            aspect: Vec::new(),
+        };
+        let cam = Camera::new(&p.camera).unwrap();
+        let plain = render_cpu(&scene(false), &cam, &p, &Counter::none())
+            .unwrap()
+            .1;
+        let deep = render_cpu(&scene(true), &cam, &p, &Counter::none())
+            .unwrap()
+            .1;
+        let count = |f: &dyn Fn(usize) -> bool| (0..plain.len()).filter(|&i| f(i)).count() as f64;
+        let area = count(&|i| plain[i] > 0.5);
+        let lost = count(&|i| plain[i] > 0.5 && deep[i] <= 0.5) / area;
+        let gained = count(&|i| plain[i] <= 0.5 && deep[i] > 0.5) / area;
+        // The plane's edges are pixelated (about 141 pixels across at 45°: 0.7% of its width).
         assert!(
-            (lost - 0.05).abs() < 0.01,
-            "lost fraction {lost}, expected 0.05"
+            (lost - 0.05).abs() < 0.01 && (gained - 0.05).abs() < 0.01,
+            "lost {lost}, gained {gained}, expected 0.05 each"
         );
-        // The GPU path carves the same edge.
+        // The GPU path carves and extends the same outline.
         for backends in [wgpu::Backends::PRIMARY, wgpu::Backends::GL] {
             let Ok(gpu) = mesoflow_runtime::Gpu::with_backends(backends) else {
                 continue;
             };
-            let mdf = sunken_mdf(4.0);
-            let material = Material::new(Source::Raw(&btf));
-            let mesh = plane();
-            let scene = Scene {
-                mesh: &mesh,
-                material: &material,
-                mdf: Some(MdfLookup::new(&mdf)),
-                light: Light::new(&p.light).unwrap(),
-                tiling: p.tiling,
-                shell: p.shell,
-                background: p.background,
-                parallax: false,
-                sides: shell_sides(&mesh, p.shell),
-            };
-            let cam = Camera::new(&p.camera).unwrap();
             let ctx = NodeContext::detached(None);
-            match render_gpu(&ctx, &gpu, &scene, &cam, &p) {
+            match render_gpu(&ctx, &gpu, &scene(true), &cam, &p) {
                 Ok((_, m, _, _)) => {
-                    let g = coverage(&m);
+                    let differ = count(&|i| (m[i] > 0.5) != (deep[i] > 0.5)) / area;
+
                     assert!(
-                        (g - deep).abs() < 0.002,
-                        "{}: {g} vs CPU {deep}",
+                        differ < 0.002,
+                        "{}: {differ} of the pixels differ",
                         gpu.describe()
                     );
                 }
@@ -665,6 +681,7 @@ mod tests {
                 background: [0.0; 3],
                 parallax,
                 sides: Vec::new(),
+                aspect: Vec::new(),
             };
             let (o, d) = cam.ray(0, 0);
             let (_, _, s, wo) = scene.hit(&layers, 0, o, d).unwrap();
@@ -675,6 +692,71 @@ mod tests {
                 s.uv
             );
         }
+    }
+
+    #[test]
+    fn a_stretched_tile_is_looked_up_in_its_own_proportions() {
+        // A 4 × 1 quad carrying one 8-texel tile (tiling 1) under a 0.5 shell over a flat
+        // floor 4 texels deep: one texel of depth is 1/8 world unit, one texel across is 1/2
+        // along u and 1/8 along v, so k = (1/4, 1). Seen at 45° along u, the ray meets the
+        // floor 0.5 below the top, 0.5 world units (1/8 of the quad) further along u; with the
+        // tile's own proportions ignored the parallax would move the lookup a full tile
+        // width × 0.5 = 4× too far.
+        let mdf = sunken_mdf(4.0);
+        let btf = test_btf(8, &[[0.0, 0.0]], &[[0.0, 0.0]]);
+        let material = Material::new(Source::Raw(&btf));
+        let mut mesh = Mesh {
+            positions: vec![
+                [-2., -0.5, 0.],
+                [2., -0.5, 0.],
+                [2., 0.5, 0.],
+                [-2., 0.5, 0.],
+            ],
+            uvs: vec![[0., 0.], [1., 0.], [1., 1.], [0., 1.]],
+            indices: vec![0, 1, 2, 0, 2, 3],
+            ..Default::default()
+        };
+        mesh.compute_normals();
+        mesh.compute_tangents();
+        let aspect = texel_aspect(&mesh, [1.0, 1.0], 0.5, Some(&mdf));
+        for k in &aspect {
+            assert!(
+                (k[0] - 0.25).abs() < 1e-6 && (k[1] - 1.0).abs() < 1e-6,
+                "{k:?}"
+            );
+        }
+        let cam = Camera::new(&CameraParams {
+            eye: [3.0, 0.0, 3.0],
+            target: [0.0, 0.0, 0.0],
+            orthographic: Some(0.01),
+            resolution: [1, 1],
+            ..Default::default()
+        })
+        .unwrap();
+        let layers = super::layers::trace(&mesh, &cam, 1, &Counter::none());
+        let scene = Scene {
+            mesh: &mesh,
+            material: &material,
+            mdf: Some(MdfLookup::new(&mdf)),
+            light: Light::new(&LightParams::default()).unwrap(),
+            tiling: [1.0, 1.0],
+            shell: 0.5,
+            background: [0.0; 3],
+            parallax: true,
+            sides: Vec::new(),
+            aspect,
+        };
+        let (o, d) = cam.ray(0, 0);
+        let (t, t_front, s, _) = scene.hit(&layers, 0, o, d).unwrap();
+        // 0.5 below the top at 45°: 0.5·√2 along the ray. The tile sees the ray at 14° from
+        // its normal, between the MDF's rings at 0° and 15°, whose blend of 4/cos θ (convex)
+        // is 0.2% long there: 0.5% bounds it.
+        assert!(
+            (t - t_front - 0.5 * 2f64.sqrt()).abs() < 4e-3,
+            "{}",
+            t - t_front
+        );
+        assert!((s.uv[0] - (0.5 - 0.125)).abs() < 1e-3, "{:?}", s.uv);
     }
 
     #[test]
@@ -805,6 +887,9 @@ mod tests {
                 background: p.background,
                 parallax: p.parallax,
                 sides: shell_sides(&torus, p.shell),
+                // The torus's tiles are squeezed inside and stretched outside: the GPU must
+                // map directions into the tile's proportions as the CPU does.
+                aspect: texel_aspect(&torus, p.tiling, p.shell, with_mdf.then_some(&mdf)),
             };
             let cam = Camera::new(&p.camera).unwrap();
             let ctx = NodeContext::detached(None);

@@ -37,6 +37,11 @@ struct Params {
 @group(0) @binding(8) var layers: texture_2d_array<f32>;
 
 const NONE: u32 = 0xffffffffu;
+// A side wall in `mesh`: four corners, its triangle, the corner slots of its edge.
+const SIDE_FLOATS: u32 = 15u;
+// shade.rs's SHADOW_SLACK and material.rs's IMPLIED_FLOOR.
+const SHADOW_SLACK: f32 = 1.0;
+const IMPLIED_FLOOR: f32 = 0.1;
 
 fn inf() -> f32 {
     return bitcast<f32>(0x7f800000u);
@@ -67,6 +72,8 @@ struct Surface {
     t: vec3<f32>,
     b: vec3<f32>,
     n: vec3<f32>,
+    // The texel aspect (k_u, k_v) (shade.rs's texel_aspect).
+    k: vec2<f32>,
 };
 
 fn v3(base: u32, i: u32) -> vec3<f32> {
@@ -106,7 +113,26 @@ fn surface(f: vec4<f32>) -> Surface {
     s.n = nn;
     s.t = tt;
     s.b = cross(nn, tt) * hand;
+    let kb = 12u * n;
+    s.k = vec2<f32>(mesh[kb + 2u * i0], mesh[kb + 2u * i0 + 1u]) * w.x
+        + vec2<f32>(mesh[kb + 2u * i1], mesh[kb + 2u * i1 + 1u]) * w.y
+        + vec2<f32>(mesh[kb + 2u * i2], mesh[kb + 2u * i2 + 1u]) * w.z;
     return s;
+}
+
+// A local direction in the tile's own proportions (shade.rs's Surface::canonical).
+fn canonical(s: Surface, w: vec3<f32>) -> vec3<f32> {
+    let c = vec3<f32>(w.x * s.k.x, w.y * s.k.y, w.z);
+    if (length(c) > 1e-30) {
+        return normalize(c);
+    }
+    return w;
+}
+
+// World length along canonical direction per unit of depth (shade.rs's Surface::stretch).
+fn stretch(s: Surface, w: vec3<f32>) -> f32 {
+    let l = length(vec3<f32>(w.x * s.k.x, w.y * s.k.y, w.z));
+    return select(1.0, 1.0 / l, l > 0.0);
 }
 
 fn local(s: Surface, v: vec3<f32>) -> vec3<f32> {
@@ -349,13 +375,80 @@ fn texel(pair: u32, x: u32, y: u32) -> vec3<f32> {
     return c;
 }
 
+// How much light from local direction l reaches the point `depth` MDF texels below the top at
+// uv (material.rs's MdfLookup::reaches): each MDF view blended for l asked along its own line
+// through the point.
+fn reaches(uv: vec2<f32>, depth: f32, l: vec3<f32>, slack: f32) -> f32 {
+    if (l.z <= 1e-4) {
+        return 0.0;
+    }
+    let mw = u32(P.mdf.x);
+    let mh = u32(P.mdf.y);
+    let bv = lookup(P.offs2.z, P.dirs.z, P.rings_at.z, l);
+    var out = 0.0;
+    for (var a = 0u; a < bv.count; a = a + 1u) {
+        let i = bv.idx[a];
+        let vk = vec3<f32>(dirs[P.offs2.z + 3u * i], dirs[P.offs2.z + 3u * i + 1u], dirs[P.offs2.z + 3u * i + 2u]);
+        if (vk.z <= 1e-6) {
+            continue;
+        }
+        let reach = depth / vk.z;
+        let tp = taps(uv + reach * vk.xy / P.mdf.xy, mw, mh);
+        var sum = 0.0;
+        var weight = 0.0;
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            let tw = tap_weight(tp, k);
+            let d = mdf[(i * mh + tp.y[k >> 1u]) * mw + tp.x[k & 1u]];
+            if (d < 3.0e38 && tw > 0.0) {
+                sum = sum + d * tw;
+                weight = weight + tw;
+            }
+        }
+        var met = inf();
+        if (weight >= 0.5) {
+            met = sum / weight;
+        }
+        let sl = slack * (1.0 + 0.05 * reach);
+        out = out + bv.w[a] * clamp(1.0 - (reach - sl - met), 0.0, 1.0);
+    }
+    return out;
+}
+
+// The light's visibility at the view hit (shade.rs's light_visibility); 1 where there is no
+// depth (no MDF, or lookups at the hit's own texel).
+fn light_visible(uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>, l: vec3<f32>) -> f32 {
+    if (P.mdf.w < 0.5 || (depth.x <= 0.0 && depth.y <= 0.0)) {
+        return 1.0;
+    }
+    let hit = uv - depth * wo.xy;
+    return reaches(hit, depth.x * P.mdf.x * wo.z, l, SHADOW_SLACK);
+}
+
+// The visibility a blend of sampled lights implies (material.rs).
+fn implied(bl: Blend, uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>) -> f32 {
+    var v = 0.0;
+    for (var k = 0u; k < bl.count; k = k + 1u) {
+        let i = P.offs2.y + 3u * bl.idx[k];
+        v = v + bl.w[k] * light_visible(uv, wo, depth, vec3<f32>(dirs[i], dirs[i + 1u], dirs[i + 2u]));
+    }
+    return v;
+}
+
+// The sampled lights' value with the query's own visibility for the one they imply, only ever
+// darker (material.rs's eval_shadowed).
+fn reshadow(e: vec3<f32>, own: f32, implied: f32) -> vec3<f32> {
+    return e * min((own + IMPLIED_FLOOR) / (implied + IMPLIED_FLOOR), 1.0);
+}
+
 // Beyond the outermost light ring: the two outer rings at the light's azimuth, continued as a
-// power of cos θ (material.rs).
+// power of cos θ (material.rs); the MDF's shadows carried over as in reshadow.
 fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> vec3<f32> {
     let c1 = P.rings.x;
     let c0 = P.rings.y;
+    let own = light_visible(uv, wo, depth, wi);
     if (P.rings.w < 0.5 || wi.z >= c1 - 1e-9) {
-        return btf_eval_sampled(uv, wo, depth, lookup(P.offs2.y, P.dirs.y, P.rings_at.y, wi));
+        let bl = lookup(P.offs2.y, P.dirs.y, P.rings_at.y, wi);
+        return reshadow(btf_eval_sampled(uv, wo, depth, bl), own, implied(bl, uv, wo, depth));
     }
     let h = length(wi.xy);
     var cs = vec2<f32>(1.0, 0.0);
@@ -378,8 +471,8 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> ve
         b1 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s1 * cs.x, s1 * cs.y, c1), acos(clamp(c1, -1.0, 1.0)));
         b0 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s0 * cs.x, s0 * cs.y, c0), acos(clamp(c0, -1.0, 1.0)));
     }
-    let e1 = btf_eval_sampled(uv, wo, depth, b1);
-    let e0 = btf_eval_sampled(uv, wo, depth, b0);
+    let e1 = reshadow(btf_eval_sampled(uv, wo, depth, b1), own, implied(b1, uv, wo, depth));
+    let e0 = reshadow(btf_eval_sampled(uv, wo, depth, b0), own, implied(b0, uv, wo, depth));
     // A power of cos θ through the two rings (material.rs).
     let c = max(wi.z, 1e-6);
     var out = vec3<f32>(0.0);
@@ -441,15 +534,12 @@ fn btf_eval_sampled(uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>, bl: Blend) -
     return acc;
 }
 
-// (world distance, MDF texels) to the mesostructure, 0 without an MDF.
-fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
-    if (P.mdf.w < 0.5 || P.mdf.z <= 0.0) {
-        return vec2<f32>(0.0, 0.0);
-    }
+// The MDF's distance in texels at uv along wc (material.rs's MdfLookup::eval); ∞ for a miss.
+fn mdf_lookup(uv: vec2<f32>, wc: vec3<f32>) -> f32 {
     let mw = u32(P.mdf.x);
     let mh = u32(P.mdf.y);
-    let tp = taps(s.uv, mw, mh);
-    let bv = lookup(P.offs2.z, P.dirs.z, P.rings_at.z, wo);
+    let tp = taps(uv, mw, mh);
+    let bv = lookup(P.offs2.z, P.dirs.z, P.rings_at.z, wc);
     var sum = 0.0;
     var weight = 0.0;
     for (var a = 0u; a < bv.count; a = a + 1u) {
@@ -463,10 +553,22 @@ fn mdf_distance(s: Surface, wo: vec3<f32>) -> vec2<f32> {
         }
     }
     if (weight < 0.5) {
+        return inf();
+    }
+    return sum / weight;
+}
+
+// (world distance, MDF texels) to the mesostructure along the local view `wo` (looked up along
+// `wc`, canonical(s, wo) above the horizon), 0 without an MDF.
+fn mdf_distance(s: Surface, wo: vec3<f32>, wc: vec3<f32>) -> vec2<f32> {
+    if (P.mdf.w < 0.5 || P.mdf.z <= 0.0) {
+        return vec2<f32>(0.0, 0.0);
+    }
+    let d = mdf_lookup(s.uv, wc);
+    if (d >= 3.0e38) {
         return vec2<f32>(inf(), inf());
     }
-    let d = sum / weight;
-    return vec2<f32>(d * P.misc.y / P.mdf.z, d);
+    return vec2<f32>(d * P.misc.y / P.mdf.z * stretch(s, wo), d);
 }
 
 struct Hit {
@@ -510,7 +612,7 @@ fn corner(o: u32, k: u32) -> vec3<f32> {
 fn side_exit(o: vec3<f32>, d: vec3<f32>, after: f32) -> f32 {
     var best = inf();
     for (var q = 0u; q < P.sides.y; q = q + 1u) {
-        let base = P.sides.x + 12u * q;
+        let base = P.sides.x + SIDE_FLOATS * q;
         let a = corner(base, 0u);
         let b = corner(base, 1u);
         let c = corner(base, 2u);
@@ -527,7 +629,104 @@ fn side_exit(o: vec3<f32>, d: vec3<f32>, after: f32) -> f32 {
     return best;
 }
 
+// A hit at t entering the top at s, dtex MDF texels along wc (shade.rs's deep_hit).
+fn deep_hit(s: Surface, dtex: f32, wc: vec3<f32>, t: f32, t_front: f32) -> Hit {
+    var h: Hit;
+    h.found = true;
+    h.t = t;
+    h.t_front = t_front;
+    h.s = s;
+    h.wo = wc;
+    h.depth = vec2<f32>(0.0, 0.0);
+    if (P.background.w > 0.5) {
+        h.s.uv = s.uv - dtex * wc.xy / P.mdf.xy;
+    } else if (P.mdf.w > 0.5 && dtex > 0.0) {
+        h.depth = dtex / P.mdf.xy;
+    }
+    return h;
+}
+
+fn wall_inward(base: u32) -> vec3<f32> {
+    return cross(corner(base, 1u) - corner(base, 0u), corner(base, 3u) - corner(base, 0u));
+}
+
+fn wall_crossing(base: u32, o: vec3<f32>, d: vec3<f32>, after: f32) -> f32 {
+    var best = inf();
+    let t1 = tri_hit(o, d, corner(base, 0u), corner(base, 1u), corner(base, 2u));
+    if (t1 > after && t1 < best) {
+        best = t1;
+    }
+    let t2 = tri_hit(o, d, corner(base, 0u), corner(base, 2u), corner(base, 3u));
+    if (t2 > after && t2 < best) {
+        best = t2;
+    }
+    return best;
+}
+
+// Where a ray entering the shell through a side wall before `before` meets mesostructure
+// (shade.rs's side_hit).
+fn side_hit(o: vec3<f32>, d: vec3<f32>, before: f32) -> Hit {
+    var none: Hit;
+    none.found = false;
+    if (P.mdf.w < 0.5 || P.mdf.z <= 0.0) {
+        return none;
+    }
+    var tw = inf();
+    var wall = NONE;
+    for (var q = 0u; q < P.sides.y; q = q + 1u) {
+        let base = P.sides.x + SIDE_FLOATS * q;
+        if (dot(d, wall_inward(base)) <= 0.0) {
+            continue;
+        }
+        let t = wall_crossing(base, o, d, 0.0);
+        if (t < before && t < tw) {
+            tw = t;
+            wall = base;
+        }
+    }
+    if (wall == NONE) {
+        return none;
+    }
+    let p = o + d * tw;
+    let q0 = corner(wall, 0u);
+    let edge = corner(wall, 1u) - q0;
+    let along = clamp(dot(p - q0, edge) / max(dot(edge, edge), 1e-30), 0.0, 1.0);
+    var w = array<f32, 3>(0.0, 0.0, 0.0);
+    w[u32(mesh[wall + 13u])] = 1.0 - along;
+    w[u32(mesh[wall + 14u])] = along;
+    let s = surface(vec4<f32>(tw, w[1], w[2], mesh[wall + 12u]));
+    let top = q0 + edge * along;
+    let below = max(dot(top - p, s.n), 0.0);
+    let wo_world = local_up(local(s, -d));
+    let wc = local_up(canonical(s, wo_world));
+    let per_texel = P.misc.y / P.mdf.z * stretch(s, wo_world);
+    let back = below / wo_world.z / per_texel;
+    var entry = s;
+    entry.uv = s.uv + back * wc.xy / P.mdf.xy;
+    let met = mdf_lookup(entry.uv, wc);
+    if (met >= 3.0e38) {
+        return none;
+    }
+    let dtex = max(met, back);
+    let t = tw + (dtex - back) * per_texel;
+    if (t >= side_exit(o, d, tw * (1.0 + 1e-6) + 1e-9)) {
+        return none;
+    }
+    return deep_hit(entry, dtex, wc, t, tw);
+}
+
 fn find_hit(x: u32, y: u32, o: vec3<f32>, d: vec3<f32>) -> Hit {
+    let first = textureLoad(layers, vec2<i32>(i32(x), i32(y)), 0, 0);
+    var before = inf();
+    if (first.x >= 0.0) {
+        before = first.x;
+    }
+    if (P.sides.y > 0u) {
+        let sh = side_hit(o, d, before);
+        if (sh.found) {
+            return sh;
+        }
+    }
     var h: Hit;
     h.found = false;
     for (var k = 0u; k < P.dirs.w; k = k + 1u) {
@@ -537,30 +736,20 @@ fn find_hit(x: u32, y: u32, o: vec3<f32>, d: vec3<f32>) -> Hit {
         }
         let s = surface(f);
         let wo = local_up(local(s, -d));
-        let df = mdf_distance(s, wo);
+        let wc = local_up(canonical(s, wo));
+        let df = mdf_distance(s, wo, wc);
         var tb = inf();
         let b = textureLoad(layers, vec2<i32>(i32(x), i32(y)), i32(2u * k + 1u), 0);
         if (b.x >= 0.0) {
             let sb = surface(b);
             let outward = local_up(local(sb, d));
-            tb = b.x - mdf_distance(sb, outward).x;
+            tb = b.x - mdf_distance(sb, outward, local_up(canonical(sb, outward))).x;
         } else {
             // No back face: bounded by the shell's side, where the mesh has one.
             tb = side_exit(o, d, f.x);
         }
         if (df.x < 3.0e38 && f.x + df.x < tb) {
-            h.found = true;
-            h.t = f.x + df.x;
-            h.t_front = f.x;
-            h.s = s;
-            h.depth = vec2<f32>(0.0, 0.0);
-            if (P.background.w > 0.5) {
-                h.s.uv = s.uv - df.y * wo.xy / P.mdf.xy;
-            } else if (P.mdf.w > 0.5 && df.y > 0.0) {
-                h.depth = df.y / P.mdf.xy;
-            }
-            h.wo = wo;
-            return h;
+            return deep_hit(s, df.y, wc, f.x + df.x, f.x);
         }
     }
     return h;
@@ -623,6 +812,6 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
         out[px] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
         return;
     }
-    let c = btf_eval(hit.s.uv, hit.wo, wi, hit.depth) * (P.light.w * falloff);
+    let c = btf_eval(hit.s.uv, hit.wo, canonical(hit.s, wi), hit.depth) * (P.light.w * falloff);
     out[px] = vec4<f32>(c, 1.0);
 }
