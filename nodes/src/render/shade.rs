@@ -19,8 +19,10 @@
 //! the tile's proportions (x and y scaled by k_u, k_v) before every MDF and BTF lookup, and the
 //! MDF's distances back to world units along the real ray, so shadows and masking are those of
 //! the stretched mesostructure (exact for both: they are affine invariants). The BTF's values
-//! are used as measured at the mapped directions (scaling by the world's cosine over the
-//! tile's, right for a flat facet, made the truth torus's grazing pixels 2× too bright).
+//! are used as measured at the mapped directions. (Scaling them by the world's cosine over the
+//! tile's, right for a flat facet but not for the steep facets grazing light falls on, made a
+//! plane with tiles stretched 2:1 and lit at 75° 1.8× too bright, against +4% without, and the
+//! truth torus's relative RMSE 0.235 against 0.214.)
 //!
 //! MDF distances are in MDF texels; one texel of depth is `shell / mdf.depth` world units. A hit
 //! is shaded, as in the thesis, at (x, t_f + d_f): with the BTF at the entry texel x, whose
@@ -454,8 +456,8 @@ impl Scene<'_> {
         if !visible {
             return Some([0.0; 3]);
         }
-        // The light in the tile's proportions; the BTF's cosine there gives way to the world's,
-        // so a flat Lambertian tile stays exact under any stretch.
+        // The light in the tile's proportions, where the BTF's value is used as measured (see
+        // the module's doc on why not rescaled by the world's cosine).
         let wc = s.canonical(wi);
         let f = match (&self.mdf, depth) {
             (Some(m), Some(tile)) => {
