@@ -31,8 +31,9 @@
 //! (their visibilities with the blend's weights), at most 1: the MDF only takes light away,
 //! where the query's light is more shadowed than its samples'. Past the cone both rings are so
 //! carried to the query's visibility before the power law continues them. On the truth torus
-//! this took pixels lit at 75–82° from +26% to +7% and 82–90° from +85% to +1% (tested:
-//! `lights_past_the_cone_match_a_capture_at_those_lights`).
+//! this took pixels lit at 75–82° from +25% to +10% and 82–90° from +104% to +4% (measured
+//! after the tile's proportions, against the first truth; held by the truth test, and at the
+//! material's level by `lights_past_the_cone_match_a_capture_at_those_lights`).
 //!
 //! **Parallax-compensated view blend.** Each sampled view's image shows, at a texel, the
 //! mesostructure its own ray meets there: a view 15° away sees a point several texels over.
