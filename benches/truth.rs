@@ -3,7 +3,8 @@
 //! `mesh.displace`'s mesh), for the issue's scenes — a torus under 6-texel bumps with and
 //! without the MDF, the same under 2-texel bumps, an open 2 × 2 plane seen obliquely with and
 //! without the MDF — and then the render's error against its frame time as each model choice
-//! varies (direction sampling, PCA rank, LOD level, shadow map resolution, MDF on/off), beside
+//! varies (direction sampling and interpolation, PCA rank, LOD level, shadow map resolution,
+//! MDF on/off), beside
 //! what a user without a BTF would render: the plain mesh with the tile's normal map.
 //!
 //! Per case: relative RMSE and bias over the pixels either image shows the object in, the
@@ -168,6 +169,12 @@ fn run_case(root: &Path, out: &Path, cache: &Path, width: u32, case: &Case) -> M
     );
     let cosine = read_npy(&run_out.join("macro_npy.npy"));
     let grazing = truth_scenes::grazing_bias(&truth, &ours, &tm, &om, &cosine);
+    let (beyond, beyond_truth, beyond_px) =
+        truth_scenes::past_horizon(&truth, &ours, &tm, &om, &cosine);
+    println!(
+        "{}: past the macro horizon ours {beyond:.4}, truth {beyond_truth:.4} ({beyond_px} px)",
+        case.name
+    );
     std::fs::copy(
         run_out.join("truth_ours_difference.png"),
         out.join(format!("{}.png", case.name)),
@@ -303,6 +310,17 @@ fn main() {
             ],
         ),
         (
+            "direction interpolation",
+            vec![
+                (
+                    "nearest three, 1/angle".into(),
+                    vec!["ours.interpolation=\"nearest\"".into()],
+                    vec![],
+                ),
+                ("bilinear over rings".into(), vec![], vec![]),
+            ],
+        ),
+        (
             "PCA rank (YCbCr)",
             [4u32, 8, 16, 32]
                 .iter()
@@ -342,14 +360,14 @@ fn main() {
     for (family, choices) in &families {
         let mut points = Vec::new();
         for (k, (label, sets, nodes)) in choices.iter().enumerate() {
-            let name = format!(
-                "trade_{}_{k}",
-                family
-                    .split_whitespace()
-                    .next()
-                    .unwrap_or("x")
-                    .to_lowercase()
-            );
+            // The family's first two words: "direction sampling" and "direction
+            // interpolation" must not share a folder.
+            let slug: Vec<String> = family
+                .split_whitespace()
+                .take(2)
+                .map(|w| w.chars().filter(char::is_ascii_alphanumeric).collect())
+                .collect();
+            let name = format!("trade_{}_{k}", slug.join("_").to_lowercase());
             let key = format!("{sets:?} {nodes:?}");
             let r = match measured.iter().find(|m| m.0 == key) {
                 Some(m) => m.1,

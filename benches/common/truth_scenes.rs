@@ -95,3 +95,27 @@ pub fn plane_sets(width: u32, mdf: bool, renders: &[&str]) -> Vec<String> {
     v.push(format!("ours.use_mdf={mdf}"));
     v
 }
+
+/// The mean of ours and of the truth (summed over RGB) over the pixels both show the object in
+/// whose macro normal faces away from the light (the terminator's far side), and their count.
+pub fn past_horizon(
+    truth: &[f32],
+    ours: &[f32],
+    truth_mask: &[f32],
+    ours_mask: &[f32],
+    cosine: &[f32],
+) -> (f64, f64, usize) {
+    let (mut o, mut t, mut n) = (0.0, 0.0, 0usize);
+    for px in 0..truth_mask.len() {
+        if truth_mask[px] < 0.999 || ours_mask[px] < 0.5 || cosine[px * 3] > 0.0 {
+            continue;
+        }
+        for k in 0..3 {
+            o += ours[px * 3 + k] as f64;
+            t += truth[px * 3 + k] as f64;
+        }
+        n += 1;
+    }
+    let mean = |x: f64| if n > 0 { x / n as f64 } else { f64::NAN };
+    (mean(o), mean(t), n)
+}

@@ -57,6 +57,21 @@ pub struct Params {
     /// Frames rendered for the timing metrics (the image is the last one).
     #[schemars(range(min = 1, max = 1000))]
     pub frames: u32,
+    /// How sampled directions are interpolated: "rings" (bilinear between the bracketing rings
+    /// of a ring-sampled set, the default) or "nearest" (the three nearest directions by
+    /// inverse angle, what sets without rings always get; for comparisons).
+    pub interpolation: Interpolation,
+}
+
+/// The direction interpolation of `render.mesh` (see `material.rs`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Interpolation {
+    /// Bilinear in θ and φ between the bracketing rings, where the set has rings.
+    #[default]
+    Rings,
+    /// The three nearest sampled directions, weighted by inverse angle.
+    Nearest,
 }
 
 impl Default for Params {
@@ -74,6 +89,7 @@ impl Default for Params {
             use_mdf: true,
             parallax: false,
             frames: 1,
+            interpolation: Interpolation::Rings,
         }
     }
 }
@@ -90,8 +106,9 @@ impl Node for RenderMesh {
         NodeSpec {
             kind: "render.mesh",
             // 3: the mask output; lights beyond the sampled cone extrapolated, not clamped.
-            // 4: directions looked up in the tile's own proportions where the UVs stretch it.
-            version: 4,
+            // 4: directions looked up in the tile's own proportions where the UVs stretch it,
+            // the MDF's shadows, shell sides rays enter by. 5: light past the macro horizon.
+            version: 5,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -180,8 +197,16 @@ impl Node for RenderMesh {
         } else {
             return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
         };
-        let material = Material::new(source);
+        let mut material = Material::new(source);
         let mdf = inputs.opt::<Mdf>("mdf")?.filter(|_| p.use_mdf);
+        let mut mdf_lookup = mdf.map(MdfLookup::new);
+        if p.interpolation == Interpolation::Nearest {
+            material.view_table = None;
+            material.light_table = None;
+            if let Some(m) = mdf_lookup.as_mut() {
+                m.rings = None;
+            }
+        }
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let [w, h] = p.camera.resolution;
         let light = Light::new(&p.light)?;
@@ -192,7 +217,7 @@ impl Node for RenderMesh {
         let scene = Scene {
             mesh,
             material: &material,
-            mdf: mdf.map(MdfLookup::new),
+            mdf: mdf_lookup,
             light,
             tiling: p.tiling,
             shell: p.shell,

@@ -74,6 +74,7 @@ struct Surface {
     n: vec3<f32>,
     // The texel aspect (k_u, k_v) (shade.rs's texel_aspect).
     k: vec2<f32>,
+    tri: u32,
 };
 
 fn v3(base: u32, i: u32) -> vec3<f32> {
@@ -113,6 +114,7 @@ fn surface(f: vec4<f32>) -> Surface {
     s.n = nn;
     s.t = tt;
     s.b = cross(nn, tt) * hand;
+    s.tri = tri;
     let kb = 12u * n;
     s.k = vec2<f32>(mesh[kb + 2u * i0], mesh[kb + 2u * i0 + 1u]) * w.x
         + vec2<f32>(mesh[kb + 2u * i1], mesh[kb + 2u * i1 + 1u]) * w.y
@@ -425,7 +427,10 @@ fn light_visible(uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>, l: vec3<f32>) -
 }
 
 // The visibility a blend of sampled lights implies (material.rs).
-fn implied(bl: Blend, uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>) -> f32 {
+fn implied(bl: Blend, uv: vec2<f32>, wo: vec3<f32>, depth: vec2<f32>, shadowed: bool) -> f32 {
+    if (!shadowed) {
+        return 1.0;
+    }
     var v = 0.0;
     for (var k = 0u; k < bl.count; k = k + 1u) {
         let i = P.offs2.y + 3u * bl.idx[k];
@@ -442,13 +447,17 @@ fn reshadow(e: vec3<f32>, own: f32, implied: f32) -> vec3<f32> {
 
 // Beyond the outermost light ring: the two outer rings at the light's azimuth, continued as a
 // power of cos θ (material.rs); the MDF's shadows carried over as in reshadow.
-fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> vec3<f32> {
+// `shadowed` false: the BTF alone (material.rs's eval_at_depth), no MDF shadows.
+fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>, shadowed: bool) -> vec3<f32> {
     let c1 = P.rings.x;
     let c0 = P.rings.y;
-    let own = light_visible(uv, wo, depth, wi);
+    var own = 1.0;
+    if (shadowed) {
+        own = light_visible(uv, wo, depth, wi);
+    }
     if (P.rings.w < 0.5 || wi.z >= c1 - 1e-9) {
         let bl = lookup(P.offs2.y, P.dirs.y, P.rings_at.y, wi);
-        return reshadow(btf_eval_sampled(uv, wo, depth, bl), own, implied(bl, uv, wo, depth));
+        return reshadow(btf_eval_sampled(uv, wo, depth, bl), own, implied(bl, uv, wo, depth, shadowed));
     }
     let h = length(wi.xy);
     var cs = vec2<f32>(1.0, 0.0);
@@ -471,8 +480,8 @@ fn btf_eval(uv: vec2<f32>, wo: vec3<f32>, wi: vec3<f32>, depth: vec2<f32>) -> ve
         b1 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s1 * cs.x, s1 * cs.y, c1), acos(clamp(c1, -1.0, 1.0)));
         b0 = blend(P.offs2.y, P.dirs.y, vec3<f32>(s0 * cs.x, s0 * cs.y, c0), acos(clamp(c0, -1.0, 1.0)));
     }
-    let e1 = reshadow(btf_eval_sampled(uv, wo, depth, b1), own, implied(b1, uv, wo, depth));
-    let e0 = reshadow(btf_eval_sampled(uv, wo, depth, b0), own, implied(b0, uv, wo, depth));
+    let e1 = reshadow(btf_eval_sampled(uv, wo, depth, b1), own, implied(b1, uv, wo, depth, shadowed));
+    let e0 = reshadow(btf_eval_sampled(uv, wo, depth, b0), own, implied(b0, uv, wo, depth, shadowed));
     // A power of cos θ through the two rings (material.rs).
     let c = max(wi.z, 1e-6);
     var out = vec3<f32>(0.0);
@@ -755,6 +764,84 @@ fn find_hit(x: u32, y: u32, o: vec3<f32>, d: vec3<f32>) -> Hit {
     return h;
 }
 
+fn unit_or_up(v: vec3<f32>) -> vec3<f32> {
+    if (length(v) > 1e-30) {
+        return normalize(v);
+    }
+    return vec3<f32>(0.0, 0.0, 1.0);
+}
+
+// The normal curvature along world tangent direction a on triangle tri (shade.rs's curvature).
+fn curvature(tri: u32, a: vec3<f32>) -> f32 {
+    let n = P.offs.x;
+    let i0 = tables[3u * tri];
+    let i1 = tables[3u * tri + 1u];
+    let i2 = tables[3u * tri + 2u];
+    let e1 = v3(0u, i1) - v3(0u, i0);
+    let e2 = v3(0u, i2) - v3(0u, i0);
+    let n0 = unit_or_up(v3(3u * n, i0));
+    let n1 = unit_or_up(v3(3u * n, i1));
+    let n2 = unit_or_up(v3(3u * n, i2));
+    let g11 = dot(e1, e1);
+    let g12 = dot(e1, e2);
+    let g22 = dot(e2, e2);
+    let det = g11 * g22 - g12 * g12;
+    if (abs(det) <= 1e-12 * g11 * g22) {
+        return 0.0;
+    }
+    let r1 = dot(a, e1);
+    let r2 = dot(a, e2);
+    let alpha = (g22 * r1 - g12 * r2) / det;
+    let beta = (g11 * r2 - g12 * r1) / det;
+    return dot((n1 - n0) * alpha + (n2 - n0) * beta, a);
+}
+
+// Light past the macro horizon on a convex surface (shade.rs's past_horizon).
+fn past_horizon(s: Surface, wo: vec3<f32>, depth: vec2<f32>, to_light: vec3<f32>, wi: vec3<f32>, below_in: f32) -> vec3<f32> {
+    let zero = vec3<f32>(0.0);
+    if (P.mdf.w < 0.5 || P.mdf.z <= 0.0 || (depth.x <= 0.0 && depth.y <= 0.0) || P.rings.w < 0.5) {
+        return zero;
+    }
+    let c1 = P.rings.x;
+    let c0 = P.rings.y;
+    let t = to_light - s.n * dot(s.n, to_light);
+    if (length(t) < 1e-20) {
+        return zero;
+    }
+    let a = normalize(t);
+    let kappa = curvature(s.tri, a);
+    if (kappa <= 0.0) {
+        return zero;
+    }
+    let sin_e = wi.z;
+    let cos_e = sqrt(max(1.0 - wi.z * wi.z, 0.0));
+    let tan_e = sin_e / max(cos_e, 1e-12);
+    let below = max(below_in, 0.0);
+    if (P.misc.y - below < tan_e * tan_e / (2.0 * kappa)) {
+        return zero;
+    }
+    let exit = (-tan_e + sqrt(tan_e * tan_e + 2.0 * kappa * below)) / kappa;
+    let chord = atan(below / max(exit, 1e-30));
+    let al = local(s, a);
+    let dir = al.xy / max(length(al.xy), 1e-30);
+    let hit = s.uv - depth * wo.xy;
+    let lit = reaches(hit, depth.x * P.mdf.x * wo.z, canonical(s, vec3<f32>(dir * cos(chord), sin(chord))), 0.0);
+    if (lit <= 0.0) {
+        return zero;
+    }
+    let k1 = sqrt(max(1.0 - c1 * c1, 0.0));
+    let k0 = sqrt(max(1.0 - c0 * c0, 0.0));
+    let e1 = btf_eval(s.uv, wo, canonical(s, vec3<f32>(dir * k1, c1)), depth, false);
+    let e0 = btf_eval(s.uv, wo, canonical(s, vec3<f32>(dir * k0, c0)), depth, false);
+    let det = c1 * k0 - c0 * k1;
+    if (abs(det) < 1e-12) {
+        return zero;
+    }
+    let along = (e1 * k0 - e0 * k1) / det;
+    let across = (e0 * c1 - e1 * c0) / det;
+    return max(along * sin_e + across * cos_e, zero) * lit;
+}
+
 fn lit(p: vec3<f32>, cos_light: f32) -> bool {
     let c = P.scam;
     let rel = p - c.eye.xyz;
@@ -808,10 +895,17 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
         to_light = normalize(v);
     }
     let wi = local(hit.s, to_light);
-    if (wi.z <= 0.0 || (P.offs.z == 1u && !lit(p, wi.z))) {
+    if (wi.z <= 0.0) {
+        // Below the macro horizon: what the curved mesostructure still catches.
+        let below = (hit.t - hit.t_front) * dot(-ray.d, hit.s.n);
+        let e = past_horizon(hit.s, hit.wo, hit.depth, to_light, wi, below);
+        out[px] = vec4<f32>(e * (P.light.w * falloff), 1.0);
+        return;
+    }
+    if (P.offs.z == 1u && !lit(p, wi.z)) {
         out[px] = vec4<f32>(0.0, 0.0, 0.0, 1.0);
         return;
     }
-    let c = btf_eval(hit.s.uv, hit.wo, canonical(hit.s, wi), hit.depth) * (P.light.w * falloff);
+    let c = btf_eval(hit.s.uv, hit.wo, canonical(hit.s, wi), hit.depth, true) * (P.light.w * falloff);
     out[px] = vec4<f32>(c, 1.0);
 }

@@ -13,6 +13,10 @@
 //! ([`Scene::side_hit`]): an open 2 × 2 plane's outline against the true displaced sheet, IoU
 //! 0.923 → 0.996.
 //!
+//! **Past the macro horizon** ([`Scene::past_horizon`]): on a convex surface the shell falls
+//! away under a light the macro normal faces away from, and the mesostructure decides what
+//! still catches it (the truth torus: 0.0146 there, ours 0.0182, black before).
+//!
 //! **The tile's proportions.** The BTF and MDF measured a tile whose texels are as wide as one
 //! texel of depth (`shell / mdf.depth`); a mapping that stretches or squeezes the tile makes
 //! its bumps flatter or steeper ([`texel_aspect`]). View and light directions are mapped into
@@ -259,6 +263,8 @@ pub struct Surface {
     pub n: V3,
     /// The texel aspect (k_u, k_v) here ([`texel_aspect`]).
     pub k: [f64; 2],
+    /// The mesh triangle it lies on.
+    pub tri: usize,
 }
 
 impl Surface {
@@ -313,7 +319,15 @@ impl Scene<'_> {
                     + self.aspect[i2][j] as f64 * w[2]
             })
         };
-        Surface { p, uv, t, b, n, k }
+        Surface {
+            p,
+            uv,
+            t,
+            b,
+            n,
+            k,
+            tri: f.tri as usize,
+        }
     }
 
     fn local(s: &Surface, v: V3) -> V3 {
@@ -435,6 +449,97 @@ impl Scene<'_> {
         Some(self.deep_hit(entry, dtex, wo, t, tw))
     }
 
+    /// The normal curvature of the mesh along world tangent direction `a` on triangle `tri`
+    /// (from its vertex normals: how fast the normal turns toward `a` per unit length along
+    /// it), positive where the surface is convex.
+    fn curvature(&self, tri: usize, a: V3) -> f64 {
+        let m = self.mesh;
+        let f = |v: [f32; 3]| v.map(|x| x as f64);
+        let c = m.corners(tri);
+        let p = c.map(|i| f(m.positions[i]));
+        let n = c.map(|i| normalize(f(m.normals[i])).unwrap_or([0.0, 0.0, 1.0]));
+        let (e1, e2) = (sub(p[1], p[0]), sub(p[2], p[0]));
+        let (g11, g12, g22) = (dot(e1, e1), dot(e1, e2), dot(e2, e2));
+        let det = g11 * g22 - g12 * g12;
+        if det.abs() <= 1e-30 * g11 * g22 {
+            return 0.0;
+        }
+        // a = α e1 + β e2 in the triangle's plane; the normal changes by α Δn1 + β Δn2.
+        let (r1, r2) = (dot(a, e1), dot(a, e2));
+        let (alpha, beta) = ((g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det);
+        dot(
+            add(mul(sub(n[1], n[0]), alpha), mul(sub(n[2], n[0]), beta)),
+            a,
+        )
+    }
+
+    /// The light at a hit whose macro normal faces away from it (`wi.z ≤ 0`), on a convex
+    /// surface: the curved shell falls away under the light's ray, so points high enough in
+    /// it still see the light. Along the light's azimuth, with normal curvature κ, a ray
+    /// leaving the hit `below` world units under the shell's top at elevation e < 0 stays
+    /// above the shell's bottom if shell − below ≥ tan²e / 2κ, and leaves the top after
+    /// s = (−tan e + √(tan²e + 2κ·below)) / κ: in the tile's flat frame the straight line
+    /// from the hit to that exit, at elevation atan(below / s), is what the mesostructure must
+    /// leave clear ([`MdfLookup::reaches`], with no slack). The BTF has no light below the
+    /// horizon: each texel's values on the two outermost light rings at the light's azimuth
+    /// are continued as one Lambertian facet's, A·sin e + C·cos e (a flat facet's C is 0, so
+    /// it stays black; a facet turned toward the light keeps some). Needs an MDF and two
+    /// light rings; `None` where the point is dark.
+    fn past_horizon(
+        &self,
+        s: &Surface,
+        wo: V3,
+        depth: Option<[f64; 2]>,
+        to_light: V3,
+        wi: V3,
+        below: f64,
+    ) -> Option<[f64; 3]> {
+        let (m, tile) = (self.mdf.as_ref()?, depth?);
+        let (c1, c0) = self.material.light_rings?;
+        let a = normalize(sub(to_light, mul(s.n, dot(s.n, to_light))))?;
+        let kappa = self.curvature(s.tri, a);
+        if kappa <= 0.0 {
+            return None;
+        }
+        let (sin_e, cos_e) = (wi[2], (1.0 - wi[2] * wi[2]).max(0.0).sqrt());
+        let tan_e = sin_e / cos_e.max(1e-12);
+        let below = below.max(0.0);
+        if self.shell - below < tan_e * tan_e / (2.0 * kappa) {
+            return None;
+        }
+        let exit = (-tan_e + (tan_e * tan_e + 2.0 * kappa * below).sqrt()) / kappa;
+        let chord = (below / exit.max(1e-300)).atan();
+        let al = Self::local(s, a);
+        let h = al[0].hypot(al[1]).max(1e-300);
+        let towards = |sin: f64, cos: f64| [al[0] / h * cos, al[1] / h * cos, sin];
+        let hit = [s.uv[0] - tile[0] * wo[0], s.uv[1] - tile[1] * wo[1]];
+        let lit = m.reaches(
+            hit[0],
+            hit[1],
+            tile[0] * m.mdf.width as f64 * wo[2],
+            s.canonical(towards(chord.sin(), chord.cos())),
+            0.0,
+        );
+        if lit <= 0.0 {
+            return None;
+        }
+        let ring = |c: f64| {
+            let l = s.canonical(towards(c, (1.0 - c * c).max(0.0).sqrt()));
+            self.material.eval_at_depth(s.uv[0], s.uv[1], wo, l, depth)
+        };
+        let (e1, e0) = (ring(c1), ring(c0));
+        let (k1, k0) = ((1.0 - c1 * c1).sqrt(), (1.0 - c0 * c0).sqrt());
+        let det = c1 * k0 - c0 * k1;
+        if det.abs() < 1e-12 {
+            return None;
+        }
+        Some([0, 1, 2].map(|j| {
+            let along = (e1[j] * k0 - e0[j] * k1) / det;
+            let across = (c1 * e0[j] - c0 * e1[j]) / det;
+            (along * sin_e + across * cos_e).max(0.0) * lit
+        }))
+    }
+
     /// Linear RGB of pixel `px` whose ray is (o, d); `None` where the ray meets no
     /// mesostructure (the background shows).
     pub fn shade(
@@ -445,12 +550,17 @@ impl Scene<'_> {
         d: V3,
         shadow: Option<&ShadowMap>,
     ) -> Option<[f64; 3]> {
-        let (_, t_front, s, wo, depth) = self.hit_with_depth(layers, px, o, d)?;
+        let (t, t_front, s, wo, depth) = self.hit_with_depth(layers, px, o, d)?;
         let p = add(o, mul(d, t_front));
         let (to_light, irradiance) = self.light.at(p);
         let wi = Self::local(&s, to_light);
         if wi[2] <= 0.0 {
-            return Some([0.0; 3]);
+            // Below the macro horizon: what the curved mesostructure still catches.
+            let below = (t - t_front) * dot(mul(d, -1.0), s.n);
+            let f = self
+                .past_horizon(&s, wo, depth, to_light, wi, below)
+                .unwrap_or([0.0; 3]);
+            return Some(f.map(|c| c * irradiance));
         }
         let visible = shadow.is_none_or(|sm| sm.lit(p, wi[2]));
         if !visible {
