@@ -677,6 +677,18 @@ mod tests {
         }
     }
 
+    /// One orthographic pixel looking at the origin from 45° above +x.
+    fn one_ray_at_45_degrees() -> Camera {
+        Camera::new(&CameraParams {
+            eye: [3.0, 0.0, 3.0],
+            target: [0.0, 0.0, 0.0],
+            orthographic: Some(0.01),
+            resolution: [1, 1],
+            ..Default::default()
+        })
+        .unwrap()
+    }
+
     #[test]
     fn parallax_moves_the_lookup_by_the_mdf_offset() {
         // A 45° orthographic view (φ = 0) of the plane's centre over a flat MDF sunk 4 texels:
@@ -686,14 +698,7 @@ mod tests {
         let btf = test_btf(8, &[[0.0, 0.0]], &[[0.0, 0.0]]);
         let material = Material::new(Source::Raw(&btf));
         let mesh = plane();
-        let cam = Camera::new(&CameraParams {
-            eye: [3.0, 0.0, 3.0],
-            target: [0.0, 0.0, 0.0],
-            orthographic: Some(0.01),
-            resolution: [1, 1],
-            ..Default::default()
-        })
-        .unwrap();
+        let cam = one_ray_at_45_degrees();
         let layers = super::layers::trace(&mesh, &cam, 1, &Counter::none());
         for (parallax, want_u) in [(false, 0.5), (true, 0.0)] {
             let scene = Scene {
@@ -750,14 +755,7 @@ mod tests {
                 "{k:?}"
             );
         }
-        let cam = Camera::new(&CameraParams {
-            eye: [3.0, 0.0, 3.0],
-            target: [0.0, 0.0, 0.0],
-            orthographic: Some(0.01),
-            resolution: [1, 1],
-            ..Default::default()
-        })
-        .unwrap();
+        let cam = one_ray_at_45_degrees();
         let layers = super::layers::trace(&mesh, &cam, 1, &Counter::none());
         let scene = Scene {
             mesh: &mesh,
