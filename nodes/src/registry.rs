@@ -15,6 +15,8 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::procedural::Procedural);
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);
+    r.register(crate::heightfield::from_normals::FromNormals);
+    r.register(crate::heightfield::normal_noise::NormalNoise);
     r.register(crate::image::compare::Compare);
     r.register(crate::image::flip::Flip);
     r.register(crate::render::scene_footprint::SceneFootprint);

@@ -1,5 +1,7 @@
 //! Mesostructure height fields: procedural tiles, reading from files, and normal maps.
 
+pub mod from_normals;
+pub mod normal_noise;
 pub mod normals;
 pub mod procedural;
 pub mod raycast;
