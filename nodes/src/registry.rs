@@ -17,6 +17,9 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::normals::Normals);
     r.register(crate::heightfield::from_normals::FromNormals);
     r.register(crate::heightfield::normal_noise::NormalNoise);
+    r.register(crate::heightfield::edit::Edit);
+    r.register(crate::brdf::edit::Edit);
+    r.register(crate::brdf::transfer::Transfer);
     r.register(crate::image::compare::Compare);
     r.register(crate::image::flip::Flip);
     r.register(crate::render::scene_footprint::SceneFootprint);

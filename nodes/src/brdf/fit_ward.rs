@@ -103,7 +103,8 @@ impl Node for FitWard {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "brdf.fit_ward",
-            version: 4,
+            // 5: the `clusters` output.
+            version: 5,
             doc: "Per-pixel isotropic Ward fit (ρd RGB, ρs, α) by Levenberg–Marquardt from K-means cluster fits, about a flat normal or per-pixel normals from photometric stereo; appearance vectors for the manifold.",
             device: DevicePreference::Cpu,
             inputs: vec![
@@ -116,6 +117,7 @@ impl Node for FitWard {
                 Port::output("residual", Image::TYPE, "RMS residual per pixel (radiance)"),
                 Port::output("appearance", PointSet::TYPE, "normalised appearance vectors, n × 5"),
                 Port::output("normals", NormalMap::TYPE, "the normals the fit used"),
+                Port::output("clusters", Image::TYPE, "each pixel's K-means cluster (0, 1, …), one channel"),
                 Port::output("normal_fallbacks", "Scalar", "pixels whose photometric normal could not be determined (flat used)"),
                 Port::optional_output("error_normal_deg", "Scalar", "median angle to `true_normals`, degrees (absent without)"),
                 Port::output("not_converged", "Scalar", "pixels that did not converge"),
@@ -226,7 +228,14 @@ impl Node for FitWard {
                 .collect(),
         };
         ctx.timing("pixels_per_second", n as f64 / seconds.max(1e-12));
+        let clusters = Image {
+            width: btf.width,
+            height: btf.height,
+            channels: 1,
+            data: fit.labels.iter().map(|l| *l as f32).collect(),
+        };
         let mut out = Outputs::new()
+            .with("clusters", clusters)
             .with("normals", normals)
             .with("normal_fallbacks", Scalar(fit.normal_fallbacks as f64))
             .with("maps", fit.maps)
@@ -254,6 +263,8 @@ pub struct Fit {
     /// The normal each pixel was fitted about.
     pub normals: Vec<[f64; 3]>,
     pub normal_fallbacks: usize,
+    /// Each pixel's K-means cluster.
+    pub labels: Vec<usize>,
 }
 
 /// One pixel's (or cluster's) observations: per pair, RGB.
@@ -543,6 +554,7 @@ pub fn fit(ctx: &NodeContext, btf: &Btf, p: &Params) -> Result<Fit, NodeError> {
         not_converged,
         normals: normals.unwrap_or_else(|| vec![[0.0, 0.0, 1.0]; n]),
         normal_fallbacks,
+        labels: clusters.labels,
     })
 }
 

@@ -150,14 +150,7 @@ impl Node for FromNormals {
             height: h,
             data: z.iter().map(|v| *v as f32).collect(),
         };
-        let (lo, hi) = height.min_max();
-        let span = if hi > lo { hi - lo } else { 1.0 };
-        let preview = Image {
-            width: w,
-            height: h,
-            channels: 1,
-            data: height.data.iter().map(|v| (v - lo) / span).collect(),
-        };
+        let preview = preview(&height);
         let mut out = Outputs::new()
             .with("preview", preview)
             .with(
@@ -179,6 +172,43 @@ impl Node for FromNormals {
         }
         Ok(out)
     }
+}
+
+/// The heights scaled to [0, 1], one grey channel.
+pub fn preview(height: &HeightField) -> Image {
+    let (lo, hi) = height.min_max();
+    let span = if hi > lo { hi - lo } else { 1.0 };
+    Image {
+        width: height.width,
+        height: height.height,
+        channels: 1,
+        data: height.data.iter().map(|v| (v - lo) / span).collect(),
+    }
+}
+
+/// A normal map integrated with the defaults (least squares, periodic, unweighted), for nodes
+/// that take geometry as normals; errors name `port`.
+pub fn integrate(n: &NormalMap, port: &str) -> Result<HeightField, NodeError> {
+    let rename = |e: NodeError| match e {
+        NodeError::Input { message, .. } => NodeError::input(port, message),
+        other => other,
+    };
+    if n.width < 2 || n.height < 2 {
+        return Err(NodeError::input(
+            port,
+            format!(
+                "is {}×{}; at least 2×2 texels are needed",
+                n.width, n.height
+            ),
+        ));
+    }
+    slopes(n).map_err(rename)?;
+    let z = least_squares(n, None, Boundary::Periodic).map_err(rename)?;
+    Ok(HeightField {
+        width: n.width,
+        height: n.height,
+        data: z.iter().map(|v| *v as f32).collect(),
+    })
 }
 
 /// Per texel (∂z/∂u, ∂z/∂v) implied by the normal.
