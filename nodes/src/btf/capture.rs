@@ -7,10 +7,10 @@
 //! Radiometry: the light has unit irradiance on a plane facing it, so a value is
 //! f(ωi, ωo) · max(0, n·ωi) · visibility — for a flat Lambertian tile, ρ/π · cos θi.
 
-use super::brdf::{self, Model};
+use super::brdf::{self, Lobe, Model};
 use super::directions::{DirectionSet, Named};
 use crate::heightfield::raycast::{Caster, Miss};
-use crate::types::{Btf, Direction, DirectionPair, HeightField, Image};
+use crate::types::{BrdfMap, Btf, Direction, DirectionPair, HeightField, Image, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 use rayon::prelude::*;
@@ -32,12 +32,19 @@ pub struct Params {
     pub brdf: Model,
     /// Diffuse albedo (linear RGB) when no `albedo` image is connected.
     pub albedo: [f64; 3],
-    /// Ward specular albedo ρs.
+    /// Specular albedo ρs (Ward), or the lobe's weight (GGX: 1 is the physical lobe).
     #[schemars(range(min = 0.0, max = 1.0))]
     pub specular: f64,
-    /// Ward roughness α (RMS slope of the microfacets).
+    /// Roughness α (Ward: RMS slope of the microfacets; GGX: its α; anisotropic Ward: αu,
+    /// along the image's x axis).
     #[schemars(range(min = 0.001, max = 1.0))]
     pub roughness: f64,
+    /// Anisotropic Ward's αv, along the image's y axis; default: `roughness`.
+    #[schemars(range(min = 0.001, max = 1.0))]
+    pub roughness_v: Option<f64>,
+    /// GGX: the refractive index of Schlick's Fresnel term (1.5: F0 = 0.04).
+    #[schemars(range(min = 1.0, max = 10.0))]
+    pub ior: f64,
     /// View direction [θ, φ] of the `preview` output (the nearest captured pair is shown).
     pub preview_view: [f64; 2],
     /// Light direction [θ, φ] of the `preview` output.
@@ -61,6 +68,8 @@ impl Default for Params {
             albedo: [0.6, 0.6, 0.6],
             specular: 0.05,
             roughness: 0.2,
+            roughness_v: None,
+            ior: 1.5,
             preview_view: [0.0, 0.0],
             preview_light: [45.0, 0.0],
             memory_budget_gb: None,
@@ -77,12 +86,15 @@ impl Node for Capture {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "btf.capture",
-            version: 1,
-            doc: "Synthetic BTF of a periodic height field: view rays with masking and parallax, shadow rays, Lambert or Ward.",
+            // 2: GGX and anisotropic Ward, per-texel `maps`; Ward's half vector normalised first
+            // (the same value, other rounding).
+            version: 2,
+            doc: "Synthetic BTF of a periodic height field: view rays with masking and parallax, shadow rays; Lambert, Ward, anisotropic Ward or GGX with Fresnel, constant or per texel.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("height", HeightField::TYPE, "mesostructure tile, heights in texels"),
                 Port::optional("albedo", Image::TYPE, "diffuse albedo map, same size as the height field"),
+                Port::optional("maps", BrdfMap::TYPE, "per-texel ρd RGB, ρs, α (brdf.fit_ward's, or edited), same size; replaces albedo, specular and roughness"),
             ],
             outputs: vec![
                 Port::output("btf", Btf::TYPE, "the captured BTF"),
@@ -107,7 +119,20 @@ impl Node for Capture {
 
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let hf = inputs.get::<HeightField>("height")?;
-        let albedo = albedo_planes(inputs.opt::<Image>("albedo")?, hf, p.albedo)?;
+        let maps = inputs.opt::<BrdfMap>("maps")?;
+        let (albedo, lobe_maps) = match maps {
+            None => (
+                albedo_planes(inputs.opt::<Image>("albedo")?, hf, p.albedo)?,
+                None,
+            ),
+            Some(_) if inputs.opt::<Image>("albedo")?.is_some() => {
+                return Err(NodeError::input(
+                    "albedo",
+                    "connect `albedo` or `maps`, not both",
+                ));
+            }
+            Some(m) => map_planes(m, hf)?,
+        };
         let width = p.resolution.map_or(hf.width, |r| r as usize);
         let height = ((width * hf.height) as f64 / hf.width as f64)
             .round()
@@ -129,7 +154,7 @@ impl Node for Capture {
                 format!("the BTF would need {bytes} bytes"),
             ));
         }
-        let scene = Scene::new(hf, albedo, p);
+        let scene = Scene::new(hf, albedo, lobe_maps, p);
         let plane = width * height;
         crate::memory::check(
             (pairs.len() * 3 * plane * 4) as u64,
@@ -194,6 +219,40 @@ fn albedo_planes(
     Ok([0, 1, 2].map(|k| (0..n).map(|i| img.data[i * c + k.min(c - 1)]).collect()))
 }
 
+/// Per-texel Ward maps as albedo planes and (ρs, α) pairs.
+#[allow(clippy::type_complexity)]
+fn map_planes(
+    m: &BrdfMap,
+    hf: &HeightField,
+) -> Result<([Vec<f32>; 3], Option<Vec<[f32; 2]>>), NodeError> {
+    if (m.width, m.height) != (hf.width, hf.height) {
+        return Err(NodeError::input(
+            "maps",
+            format!(
+                "are {}×{}, the height field {}×{}; they must match",
+                m.width, m.height, hf.width, hf.height
+            ),
+        ));
+    }
+    if let Some(i) = m.data.iter().position(|v| !v.is_finite()) {
+        let px = i / WARD_PARAMS;
+        return Err(NodeError::input(
+            "maps",
+            format!(
+                "texel ({}, {}) has a non-finite parameter",
+                px % m.width,
+                px / m.width
+            ),
+        ));
+    }
+    let n = m.width * m.height;
+    let planes = [0, 1, 2].map(|c| (0..n).map(|i| m.pixel(i)[c] as f32).collect());
+    let lobes = (0..n)
+        .map(|i| [m.pixel(i)[3] as f32, m.pixel(i)[4].max(1e-3) as f32])
+        .collect();
+    Ok((planes, Some(lobes)))
+}
+
 /// The mesostructure as the shader sees it: surface, smooth normals, albedo, BRDF.
 struct Scene<'a> {
     caster: Caster<'a>,
@@ -202,13 +261,19 @@ struct Scene<'a> {
     /// Central-difference gradients at the samples, interpolated bilinearly for smooth shading.
     grad: Vec<[f32; 2]>,
     albedo: [Vec<f32>; 3],
-    model: Model,
-    rho_s: f64,
-    alpha: f64,
+    /// The lobe, where no per-texel maps are given.
+    lobe: Lobe,
+    /// Per-sample (ρs, α) from `maps`; αv keeps the lobe's αv/α ratio.
+    lobe_maps: Option<Vec<[f32; 2]>>,
 }
 
 impl<'a> Scene<'a> {
-    fn new(hf: &'a HeightField, albedo: [Vec<f32>; 3], p: &Params) -> Self {
+    fn new(
+        hf: &'a HeightField,
+        albedo: [Vec<f32>; 3],
+        lobe_maps: Option<Vec<[f32; 2]>>,
+        p: &Params,
+    ) -> Self {
         let grad = (0..hf.height as isize)
             .flat_map(|j| (0..hf.width as isize).map(move |i| (i, j)))
             .map(|(i, j)| {
@@ -224,9 +289,14 @@ impl<'a> Scene<'a> {
             hf,
             grad,
             albedo,
-            model: p.brdf,
-            rho_s: p.specular,
-            alpha: p.roughness,
+            lobe: Lobe {
+                model: p.brdf,
+                rho_s: p.specular,
+                alpha: p.roughness,
+                alpha_v: p.roughness_v.unwrap_or(p.roughness),
+                ior: p.ior,
+            },
+            lobe_maps,
         }
     }
 
@@ -322,7 +392,20 @@ impl<'a> Scene<'a> {
         let rho = self.lerp(hit.u, hit.v, |i| {
             [self.albedo[0][i], self.albedo[1][i], self.albedo[2][i]]
         });
-        Some(rho.map(|r| brdf::eval(self.model, r, self.rho_s, self.alpha, n, wi, wo) * cos_i))
+        let lobe = match &self.lobe_maps {
+            None => self.lobe,
+            Some(m) => {
+                let [rho_s, alpha] = self.lerp(hit.u, hit.v, |i| m[i]);
+                Lobe {
+                    rho_s,
+                    alpha,
+                    alpha_v: alpha * self.lobe.alpha_v / self.lobe.alpha,
+                    ..self.lobe
+                }
+            }
+        };
+        let t = brdf::tangent(n);
+        Some(rho.map(|r| brdf::eval_lobe(&lobe, r, n, t, wi, wo) * cos_i))
     }
 }
 
@@ -394,6 +477,7 @@ mod tests {
                         Model::Ward => {
                             ward_flat(rho, p.specular, p.roughness, pair.view, pair.light)
                         }
+                        _ => unreachable!("only the fitted models are listed"),
                     };
                     let expected = f * pair.light.theta.cos();
                     for (x, y) in [(0, 0), (3, 2), (5, 5)] {
@@ -403,6 +487,61 @@ mod tests {
                             "{model:?} pair {k} channel {c}: {got} vs {expected}"
                         );
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn per_texel_maps_capture_each_texels_own_ward_brdf() {
+        // A flat tile whose left half is one Ward material and right half another: every texel
+        // is that texel's f · cos θi (the same closed form as above), so the maps are read per
+        // texel, not blended, where neighbours agree.
+        let (n, rings) = (
+            8,
+            DirectionSet::List(vec![[0.0, 0.0], [40.0, 30.0], [70.0, 200.0]]),
+        );
+        let mat = |x: usize| {
+            if x < n / 2 {
+                [0.2, 0.3, 0.4, 0.1, 0.15]
+            } else {
+                [0.5, 0.1, 0.05, 0.02, 0.4]
+            }
+        };
+        let maps = BrdfMap {
+            width: n,
+            height: n,
+            data: (0..n * n).flat_map(|i| mat(i % n)).collect(),
+        };
+        let p = Params {
+            views: rings.clone(),
+            lights: rings,
+            brdf: Model::Ward,
+            ..Params::default()
+        };
+        let inputs = Inputs::new()
+            .with("height", std::sync::Arc::new(field(n, |_, _| 1.0)))
+            .with("maps", std::sync::Arc::new(maps));
+        let out = Capture
+            .run(&NodeContext::detached(None), &p, &inputs)
+            .unwrap();
+        let b = out
+            .get("btf")
+            .unwrap()
+            .as_any()
+            .downcast_ref::<Btf>()
+            .unwrap();
+        for (k, pair) in b.pairs.iter().enumerate() {
+            for x in [1, 2, 5, 6] {
+                let m = mat(x);
+                for c in 0..3 {
+                    let expected =
+                        ward_flat(m[c], m[3], m[4], pair.view, pair.light) * pair.light.theta.cos();
+                    let got = at(b, k, c, x, 3);
+                    assert!(
+                        (got - expected).abs() <= 1e-6 * expected,
+                        "pair {k} texel {x} channel {c}: {got} vs {expected}"
+                    );
                 }
             }
         }

@@ -83,7 +83,8 @@ impl Node for Reference {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "render.reference",
-            version: 1,
+            // 2: Ward's half vector is normalised before its cosine (btf::brdf; other rounding).
+            version: 2,
             doc: "Ground truth (or, with a normal map, normal mapping): direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance, N samples per pixel, box filter, on the CPU.",
             device: DevicePreference::Cpu,
             inputs: vec![
