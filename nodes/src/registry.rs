@@ -12,6 +12,8 @@ pub fn registry() -> Registry {
     r.register(crate::btf::read_ubo2003::ReadUbo2003);
     r.register(crate::btf::reconstruct::Reconstruct);
     r.register(crate::btf::write_ubo2003::WriteUbo2003);
+    r.register(crate::btf::read_ubo2014::ReadUbo2014);
+    r.register(crate::btf::write_ubo2014::WriteUbo2014);
     r.register(crate::heightfield::procedural::Procedural);
     r.register(crate::heightfield::read::Read);
     r.register(crate::heightfield::normals::Normals);

@@ -1,0 +1,280 @@
+//! The Bonn UBO2014 formats against an independent writer and reader (`tests/peers/ubo2014.py`,
+//! written from btflib's documentation with numpy's float16): every variant's factors read bit
+//! for bit, the expanded BTF as the peer expands it, bad files refused with the file named, and
+//! mesoflow's DFMF writer read back by the peer.
+
+mod common;
+
+use common::{mesoflow, peer_python, read_npy, Scratch};
+use half::f16;
+use mesoflow_nodes::btf::reconstruct::reconstruct;
+use mesoflow_nodes::btf::ubo2014::{self, Payload};
+use mesoflow_nodes::types::{BasisBlock, BtfBasis, Centring, ColorSpace, Direction, DirectionPair};
+use std::path::Path;
+use std::process::Command;
+
+const PEER: &str = "tests/peers/ubo2014.py";
+
+fn peer(py: &Path, args: &[&str]) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let o = Command::new(py)
+        .arg(root.join(PEER))
+        .args(args)
+        .output()
+        .expect("run the peer");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+fn same_bits(name: &str, ours: &[f32], theirs: &[f32]) {
+    assert_eq!(ours.len(), theirs.len(), "{name}: length");
+    for (i, (a, b)) in ours.iter().zip(theirs).enumerate() {
+        assert_eq!(a.to_bits(), b.to_bits(), "{name}[{i}]: {a} vs {b}");
+    }
+}
+
+/// |ours − theirs| ≤ tol·(1 + |theirs|) everywhere.
+fn close(name: &str, ours: &[f32], theirs: &[f32], tol: f32) {
+    assert_eq!(ours.len(), theirs.len(), "{name}: length");
+    let worst = ours
+        .iter()
+        .zip(theirs)
+        .map(|(a, b)| (a - b).abs() / (1.0 + b.abs()))
+        .fold(0f32, f32::max);
+    assert!(worst <= tol, "{name}: worst relative difference {worst}");
+}
+
+#[test]
+fn every_variant_reads_as_the_independent_writer_wrote_it() {
+    let Some(py) = peer_python("numpy") else {
+        return;
+    };
+    let s = Scratch::new();
+    let dir = s.dir.path();
+    let variants = [
+        "dfmf_rgb",
+        "dfmf_yuv_transposed",
+        "dfmf_pca_f32",
+        "fmf12_log_heightmap",
+        "fmf06r_images",
+        "fmf06",
+        "pvf06r_lightfield",
+        "pvf06_legacy_images",
+    ];
+    let mut signatures = std::collections::BTreeSet::new();
+    for v in variants {
+        peer(&py, &["write", v, &dir.display().to_string()]);
+        let npy = |name: &str| read_npy(&dir.join(format!("{v}.{name}.npy"))).1;
+        let bytes = std::fs::read(dir.join(format!("{v}.btf"))).unwrap();
+        let file = ubo2014::parse(&bytes).unwrap_or_else(|e| panic!("{v}: {e}"));
+        signatures.insert(file.header.signature.text());
+        // The factors, bit for bit (half floats widened to f32 by numpy and by us).
+        match &file.payload {
+            Payload::Dfmf { channels, .. } => {
+                for (c, ch) in channels.iter().enumerate() {
+                    same_bits(&format!("{v} U{c}"), &ch.u, &npy(&format!("u{c}")));
+                    same_bits(&format!("{v} S×V{c}"), &ch.sxv, &npy(&format!("sxv{c}")));
+                }
+            }
+            Payload::Fmf { factor, .. } => {
+                same_bits(&format!("{v} U"), &factor.u, &npy("u0"));
+                same_bits(&format!("{v} S×V"), &factor.sxv, &npy("sxv0"));
+            }
+            Payload::Pvf { slots } => {
+                for (i, slot) in slots.iter().enumerate() {
+                    same_bits(&format!("{v} C{i}"), &slot.c, &npy(&format!("c{i}")));
+                    same_bits(&format!("{v} W{i}"), &slot.w, &npy(&format!("w{i}")));
+                    same_bits(&format!("{v} mean{i}"), &slot.mean, &npy(&format!("m{i}")));
+                }
+            }
+        }
+        // The expanded BTF through the command line. Tolerance: both sum the same stored
+        // factors, the peer in f64, we in f64 from f32 products and round to f32: 1e-5.
+        let graph = format!(
+            r#"{{"mesoflow": 1, "nodes": {{
+                "read": {{"kind": "btf.read_ubo2014", "params": {{"path": "{v}.btf"}}}},
+                "npy": {{"kind": "npy.write", "inputs": {{"value": "read.btf"}}, "params": {{"path": "{v}.npy"}}}}
+            }}}}"#
+        );
+        let g = s.write(&format!("{v}.json"), &graph);
+        let out = s.path(&format!("out_{v}"));
+        let r = mesoflow(
+            &[
+                "run",
+                &g.display().to_string(),
+                "--quiet",
+                "--no-cache",
+                "--out-dir",
+                &out.display().to_string(),
+            ],
+            dir,
+        );
+        assert_eq!(r.code, 0, "{v}: {}", r.stderr);
+        let (shape, ours) = read_npy(&out.join(format!("{v}.npy")));
+        let (want_shape, want) = read_npy(&dir.join(format!("{v}.expected.npy")));
+        assert_eq!(shape, want_shape, "{v}");
+        close(v, &ours, &want, 1e-5);
+        // The linear variants also as a basis, not expanded: the same values once expanded.
+        match ubo2014::nonlinear(&file) {
+            None => close(
+                &format!("{v} as a basis"),
+                &reconstruct(&ubo2014::to_basis(&file, true)).data,
+                &want,
+                1e-5,
+            ),
+            Some(why) => assert!(
+                matches!(
+                    v,
+                    "dfmf_pca_f32" | "fmf12_log_heightmap" | "pvf06_legacy_images"
+                ),
+                "{v}: {why}"
+            ),
+        }
+    }
+    assert_eq!(signatures.len(), 6, "{signatures:?}");
+}
+
+#[test]
+fn bad_files_name_the_file_and_what_is_wrong() {
+    let Some(py) = peer_python("numpy") else {
+        return;
+    };
+    let s = Scratch::new();
+    let dir = s.dir.path();
+    peer(&py, &["write", "dfmf_rgb", &dir.display().to_string()]);
+    let good = std::fs::read(dir.join("dfmf_rgb.btf")).unwrap();
+    let truncated = &good[..good.len() - 7];
+    let mut wrong_signature = good.clone();
+    wrong_signature[1..5].copy_from_slice(b"XXXX");
+    // The width (after the meta block and the directions) one larger: the factors no longer fit.
+    let meta = u32::from_le_bytes(good[10..14].try_into().unwrap()) as usize;
+    let width_at = 10 + meta + 4 + 2 * (8 + 4 + 3 * 8);
+    let mut wrong_size = good.clone();
+    wrong_size[width_at] += 1;
+    for (name, bytes, expect) in [
+        (
+            "truncated",
+            truncated.to_vec(),
+            "the file ends inside channel 2's S×V",
+        ),
+        ("signature", wrong_signature, "is none of UBO2014's"),
+        (
+            "size",
+            wrong_size,
+            "channel 0 is 6 × 20; the header asks for 6 × 24",
+        ),
+    ] {
+        std::fs::write(dir.join(format!("{name}.btf")), &bytes).unwrap();
+        let g = s.write(&format!("{name}.json"), &format!(r#"{{"mesoflow": 1, "nodes": {{"read": {{"kind": "btf.read_ubo2014", "params": {{"path": "{name}.btf"}}}}}}}}"#));
+        let r = mesoflow(
+            &[
+                "run",
+                &g.display().to_string(),
+                "--quiet",
+                "--no-cache",
+                "--out-dir",
+                &s.path("o").display().to_string(),
+            ],
+            dir,
+        );
+        assert_ne!(r.code, 0, "{name}");
+        assert!(
+            r.stderr.contains(&format!("{name}.btf")) && r.stderr.contains(expect),
+            "{name}: {}",
+            r.stderr
+        );
+    }
+}
+
+/// A basis with every kind of block mesoflow makes: a whole-RGB block centred per column over the
+/// first view's pairs, and per-channel blocks centred per texel over the second view's.
+fn basis(color: ColorSpace) -> BtfBasis {
+    let (w, h) = (4, 3);
+    let t = w * h;
+    let views = [Direction::degrees(0.0, 0.0), Direction::degrees(30.0, 90.0)];
+    let lights = [
+        Direction::degrees(10.0, 0.0),
+        Direction::degrees(45.0, 120.0),
+        Direction::degrees(70.0, 240.0),
+    ];
+    let pairs: Vec<DirectionPair> = views
+        .iter()
+        .flat_map(|v| {
+            lights.iter().map(move |l| DirectionPair {
+                view: *v,
+                light: *l,
+            })
+        })
+        .collect();
+    let wave = |i: usize, a: f32| ((i as f32 * 0.37 + a).sin() * 0.4) as f32;
+    let mut blocks = vec![BasisBlock {
+        first_pair: 0,
+        pair_count: 3,
+        channel: None,
+        centring: Centring::Columns,
+        mean: (0..9).map(|j| 0.2 + 0.01 * j as f32).collect(),
+        maps: (0..2 * t).map(|i| wave(i, 0.0)).collect(),
+        basis: (0..2 * 9).map(|i| wave(i, 1.0)).collect(),
+        singular: vec![3.0, 1.5],
+    }];
+    for c in 0..3u8 {
+        blocks.push(BasisBlock {
+            first_pair: 3,
+            pair_count: 3,
+            channel: Some(c),
+            centring: Centring::Texels,
+            mean: (0..t).map(|i| 0.1 + wave(i, c as f32).abs()).collect(),
+            maps: (0..t).map(|i| wave(i, 2.0 + c as f32)).collect(),
+            basis: (0..3).map(|i| wave(i, 3.0)).collect(),
+            singular: vec![0.7],
+        });
+    }
+    let b = BtfBasis {
+        width: w,
+        height: h,
+        pairs,
+        color,
+        blocks,
+    };
+    b.check().unwrap();
+    b
+}
+
+#[test]
+fn our_dfmf_files_read_back_in_the_independent_reader() {
+    let Some(py) = peer_python("numpy") else {
+        return;
+    };
+    let s = Scratch::new();
+    for (name, color) in [("rgb", ColorSpace::Rgb), ("ycbcr", ColorSpace::YCbCr)] {
+        let b = basis(color);
+        let bytes = ubo2014::write_dfmf(&b).unwrap();
+        let path = s.path(&format!("{name}.btf"));
+        std::fs::write(&path, &bytes).unwrap();
+        let prefix = s.path(name);
+        peer(
+            &py,
+            &[
+                "read",
+                &path.display().to_string(),
+                &prefix.display().to_string(),
+            ],
+        );
+        // Both readers see the same half floats.
+        let Payload::Dfmf { channels, .. } = ubo2014::parse(&bytes).unwrap().payload else {
+            panic!("not DFMF")
+        };
+        for (c, ch) in channels.iter().enumerate() {
+            let npy = |f: &str| read_npy(Path::new(&format!("{}.{f}{c}.npy", prefix.display()))).1;
+            same_bits(&format!("{name} U{c}"), &ch.u, &npy("u"));
+            same_bits(&format!("{name} S×V{c}"), &ch.sxv, &npy("sxv"));
+            assert!(
+                ch.u.iter().all(|v| f16::from_f32(*v).to_f32() == *v),
+                "U{c} holds halves"
+            );
+        }
+        // The peer's expansion is the basis's reconstruction up to half rounding: each value
+        // sums a handful of products of halves (relative error 2^-11 each) of magnitude < 1.
+        let (_, theirs) = read_npy(Path::new(&format!("{}.expected.npy", prefix.display())));
+        close(name, &reconstruct(&b).data, &theirs, 4e-3);
+    }
+}
