@@ -28,6 +28,13 @@ fn small(graph: &str) -> Vec<String> {
     };
     let mut s: Vec<String> = match graph {
         "btf_capture" => vec!["surface.size=16".into()],
+        "btf_edit" => vec![
+            format!("capture.views={DIRS}"),
+            format!("capture.lights={DIRS}"),
+            format!("recovered.views={DIRS}"),
+            format!("recovered.lights={DIRS}"),
+            "fit.iterations=50".into(),
+        ],
         "btf_compress" => vec!["surface.size=16".into(), "pca.rank=3".into()],
         "height_from_normals" => vec!["tile.size=32".into()],
         "isomap" => vec!["roll.n=300".into(), "landmark.landmarks=50".into()],

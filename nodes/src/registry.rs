@@ -28,6 +28,7 @@ pub fn registry() -> Registry {
     r.register(crate::image::row::Row);
     r.register(crate::image::blur::Blur);
     r.register(crate::image::ramp::Ramp);
+    r.register(crate::image::colorize::Colorize);
     r.register(crate::io::image_read::ImageRead);
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);

@@ -5,8 +5,8 @@
 //!
 //! Hue, saturation and value are those of the linear albedo (not of sRGB-encoded values): a
 //! value scale of 0.5 halves the albedo, whatever its colour. Edited albedos are kept in [0, 1]
-//! (a surface cannot reflect more than it receives) and ρs ≥ 0, α within the fit's bounds; the
-//! pixels clamped are counted and warned about.
+//! and ρs in [0, 1] (a surface cannot reflect more than it receives), α within the fit's
+//! bounds; the pixels clamped are counted and warned about.
 
 use crate::types::{BrdfMap, Image, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
@@ -74,7 +74,7 @@ impl Node for Edit {
             outputs: vec![
                 Port::output("maps", BrdfMap::TYPE, "the edited parameters"),
                 Port::output("albedo", Image::TYPE, "the edited diffuse albedo ρd, RGB"),
-                Port::output("clamped", "Scalar", "pixels whose edited albedo left [0, 1] and were clamped"),
+                Port::output("clamped", "Scalar", "pixels whose edited albedo or ρs left [0, 1] and were clamped"),
             ],
             disk_cache: true,
         }
@@ -124,7 +124,9 @@ impl Node for Edit {
             for c in 0..3 {
                 px[c] = (1.0 - t) * px[c] + t * bounded[c];
             }
-            px[3] = (1.0 - t) * px[3] + t * (px[3] * p.specular_scale).max(0.0);
+            let rho_s = px[3] * p.specular_scale;
+            clamped += usize::from(rho_s > 1.0 && bounded == edited);
+            px[3] = (1.0 - t) * px[3] + t * rho_s.clamp(0.0, 1.0);
             let alpha = (px[4] * p.roughness_scale).clamp(ALPHA_RANGE.0, ALPHA_RANGE.1);
             px[4] = (1.0 - t) * px[4] + t * alpha;
         }

@@ -52,6 +52,7 @@ pub fn refine_with_normal(
     n0: [f64; 3],
     iterations: u32,
     tol: f64,
+    alpha_min: f64,
 ) -> ([f64; WARD_PARAMS], [f64; 3], bool) {
     let mut z = [0.0; N];
     z[..WARD_PARAMS].copy_from_slice(&x);
@@ -67,7 +68,7 @@ pub fn refine_with_normal(
         |z| cost(pairs, obs, z),
         |z| normal_equations(pairs, obs, z),
         |z| {
-            clamp_ward(z);
+            clamp_ward(z, alpha_min);
             z[5] = z[5].clamp(-MAX_SLOPE, MAX_SLOPE);
             z[6] = z[6].clamp(-MAX_SLOPE, MAX_SLOPE);
         },

@@ -33,13 +33,19 @@ use std::time::Instant;
 const ALPHA_MIN: f64 = 0.005;
 const ALPHA_MAX: f64 = 2.0;
 
-/// The bounds of a Ward parameter vector (ρd RGB, ρs, α, …): reflectances not negative, α in
-/// [ALPHA_MIN, ALPHA_MAX]; entries past α are left alone.
-pub(super) fn clamp_ward(x: &mut [f64]) {
+/// The largest specular albedo: Ward's ρs is the lobe's share of the light it reflects, so
+/// above 1 it would create energy. Without the bound a pixel whose data no Ward lobe explains
+/// (a GGX capture's Fresnel rise at grazing angles) could run to ρs ≈ 1e48 at the narrowest α.
+const RHO_S_MAX: f64 = 1.0;
+
+/// The bounds of a Ward parameter vector (ρd RGB, ρs, α, …): reflectances not negative, ρs at
+/// most RHO_S_MAX, α in [alpha_min, ALPHA_MAX]; entries past α are left alone.
+pub(super) fn clamp_ward(x: &mut [f64], alpha_min: f64) {
     for v in x.iter_mut().take(4) {
         *v = v.max(0.0);
     }
-    x[4] = x[4].clamp(ALPHA_MIN, ALPHA_MAX);
+    x[3] = x[3].min(RHO_S_MAX);
+    x[4] = x[4].clamp(alpha_min, ALPHA_MAX);
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
@@ -68,6 +74,11 @@ pub struct Params {
     /// Levenberg–Marquardt steps per pixel at most.
     #[schemars(range(min = 1))]
     pub iterations: u32,
+    /// The narrowest lobe α fitted. A lobe narrower than the capture's angular spacing falls
+    /// between its directions, where no data constrains it (a pixel can then fit one bright
+    /// sample with ρs = 1 and α → 0 and render a spike); set it near half that spacing in radians.
+    #[schemars(range(min = 0.005, max = 1.0))]
+    pub min_roughness: f64,
     /// Converged when a step lowers the squared error by less than this share of it.
     #[schemars(range(min = 0.0))]
     pub tolerance: f64,
@@ -87,6 +98,7 @@ impl Default for Params {
             drop_bright: 0.5,
             clusters: 8,
             iterations: 200,
+            min_roughness: ALPHA_MIN,
             tolerance: 1e-12,
             weights: [1.0, 1.0, 1.0],
             seed: 1,
@@ -144,6 +156,12 @@ impl Node for FitWard {
             if !(v.is_finite() && (0.0..1.0).contains(&v)) {
                 return Err(NodeError::param(name, "must be in [0, 1)"));
             }
+        }
+        if !(ALPHA_MIN..=1.0).contains(&p.min_roughness) {
+            return Err(NodeError::param(
+                "min_roughness",
+                format!("must be in [{ALPHA_MIN}, 1]"),
+            ));
         }
         Ok(())
     }
@@ -333,7 +351,7 @@ impl Problem<'_> {
         let saa = saa.max(1e-300);
         let denom = 3.0 * (sbb - sab * sab / saa);
         let rho_s = if denom > 0.0 {
-            ((sbi - sab / saa * sai.iter().sum::<f64>()) / denom).max(0.0)
+            ((sbi - sab / saa * sai.iter().sum::<f64>()) / denom).clamp(0.0, RHO_S_MAX)
         } else {
             0.0
         };
@@ -344,7 +362,13 @@ impl Problem<'_> {
 
     /// Levenberg–Marquardt from `x` (ρd, ρs ≥ 0, α in its range); returns the parameters and
     /// whether it converged.
-    fn refine(&self, x: [f64; WARD_PARAMS], iterations: u32, tol: f64) -> ([f64; 5], bool) {
+    fn refine(
+        &self,
+        x: [f64; WARD_PARAMS],
+        iterations: u32,
+        tol: f64,
+        alpha_min: f64,
+    ) -> ([f64; 5], bool) {
         let scale: f64 = self.obs.iter().map(|v| (*v as f64).powi(2)).sum::<f64>();
         lm::minimise(
             x,
@@ -353,7 +377,7 @@ impl Problem<'_> {
             scale,
             |x| self.cost(x),
             |x| self.normal_equations(x),
-            |x| clamp_ward(x),
+            |x| clamp_ward(x, alpha_min),
         )
     }
 }
@@ -364,11 +388,13 @@ fn fit_from_scratch(problem: &Problem, p: &Params) -> [f64; WARD_PARAMS] {
     let best = (0..grid)
         .map(|i| {
             let t = i as f64 / (grid - 1) as f64;
-            problem.linear(0.01 * (80.0f64).powf(t))
+            problem.linear(p.min_roughness.max(0.01) * (80.0f64).powf(t))
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map_or([0.0, 0.0, 0.0, 0.0, 0.2], |b| b.0);
-    problem.refine(best, p.iterations, p.tolerance).0
+    problem
+        .refine(best, p.iterations, p.tolerance, p.min_roughness)
+        .0
 }
 
 pub fn fit(ctx: &NodeContext, btf: &Btf, p: &Params) -> Result<Fit, NodeError> {
@@ -512,6 +538,7 @@ pub fn fit(ctx: &NodeContext, btf: &Btf, p: &Params) -> Result<Fit, NodeError> {
                             nv[i],
                             p.iterations,
                             p.tolerance,
+                            p.min_roughness,
                         );
                         let geo: Vec<PairGeometry> = btf
                             .pairs
@@ -598,7 +625,8 @@ fn fit_pixels(
                         obs: &vectors[i * dims..(i + 1) * dims],
                     };
                     let start = start_of(i);
-                    let (mut params, mut ok) = problem.refine(start, p.iterations, p.tolerance);
+                    let (mut params, mut ok) =
+                        problem.refine(start, p.iterations, p.tolerance, p.min_roughness);
                     if params.iter().any(|v| !v.is_finite()) {
                         (params, ok) = (start, false);
                     }

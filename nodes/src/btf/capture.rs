@@ -246,6 +246,21 @@ fn map_planes(
         ));
     }
     let n = m.width * m.height;
+    // A lobe outside these bounds is not a reflectance: ρs > 1 reflects more than arrives (and at
+    // α → 0 overflows to infinity), α ≤ 0 has no normalisation.
+    if let Some(i) = (0..n).find(|&i| !(0.0..=1.0).contains(&m.pixel(i)[3]) || m.pixel(i)[4] <= 0.0)
+    {
+        return Err(NodeError::input(
+            "maps",
+            format!(
+                "texel ({}, {}) has ρs = {}, α = {}: a Ward lobe needs ρs in [0, 1] and α > 0",
+                i % m.width,
+                i / m.width,
+                m.pixel(i)[3],
+                m.pixel(i)[4]
+            ),
+        ));
+    }
     let planes = [0, 1, 2].map(|c| (0..n).map(|i| m.pixel(i)[c] as f32).collect());
     let lobes = (0..n)
         .map(|i| [m.pixel(i)[3] as f32, m.pixel(i)[4].max(1e-3) as f32])

@@ -36,8 +36,9 @@ impl Node for Compare {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "btf.compare",
-            version: 1,
-            doc: "Error of a BTF against a reference: RMSE, PSNR, max error, per-direction-pair RMSE (image and CSV).",
+            // 2: `relative_rmse`.
+            version: 2,
+            doc: "Error of a BTF against a reference: RMSE, relative RMSE, PSNR, max error, per-direction-pair RMSE (image and CSV).",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("reference", Btf::TYPE, "the reference BTF"),
@@ -45,6 +46,7 @@ impl Node for Compare {
             ],
             outputs: vec![
                 Port::output("rmse", "Scalar", "RMS error, linear units"),
+                Port::output("relative_rmse", "Scalar", "RMS error over the reference's RMS value"),
                 Port::output("psnr", "Scalar", "20·log10(reference max / rmse) dB, capped at 300"),
                 Port::output("max_error", "Scalar", "largest absolute error"),
                 Port::output("per_pair", Image::TYPE, "RMSE of each direction pair, grey"),
@@ -78,20 +80,21 @@ impl Node for Compare {
         }
         let plane = 3 * a.width * a.height;
         // Per pair: (sum of squared errors, max abs error), each summed in order.
-        let per: Vec<(f64, f64)> = (0..a.pairs.len())
+        let per: Vec<(f64, f64, f64)> = (0..a.pairs.len())
             .into_par_iter()
             .map(|k| {
                 let (x, y) = (
                     &a.data[k * plane..(k + 1) * plane],
                     &b.data[k * plane..(k + 1) * plane],
                 );
-                x.iter().zip(y).fold((0.0, 0.0), |(s, m), (u, v)| {
+                x.iter().zip(y).fold((0.0, 0.0, 0.0), |(s, m, r), (u, v)| {
                     let d = (*u as f64 - *v as f64).abs();
-                    (s + d * d, f64::max(m, d))
+                    (s + d * d, f64::max(m, d), r + (*u as f64) * (*u as f64))
                 })
             })
             .collect();
         let sse: f64 = per.iter().map(|p| p.0).sum();
+        let reference_ss: f64 = per.iter().map(|p| p.2).sum();
         let max_error = per.iter().fold(0.0, |m, p| f64::max(m, p.1));
         if !sse.is_finite() {
             return Err(NodeError::input(
@@ -100,10 +103,11 @@ impl Node for Compare {
             ));
         }
         let rmse = (sse / a.data.len().max(1) as f64).sqrt();
+        let relative_rmse = (sse / reference_ss.max(f64::MIN_POSITIVE)).sqrt();
         let peak = a.peak();
         let pair_rmse: Vec<f32> = per
             .iter()
-            .map(|(s, _)| (s / plane as f64).sqrt() as f32)
+            .map(|(s, _, _)| (s / plane as f64).sqrt() as f32)
             .collect();
         let mut csv = String::from("pair,view_theta,view_phi,light_theta,light_phi,rmse\n");
         // Degrees rounded to 1e-9 so 30° prints as 30, not 29.999999999999996.
@@ -126,6 +130,7 @@ impl Node for Compare {
         };
         Ok(Outputs::new()
             .with("rmse", Scalar(rmse))
+            .with("relative_rmse", Scalar(relative_rmse))
             .with("psnr", Scalar(psnr(peak, rmse)))
             .with("max_error", Scalar(max_error))
             .with("per_pair", grid)

@@ -1,6 +1,7 @@
 //! Operations on images: error against a reference, side-by-side layout, blur, ramps.
 
 pub mod blur;
+pub mod colorize;
 pub mod compare;
 pub mod flip;
 pub mod ramp;

@@ -30,6 +30,14 @@ pub struct Params {
     #[serde(default = "eight")]
     #[schemars(range(min = 8, max = 16))]
     pub bits: u8,
+    /// Each pixel written as scale × scale pixels (nearest neighbour), to show small images.
+    #[serde(default = "one")]
+    #[schemars(range(min = 1, max = 64))]
+    pub scale: u32,
+    /// Multiplies every value before encoding (a camera's exposure, linear).
+    #[serde(default = "unit")]
+    #[schemars(range(min = 0.0, max = 1e6))]
+    pub exposure: f64,
 }
 
 fn auto() -> Format {
@@ -37,6 +45,13 @@ fn auto() -> Format {
 }
 fn eight() -> u8 {
     8
+}
+
+fn one() -> u32 {
+    1
+}
+fn unit() -> f64 {
+    1.0
 }
 
 pub struct ImageWrite;
@@ -62,12 +77,25 @@ impl Node for ImageWrite {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
+        if !(1..=64).contains(&p.scale) {
+            return Err(NodeError::param("scale", "must be 1 to 64"));
+        }
+        if !(p.exposure.is_finite() && (0.0..=1e6).contains(&p.exposure)) {
+            return Err(NodeError::param("exposure", "must be in [0, 1e6]"));
+        }
         format_of(p).map(drop)
     }
 
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let img = inputs.get::<Image>("image")?;
         let format = format_of(p)?;
+        let shown;
+        let img = if p.scale == 1 && p.exposure == 1.0 {
+            img
+        } else {
+            shown = enlarge(img, p.scale as usize, p.exposure as f32);
+            &shown
+        };
         let bytes = match format {
             Format::Exr => formats::encode_exr(img),
             _ => formats::encode_png(img, p.bits),
@@ -80,6 +108,21 @@ impl Node for ImageWrite {
                 bytes,
             },
         ))
+    }
+}
+
+/// The image times `exposure`, each pixel repeated `scale` × `scale` times.
+fn enlarge(img: &Image, scale: usize, exposure: f32) -> Image {
+    let (w, c) = (img.width * scale, img.channels);
+    let data = (0..img.height * scale)
+        .flat_map(|y| (0..w).map(move |x| (y / scale * img.width + x / scale) * c))
+        .flat_map(|at| img.data[at..at + c].iter().map(|v| v * exposure))
+        .collect();
+    Image {
+        width: w,
+        height: img.height * scale,
+        channels: c,
+        data,
     }
 }
 
@@ -107,4 +150,22 @@ fn format_of(p: &Params) -> Result<Format, NodeError> {
         ));
     }
     Ok(format)
+}
+
+#[cfg(test)]
+mod enlarge_tests {
+    use super::*;
+
+    #[test]
+    fn enlarging_repeats_pixels_and_exposure_scales_them() {
+        let img = Image {
+            width: 2,
+            height: 1,
+            channels: 1,
+            data: vec![0.25, 0.5],
+        };
+        let big = enlarge(&img, 2, 2.0);
+        assert_eq!((big.width, big.height), (4, 2));
+        assert_eq!(big.data, vec![0.5, 0.5, 1.0, 1.0, 0.5, 0.5, 1.0, 1.0]);
+    }
 }
