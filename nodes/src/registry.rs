@@ -37,6 +37,7 @@ pub fn registry() -> Registry {
     r.register(crate::mesh::read::Read);
     r.register(crate::render::render_mesh::RenderMesh);
     r.register(crate::render::reference::Reference);
+    r.register(crate::render::relief::RenderRelief);
     r.register(crate::io::image_write::ImageWrite);
     r.register(crate::io::npy_write::NpyWrite);
     r.register(crate::sss::material::Material);

@@ -19,7 +19,7 @@ fn gpu_err(what: &str) -> impl Fn(String) -> NodeError + '_ {
 
 /// Camera as the shaders' `Cam`: eye (w = ortho), fwd (w = half), right (w = aspect), up,
 /// size (width, height, near, far).
-fn cam_block(c: &Camera, centre: [f64; 3], radius: f64) -> Vec<f32> {
+pub(crate) fn cam_block(c: &Camera, centre: [f64; 3], radius: f64) -> Vec<f32> {
     let zc = dot(sub(centre, c.eye), c.forward);
     let (near, far) = if c.orthographic {
         (zc - 1.01 * radius, zc + 1.01 * radius)

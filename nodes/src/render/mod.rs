@@ -7,6 +7,8 @@ pub mod layers;
 pub mod light;
 pub mod material;
 pub mod reference;
+pub mod relief;
+pub mod relief_gpu;
 pub mod render_mesh;
 pub mod rings;
 pub mod scene_footprint;
