@@ -93,7 +93,7 @@ impl Node for RenderRelief {
                 Port::output("mask", Image::TYPE, "1 where the mesh is hit, else 0 (one channel)"),
                 Port::output("coverage", "Scalar", "share of pixels that show the mesh"),
             ],
-            disk_cache: false,
+            disk_cache: true,
         }
     }
 
