@@ -205,7 +205,7 @@ fn basis(color: ColorSpace) -> BtfBasis {
             })
         })
         .collect();
-    let wave = |i: usize, a: f32| ((i as f32 * 0.37 + a).sin() * 0.4) as f32;
+    let wave = |i: usize, a: f32| (i as f32 * 0.37 + a).sin() * 0.4;
     let mut blocks = vec![BasisBlock {
         first_pair: 0,
         pair_count: 3,

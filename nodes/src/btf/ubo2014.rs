@@ -4,8 +4,9 @@
 //!
 //! Layout (little-endian): a signature (`!DFMF08FCR`, `!FMF12FCER`, `!FMF06FCR`, `!FMF06FC`,
 //! `!PVF06FCR`, `!PVF06FC`; the longest that matches), then the common header — a meta block
-//! (u32 byte size, u32 version, three 80-byte strings, f32 pixels/mm, 3 f32 RGB scale; version
-//! > 1: u32 cosine flag; > 2: u32 length + XML; > 3: u32 channels + length-prefixed names), the
+//! (u32 byte size, u32 version, three 80-byte strings, f32 pixels/mm, 3 f32 RGB scale; from
+//! version 2 a u32 cosine flag, from 3 a u32 length and XML, from 4 u32 channels and
+//! length-prefixed names), the
 //! directions (u32 views; per view θ, φ as f32 radians, u32 lights and their θ, φ), u32 width and
 //! height, and for signatures ending in R u32 rotations and 3×3 f32 each. Then per variant:
 //! - FMF: (12FCER only) u8 header version; ≥ 1: u32 dynamic-range reduction; ≥ 2: u32 × 2 size and
@@ -201,7 +202,7 @@ impl<'a> Cursor<'a> {
 
     /// `n` scalars of `size` bytes (2: half, 4: single, 8: double) as f32.
     fn scalars(&mut self, n: usize, size: u8, what: &str) -> Result<Vec<f32>, FormatError> {
-        let bytes = self.take(n.checked_mul(size as usize).unwrap_or(usize::MAX), what)?;
+        let bytes = self.take(n.saturating_mul(size as usize), what)?;
         Ok(match size {
             2 => bytes
                 .chunks_exact(2)
@@ -895,16 +896,15 @@ pub fn write_dfmf(b: &BtfBasis) -> Result<Vec<u8>, String> {
     out.extend_from_slice(&(b.width as u32).to_le_bytes());
     out.extend_from_slice(&(b.height as u32).to_le_bytes());
     out.extend_from_slice(&0u32.to_le_bytes()); // no rotations
-    let channels: Vec<(Vec<f32>, Vec<Vec<f32>>, Vec<Vec<f32>>)> =
-        (0..3).map(|c| channel_components(b, c, t)).collect();
+    let channels: Vec<Components> = (0..3).map(|c| channel_components(b, c, t)).collect();
     let k_max = channels.iter().map(|c| c.0.len()).max().unwrap_or(0);
     out.extend_from_slice(&(k_max as u32).to_le_bytes());
     out.extend_from_slice(&(if yuv { 1i32 } else { 0 }).to_le_bytes());
     for _ in 0..3 {
         out.extend_from_slice(&0f32.to_le_bytes());
     }
-    for (i, v) in [1f32, 0., 0., 0., 1., 0., 0., 0., 1.].iter().enumerate() {
-        let _ = i;
+    // The identity colour matrix, row-major.
+    for v in [1f32, 0., 0., 0., 1., 0., 0., 0., 1.] {
         out.extend_from_slice(&v.to_le_bytes());
     }
     // Cb = U·2.03211/1.772 and Cr = V·1.13983/1.402, so U = Cb·1.772/2.03211, V = Cr·1.402/1.13983.
@@ -942,13 +942,12 @@ pub fn write_dfmf(b: &BtfBasis) -> Result<Vec<u8>, String> {
     Ok(out)
 }
 
+/// One channel's DFMF components: singular values, and per component its values over the
+/// pairs (U's column) and over the texels (S×V's column).
+type Components = (Vec<f32>, Vec<Vec<f32>>, Vec<Vec<f32>>);
+
 /// For channel c: singular values, per component the values over pairs and over texels.
-#[allow(clippy::type_complexity)]
-fn channel_components(
-    b: &BtfBasis,
-    c: usize,
-    t: usize,
-) -> (Vec<f32>, Vec<Vec<f32>>, Vec<Vec<f32>>) {
+fn channel_components(b: &BtfBasis, c: usize, t: usize) -> Components {
     let n = b.pairs.len();
     let (mut s, mut angle, mut texel) = (vec![], vec![], vec![]);
     for blk in &b.blocks {
@@ -997,7 +996,7 @@ fn grid(pairs: &[DirectionPair]) -> Result<(Vec<Direction>, Vec<Direction>), Str
         .ok_or("the BTF has no direction pairs")?;
     let nl = pairs.iter().take_while(|p| p.view == first_view).count();
     let lights: Vec<Direction> = pairs[..nl].iter().map(|p| p.light).collect();
-    if pairs.len() % nl != 0 {
+    if !pairs.len().is_multiple_of(nl) {
         return Err(format!(
             "{} pairs are not whole views of {nl} lights",
             pairs.len()
