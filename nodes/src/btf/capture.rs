@@ -315,26 +315,9 @@ impl<'a> Scene<'a> {
         }
     }
 
-    /// Bilinear, periodic interpolation of per-sample values at grid point (u, v).
-    fn lerp<const K: usize>(&self, u: f64, v: f64, at: impl Fn(usize) -> [f32; K]) -> [f64; K] {
-        let (w, h) = (self.hf.width as i64, self.hf.height as i64);
-        let (i, j) = (u.floor() as i64, v.floor() as i64);
-        let (fx, fy) = (u - i as f64, v - j as f64);
-        let idx = |a: i64, b: i64| (b.rem_euclid(h) * w + a.rem_euclid(w)) as usize;
-        let corners = [
-            (idx(i, j), (1.0 - fx) * (1.0 - fy)),
-            (idx(i + 1, j), fx * (1.0 - fy)),
-            (idx(i, j + 1), (1.0 - fx) * fy),
-            (idx(i + 1, j + 1), fx * fy),
-        ];
-        let mut out = [0.0; K];
-        for (c, wgt) in corners {
-            let v = at(c);
-            for k in 0..K {
-                out[k] += wgt * v[k] as f64;
-            }
-        }
-        out
+    /// Bilinear, periodic interpolation of per-texel values at grid point (x, y).
+    fn lerp<const K: usize>(&self, x: f64, y: f64, at: impl Fn(usize) -> [f32; K]) -> [f64; K] {
+        crate::heightfield::grid::bilerp(self.hf.width, self.hf.height, x, y, at)
     }
 
     /// Renders one pair into its three planes, each texel the mean of `samples`² view rays on a

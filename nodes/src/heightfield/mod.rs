@@ -2,6 +2,7 @@
 
 pub mod edit;
 pub mod from_normals;
+pub mod grid;
 pub mod normal_noise;
 pub mod normals;
 pub mod procedural;

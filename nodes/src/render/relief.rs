@@ -17,8 +17,9 @@ use super::camera::{Camera, CameraParams};
 use super::layers::{self, Frag};
 use super::light::{Light, LightParams};
 use super::relief_gpu;
+use super::shade::{surface_at, Surface};
 use crate::btf::brdf::{self, Model};
-use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
+use crate::geometry::{dot, mul, normalize, V3};
 use crate::progress::Counter;
 use crate::types::{BrdfMap, HeightField, Image, Mesh, NormalMap, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
@@ -324,23 +325,7 @@ impl<'a> Relief<'a> {
 
     /// Bilinear, periodic interpolation of per-texel values at grid point (x, y).
     fn lerp<const K: usize>(&self, x: f64, y: f64, at: impl Fn(usize) -> [f32; K]) -> [f64; K] {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let (i, j) = (x.floor() as i64, y.floor() as i64);
-        let (fx, fy) = (x - i as f64, y - j as f64);
-        let idx = |a: i64, b: i64| (b.rem_euclid(h) * w + a.rem_euclid(w)) as usize;
-        let mut out = [0.0; K];
-        for (c, wgt) in [
-            (idx(i, j), (1.0 - fx) * (1.0 - fy)),
-            (idx(i + 1, j), fx * (1.0 - fy)),
-            (idx(i, j + 1), (1.0 - fx) * fy),
-            (idx(i + 1, j + 1), fx * fy),
-        ] {
-            let v = at(c);
-            for k in 0..K {
-                out[k] += wgt * v[k] as f64;
-            }
-        }
-        out
+        crate::heightfield::grid::bilerp(self.width, self.height, x, y, at)
     }
 
     /// Depth of the surface below the top at grid point (x, y), texels.
@@ -350,42 +335,9 @@ impl<'a> Relief<'a> {
 
     /// Radiance at a visibility sample, and whether the light reaches the hit.
     pub fn shade(&self, f: &Frag, ray_dir: V3) -> [f64; 3] {
-        let m = self.mesh;
-        let [i0, i1, i2] = m.corners(f.tri as usize);
-        let wts = [1.0 - f.b1 - f.b2, f.b1, f.b2];
-        let lerp3 = |a: &dyn Fn(usize) -> V3| {
-            add(
-                add(mul(a(i0), wts[0]), mul(a(i1), wts[1])),
-                mul(a(i2), wts[2]),
-            )
-        };
-        let p = lerp3(&|i| m.positions[i].map(|v| v as f64));
-        let n = normalize(lerp3(&|i| m.normals[i].map(|v| v as f64))).unwrap_or([0.0, 0.0, 1.0]);
-        let t0 = lerp3(&|i| {
-            [
-                m.tangents[i][0] as f64,
-                m.tangents[i][1] as f64,
-                m.tangents[i][2] as f64,
-            ]
-        });
-        let t = normalize(sub(t0, mul(n, dot(n, t0))))
-            .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
-        let b = mul(cross(n, t), m.tangents[i0][3] as f64);
-        let uv = [0, 1].map(|k| {
-            (m.uvs[i0][k] as f64 * wts[0]
-                + m.uvs[i1][k] as f64 * wts[1]
-                + m.uvs[i2][k] as f64 * wts[2])
-                * self.tiling[k]
-        });
-        let k = if self.aspect.is_empty() {
-            [1.0, 1.0]
-        } else {
-            [0, 1].map(|j| {
-                self.aspect[i0][j] as f64 * wts[0]
-                    + self.aspect[i1][j] as f64 * wts[1]
-                    + self.aspect[i2][j] as f64 * wts[2]
-            })
-        };
+        let Surface {
+            p, uv, t, b, n, k, ..
+        } = surface_at(self.mesh, self.tiling, &self.aspect, f);
         let local = |v: V3| [dot(v, t), dot(v, b), dot(v, n)];
         let canonical = |v: V3| normalize([v[0] * k[0], v[1] * k[1], v[2]]).unwrap_or(v);
         let mut wo = local(mul(ray_dir, -1.0));

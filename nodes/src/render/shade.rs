@@ -252,6 +252,48 @@ pub fn side_entry(sides: &[Side], o: V3, d: V3, before: f64) -> Option<(f64, usi
 }
 
 /// A hit as [`Scene::hit`] gives it, and its depth for the parallax-compensated view blend.
+/// Position, texture coordinate (times `tiling`), tangent frame and texel aspect at a visibility
+/// sample of `m`, interpolated from its triangle's corners.
+pub fn surface_at(m: &Mesh, tiling: [f64; 2], aspect: &[[f32; 2]], f: &Frag) -> Surface {
+    let [i0, i1, i2] = m.corners(f.tri as usize);
+    let w = [1.0 - f.b1 - f.b2, f.b1, f.b2];
+    let lerp3 = |a: &dyn Fn(usize) -> V3| {
+        let (x, y, z) = (a(i0), a(i1), a(i2));
+        add(add(mul(x, w[0]), mul(y, w[1])), mul(z, w[2]))
+    };
+    let p = lerp3(&|i| m.positions[i].map(|v| v as f64));
+    let n0 = lerp3(&|i| m.normals[i].map(|v| v as f64));
+    let t0 = lerp3(&|i| {
+        let t = m.tangents[i];
+        [t[0] as f64, t[1] as f64, t[2] as f64]
+    });
+    let hand = m.tangents[i0][3] as f64;
+    let uv = [0, 1].map(|k| {
+        (m.uvs[i0][k] as f64 * w[0] + m.uvs[i1][k] as f64 * w[1] + m.uvs[i2][k] as f64 * w[2])
+            * tiling[k]
+    });
+    let n = normalize(n0).unwrap_or([0.0, 0.0, 1.0]);
+    let t = normalize(sub(t0, mul(n, dot(n, t0))))
+        .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
+    let b = mul(cross(n, t), hand);
+    let k = if aspect.is_empty() {
+        [1.0, 1.0]
+    } else {
+        [0, 1].map(|j| {
+            aspect[i0][j] as f64 * w[0] + aspect[i1][j] as f64 * w[1] + aspect[i2][j] as f64 * w[2]
+        })
+    };
+    Surface {
+        p,
+        uv,
+        t,
+        b,
+        n,
+        k,
+        tri: f.tri as usize,
+    }
+}
+
 type DeepHit = (f64, f64, Surface, V3, Option<[f64; 2]>);
 
 /// Position, texture coordinate and tangent frame (t, b, n) at a visibility sample.
@@ -288,46 +330,7 @@ impl Surface {
 
 impl Scene<'_> {
     pub fn surface(&self, f: &Frag) -> Surface {
-        let m = self.mesh;
-        let [i0, i1, i2] = m.corners(f.tri as usize);
-        let w = [1.0 - f.b1 - f.b2, f.b1, f.b2];
-        let lerp3 = |a: &dyn Fn(usize) -> V3| {
-            let (x, y, z) = (a(i0), a(i1), a(i2));
-            add(add(mul(x, w[0]), mul(y, w[1])), mul(z, w[2]))
-        };
-        let p = lerp3(&|i| m.positions[i].map(|v| v as f64));
-        let n0 = lerp3(&|i| m.normals[i].map(|v| v as f64));
-        let t0 = lerp3(&|i| {
-            let t = m.tangents[i];
-            [t[0] as f64, t[1] as f64, t[2] as f64]
-        });
-        let hand = m.tangents[i0][3] as f64;
-        let uv = [0, 1].map(|k| {
-            (m.uvs[i0][k] as f64 * w[0] + m.uvs[i1][k] as f64 * w[1] + m.uvs[i2][k] as f64 * w[2])
-                * self.tiling[k]
-        });
-        let n = normalize(n0).unwrap_or([0.0, 0.0, 1.0]);
-        let t = normalize(sub(t0, mul(n, dot(n, t0))))
-            .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
-        let b = mul(cross(n, t), hand);
-        let k = if self.aspect.is_empty() {
-            [1.0, 1.0]
-        } else {
-            [0, 1].map(|j| {
-                self.aspect[i0][j] as f64 * w[0]
-                    + self.aspect[i1][j] as f64 * w[1]
-                    + self.aspect[i2][j] as f64 * w[2]
-            })
-        };
-        Surface {
-            p,
-            uv,
-            t,
-            b,
-            n,
-            k,
-            tri: f.tri as usize,
-        }
+        surface_at(self.mesh, self.tiling, &self.aspect, f)
     }
 
     fn local(s: &Surface, v: V3) -> V3 {
