@@ -105,23 +105,15 @@ impl Node for Transfer {
 /// Bilinear, periodic resampling of every parameter plane (centres aligned).
 fn stretch(a: &BrdfMap, w: usize, h: usize) -> Vec<f64> {
     let (sx, sy) = (a.width as f64 / w as f64, a.height as f64 / h as f64);
-    let at = |x: i64, y: i64| {
-        a.pixel(
-            (y.rem_euclid(a.height as i64) * a.width as i64 + x.rem_euclid(a.width as i64))
-                as usize,
-        )
-    };
     (0..w * h)
         .flat_map(|i| {
             let (u, v) = (
                 ((i % w) as f64 + 0.5) * sx - 0.5,
                 ((i / w) as f64 + 0.5) * sy - 0.5,
             );
-            let (x, y) = (u.floor() as i64, v.floor() as i64);
-            let (fx, fy) = (u - x as f64, v - y as f64);
-            (0..WARD_PARAMS).map(move |k| {
-                (1.0 - fy) * ((1.0 - fx) * at(x, y)[k] + fx * at(x + 1, y)[k])
-                    + fy * ((1.0 - fx) * at(x, y + 1)[k] + fx * at(x + 1, y + 1)[k])
+            crate::heightfield::grid::bilerp(a.width, a.height, u, v, |t| {
+                let p = a.pixel(t);
+                [p[0], p[1], p[2], p[3], p[4]]
             })
         })
         .collect()

@@ -147,11 +147,7 @@ pub fn resample(tile: &HeightField, w: usize, h: usize) -> Vec<f32> {
                 ((i % w) as f64 + 0.5) * sx - 0.5,
                 ((i / w) as f64 + 0.5) * sy - 0.5,
             );
-            let (x, y) = (u.floor(), v.floor());
-            let (fx, fy) = ((u - x) as f32, (v - y) as f32);
-            let at = |dx: isize, dy: isize| tile.at_wrapped(x as isize + dx, y as isize + dy);
-            (1.0 - fy) * ((1.0 - fx) * at(0, 0) + fx * at(1, 0))
-                + fy * ((1.0 - fx) * at(0, 1) + fx * at(1, 1))
+            super::grid::bilerp(tile.width, tile.height, u, v, |t| [tile.data[t]])[0] as f32
         })
         .collect()
 }

@@ -4,12 +4,12 @@
 
 /// The values at grid point (x, y) of a `w`×`h` periodic tile, `at(texel index)` giving a
 /// texel's K values.
-pub fn bilerp<const K: usize>(
+pub fn bilerp<T: Copy + Into<f64>, const K: usize>(
     w: usize,
     h: usize,
     x: f64,
     y: f64,
-    at: impl Fn(usize) -> [f32; K],
+    at: impl Fn(usize) -> [T; K],
 ) -> [f64; K] {
     let (w, h) = (w as i64, h as i64);
     let (i, j) = (x.floor() as i64, y.floor() as i64);
@@ -25,7 +25,8 @@ pub fn bilerp<const K: usize>(
     for (c, wgt) in corners {
         let v = at(c);
         for k in 0..K {
-            out[k] += wgt * v[k] as f64;
+            let value: f64 = v[k].into();
+            out[k] += wgt * value;
         }
     }
     out

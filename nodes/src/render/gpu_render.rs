@@ -17,6 +17,27 @@ fn gpu_err(what: &str) -> impl Fn(String) -> NodeError + '_ {
     move |e| NodeError::Gpu(format!("render.mesh: {what}: {e}"))
 }
 
+/// The bytes of a mappable buffer once the queue has finished with it.
+pub(crate) fn read_back(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, String> {
+    let slice = buffer.slice(..);
+    let (tx, rx) = std::sync::mpsc::channel();
+    slice.map_async(wgpu::MapMode::Read, move |r| {
+        let _ = tx.send(r);
+    });
+    gpu.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| format!("wait: {e}"))?;
+    rx.recv()
+        .map_err(|e| e.to_string())?
+        .map_err(|e| e.to_string())?;
+    let bytes = slice
+        .get_mapped_range()
+        .map_err(|e| format!("map: {e}"))?
+        .to_vec();
+    buffer.unmap();
+    Ok(bytes)
+}
+
 /// Camera as the shaders' `Cam`: eye (w = ortho), fwd (w = half), right (w = aspect), up,
 /// size (width, height, near, far).
 pub(crate) fn cam_block(c: &Camera, centre: [f64; 3], radius: f64) -> Vec<f32> {
@@ -655,24 +676,7 @@ impl<'a> GpuRenderer<'a> {
 
     /// Maps a readback buffer after the queue finished and copies its bytes out.
     fn read_buffer(&self, buffer: &wgpu::Buffer) -> Result<Vec<u8>, NodeError> {
-        let slice = buffer.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        self.gpu
-            .device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| gpu_err("wait")(e.to_string()))?;
-        rx.recv()
-            .map_err(|e| gpu_err("readback")(e.to_string()))?
-            .map_err(|e| gpu_err("readback")(e.to_string()))?;
-        let bytes = slice
-            .get_mapped_range()
-            .map_err(|e| gpu_err("map")(e.to_string()))?
-            .to_vec();
-        buffer.unmap();
-        Ok(bytes)
+        read_back(self.gpu, buffer).map_err(|e| gpu_err("readback")(e))
     }
 }
 

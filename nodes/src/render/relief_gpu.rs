@@ -2,7 +2,7 @@
 //! search and shading (`relief.wgsl`), into a float target read back as the image and mask.
 
 use super::camera::Camera;
-use super::gpu_render::cam_block;
+use super::gpu_render::{cam_block, read_back};
 use super::relief::Relief;
 use crate::geometry::bounding_sphere;
 use mesoflow_runtime::{Gpu, NodeError};
@@ -330,21 +330,5 @@ pub fn render(
 }
 
 fn read(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, NodeError> {
-    let slice = buffer.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    gpu.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| gpu_err("wait")(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| gpu_err("readback")(e.to_string()))?
-        .map_err(|e| gpu_err("readback")(e.to_string()))?;
-    let bytes = slice
-        .get_mapped_range()
-        .map_err(|e| gpu_err("map")(e.to_string()))?
-        .to_vec();
-    buffer.unmap();
-    Ok(bytes)
+    read_back(gpu, buffer).map_err(gpu_err("readback"))
 }
