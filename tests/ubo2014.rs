@@ -278,3 +278,78 @@ fn our_dfmf_files_read_back_in_the_independent_reader() {
         close(name, &reconstruct(&b).data, &theirs, 4e-3);
     }
 }
+
+#[test]
+fn crop_stride_and_downsampling_act_on_the_factors_or_the_values_alike() {
+    // A DFMF of our own (4×3 texels, 6 pairs) read three ways after a crop to the top 4×2 and a
+    // 2× box: expanded (the box after expansion), as a basis (the box on the texel maps, then
+    // btf.reconstruct) and by hand from the full expansion. The factors are linear, so all three
+    // agree to f32 rounding (1e-6); a wrong window or box order would move whole texels.
+    let s = Scratch::new();
+    let dir = s.dir.path();
+    let b = basis(ColorSpace::Rgb);
+    std::fs::write(dir.join("ours.btf"), ubo2014::write_dfmf(&b).unwrap()).unwrap();
+    let graph = r#"{"mesoflow": 1, "nodes": {
+        "values": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf", "crop": [0, 0, 4, 2], "downsample": 2}},
+        "factors": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf", "output": "basis", "crop": [0, 0, 4, 2], "downsample": 2}},
+        "expanded": {"kind": "btf.reconstruct", "inputs": {"basis": "factors.basis"}},
+        "full": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf"}},
+        "strided": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf", "stride": 2}},
+        "d": {"kind": "npy.write", "inputs": {"value": "strided.btf"}, "params": {"path": "strided.npy"}},
+        "a": {"kind": "npy.write", "inputs": {"value": "values.btf"}, "params": {"path": "values.npy"}},
+        "b": {"kind": "npy.write", "inputs": {"value": "expanded.btf"}, "params": {"path": "factors.npy"}},
+        "c": {"kind": "npy.write", "inputs": {"value": "full.btf"}, "params": {"path": "full.npy"}}
+    }}"#;
+    let g = s.write("down.json", graph);
+    let out = s.path("out");
+    let r = mesoflow(
+        &[
+            "run",
+            &g.display().to_string(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+            &out.display().to_string(),
+        ],
+        dir,
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let (shape, values) = read_npy(&out.join("values.npy"));
+    let (_, factors) = read_npy(&out.join("factors.npy"));
+    let (full_shape, full) = read_npy(&out.join("full.npy"));
+    assert_eq!(shape, vec![6, 3, 1, 2]);
+    assert_eq!(full_shape, vec![6, 3, 3, 4]);
+    let by_hand: Vec<f32> = (0..6 * 3)
+        .flat_map(|plane| {
+            let f = &full[plane * 12..(plane + 1) * 12];
+            [0, 2].map(|x| (f[x] + f[x + 1] + f[4 + x] + f[4 + x + 1]) / 4.0)
+        })
+        .collect();
+    close("expanded then boxed", &values, &by_hand, 1e-6);
+    close("boxed factors", &factors, &by_hand, 1e-6);
+    // Every second texel of the 4×3: columns 0 and 2 of rows 0 and 2, exactly.
+    let (strided_shape, strided) = read_npy(&out.join("strided.npy"));
+    assert_eq!(strided_shape, vec![6, 3, 2, 2]);
+    let picked: Vec<f32> = (0..6 * 3)
+        .flat_map(|plane| [0, 2, 8, 10].map(|i| full[plane * 12 + i]))
+        .collect();
+    same_bits("strided", &strided, &picked);
+    // A size the factor does not divide is refused, naming the parameter.
+    let bad = s.write("bad.json", r#"{"mesoflow": 1, "nodes": {"r": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf", "downsample": 2}}}}"#);
+    let r = mesoflow(
+        &[
+            "run",
+            &bad.display().to_string(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+            &s.path("o2").display().to_string(),
+        ],
+        dir,
+    );
+    assert!(
+        r.code != 0 && r.stderr.contains("downsample") && r.stderr.contains("4×3"),
+        "{}",
+        r.stderr
+    );
+}

@@ -1,7 +1,8 @@
 //! `btf.read_ubo2014`: a Bonn University UBO2014 `.btf` file (DFMF, FMF or PVF, see `ubo2014.rs`)
 //! as a `Btf`, or — for the variants whose factors are linear RGB or YUV — directly as a
 //! `BtfBasis` without expanding it. A texel window and a stride apply to the factors' texel maps
-//! (exact for every variant); view and light subsets apply to the expanded BTF.
+//! (exact for every variant), box downsampling to the maps of a basis (linear) or to the expanded
+//! values; view and light subsets apply to the expanded BTF.
 //!
 //! Values follow mesoflow's convention (radiance under unit irradiance, cos θi included): a file
 //! whose cosine flag says the cosine is not in its data has each pair multiplied by cos θi. The
@@ -36,10 +37,15 @@ pub struct Params {
     /// Texel window [x, y, width, height].
     #[serde(default)]
     pub crop: Option<[u32; 4]>,
-    /// Keep every n-th texel of the window along each axis.
+    /// Keep every n-th texel of the window along each axis (btflib's strides).
     #[serde(default = "one")]
     #[schemars(range(min = 1, max = 64))]
     pub stride: u32,
+    /// Integer box-downsampling factor after the crop and stride (the mean of f × f texels;
+    /// the size must divide by it).
+    #[serde(default = "one")]
+    #[schemars(range(min = 1, max = 64))]
+    pub downsample: u32,
     /// Keep only these view directions [θ, φ] (degrees, nearest within 0.5°); `btf` output.
     #[serde(default)]
     pub views: Option<Vec<[f64; 2]>>,
@@ -67,7 +73,7 @@ impl Node for ReadUbo2014 {
         NodeSpec {
             kind: "btf.read_ubo2014",
             version: 1,
-            doc: "A Bonn UBO2014 .btf file (DFMF, FMF, PVF and their older signatures) as a Btf, or its linear factors as a BtfBasis; crop, stride, direction subsets.",
+            doc: "A Bonn UBO2014 .btf file (DFMF, FMF, PVF and their older signatures) as a Btf, or its linear factors as a BtfBasis; crop, stride, box downsampling, direction subsets.",
             device: DevicePreference::Cpu,
             inputs: vec![],
             outputs: vec![
@@ -81,6 +87,9 @@ impl Node for ReadUbo2014 {
     fn check(&self, p: &Params) -> Result<(), NodeError> {
         if !(1..=64).contains(&p.stride) {
             return Err(NodeError::param("stride", "must be 1 to 64"));
+        }
+        if !(1..=64).contains(&p.downsample) {
+            return Err(NodeError::param("downsample", "must be 1 to 64"));
         }
         if p.output == Output::Basis && (p.views.is_some() || p.lights.is_some()) {
             return Err(NodeError::param(
@@ -117,7 +126,8 @@ impl Node for ReadUbo2014 {
                         ),
                     ));
                 }
-                let basis = window(ubo2014::to_basis(&file, true), p)?;
+                // The factors are linear: averaging their texel maps averages the values.
+                let basis = boxed_basis(window(ubo2014::to_basis(&file, true), p)?, p)?;
                 Outputs::new().with("basis", basis)
             }
             Output::Btf => {
@@ -135,7 +145,8 @@ impl Node for ReadUbo2014 {
                 let full = reconstruct(&basis);
                 ctx.progress(2, 3);
                 let btf = finish(&file, full, &keep).map_err(|e| NodeError::file(&path, e))?;
-                Outputs::new().with("btf", btf)
+                // After the non-linear steps: a mean of logarithms is not a mean of values.
+                Outputs::new().with("btf", boxed_btf(btf, p)?)
             }
         };
         ctx.progress(3, 3);
@@ -182,6 +193,71 @@ fn window(mut b: BtfBasis, p: &Params) -> Result<BtfBasis, NodeError> {
     b.width = xs.len();
     b.height = ys.len();
     Ok(b)
+}
+
+/// The downsampling factor, checked against a `w`×`h` size.
+fn factor(p: &Params, w: usize, h: usize) -> Result<usize, NodeError> {
+    let f = p.downsample.max(1) as usize;
+    if !w.is_multiple_of(f) || !h.is_multiple_of(f) {
+        return Err(NodeError::param(
+            "downsample",
+            format!("{w}×{h} texels (after crop and stride) are not divisible by {f}"),
+        ));
+    }
+    Ok(f)
+}
+
+/// The mean of each f × f block of a row-major `w`-wide plane.
+fn box_plane(plane: &[f32], w: usize, h: usize, f: usize) -> Vec<f32> {
+    let (nw, nh) = (w / f, h / f);
+    (0..nw * nh)
+        .map(|i| {
+            let (x, y) = (i % nw * f, i / nw * f);
+            let sum: f64 = (0..f * f)
+                .map(|k| plane[(y + k / f) * w + x + k % f] as f64)
+                .sum();
+            (sum / (f * f) as f64) as f32
+        })
+        .collect()
+}
+
+fn boxed_basis(mut b: BtfBasis, p: &Params) -> Result<BtfBasis, NodeError> {
+    let f = factor(p, b.width, b.height)?;
+    if f == 1 {
+        return Ok(b);
+    }
+    let (w, h, t) = (b.width, b.height, b.texels());
+    for blk in &mut b.blocks {
+        blk.maps = blk
+            .maps
+            .chunks(t)
+            .flat_map(|m| box_plane(m, w, h, f))
+            .collect();
+        if blk.centring == crate::types::Centring::Texels {
+            blk.mean = box_plane(&blk.mean, w, h, f);
+        }
+    }
+    (b.width, b.height) = (w / f, h / f);
+    Ok(b)
+}
+
+fn boxed_btf(b: Btf, p: &Params) -> Result<Btf, NodeError> {
+    let f = factor(p, b.width, b.height)?;
+    if f == 1 {
+        return Ok(b);
+    }
+    let (w, h) = (b.width, b.height);
+    let data = b
+        .data
+        .chunks(w * h)
+        .flat_map(|plane| box_plane(plane, w, h, f))
+        .collect();
+    Ok(Btf {
+        width: w / f,
+        height: h / f,
+        pairs: b.pairs,
+        data,
+    })
 }
 
 /// The pairs kept by the view and light subsets, in the file's order.
