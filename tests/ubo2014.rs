@@ -10,7 +10,7 @@ use half::f16;
 use mesoflow_nodes::btf::reconstruct::reconstruct;
 use mesoflow_nodes::btf::ubo2014::{self, Payload};
 use mesoflow_nodes::types::{BasisBlock, BtfBasis, Centring, ColorSpace, Direction, DirectionPair};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 const PEER: &str = "tests/peers/ubo2014.py";
@@ -30,6 +30,26 @@ fn same_bits(name: &str, ours: &[f32], theirs: &[f32]) {
     for (i, (a, b)) in ours.iter().zip(theirs).enumerate() {
         assert_eq!(a.to_bits(), b.to_bits(), "{name}[{i}]: {a} vs {b}");
     }
+}
+
+/// Writes `graph` as NAME.json in the scratch folder and runs it uncached into out_NAME/ (the
+/// files it reads are relative to the scratch folder): the run and its output folder.
+fn run_graph(s: &Scratch, name: &str, graph: &str) -> (common::Run, PathBuf) {
+    let g = s.write(&format!("{name}.json"), graph);
+    let out = s.path(&format!("out_{name}"));
+    let args = [
+        "run".to_string(),
+        g.display().to_string(),
+        "--quiet".into(),
+        "--no-cache".into(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    let r = mesoflow(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        s.dir.path(),
+    );
+    (r, out)
 }
 
 /// |ours − theirs| ≤ tol·(1 + |theirs|) everywhere.
@@ -95,19 +115,7 @@ fn every_variant_reads_as_the_independent_writer_wrote_it() {
                 "npy": {{"kind": "npy.write", "inputs": {{"value": "read.btf"}}, "params": {{"path": "{v}.npy"}}}}
             }}}}"#
         );
-        let g = s.write(&format!("{v}.json"), &graph);
-        let out = s.path(&format!("out_{v}"));
-        let r = mesoflow(
-            &[
-                "run",
-                &g.display().to_string(),
-                "--quiet",
-                "--no-cache",
-                "--out-dir",
-                &out.display().to_string(),
-            ],
-            dir,
-        );
+        let (r, out) = run_graph(&s, v, &graph);
         assert_eq!(r.code, 0, "{v}: {}", r.stderr);
         let (shape, ours) = read_npy(&out.join(format!("{v}.npy")));
         let (want_shape, want) = read_npy(&dir.join(format!("{v}.expected.npy")));
@@ -164,18 +172,10 @@ fn bad_files_name_the_file_and_what_is_wrong() {
         ),
     ] {
         std::fs::write(dir.join(format!("{name}.btf")), &bytes).unwrap();
-        let g = s.write(&format!("{name}.json"), &format!(r#"{{"mesoflow": 1, "nodes": {{"read": {{"kind": "btf.read_ubo2014", "params": {{"path": "{name}.btf"}}}}}}}}"#));
-        let r = mesoflow(
-            &[
-                "run",
-                &g.display().to_string(),
-                "--quiet",
-                "--no-cache",
-                "--out-dir",
-                &s.path("o").display().to_string(),
-            ],
-            dir,
+        let graph = format!(
+            r#"{{"mesoflow": 1, "nodes": {{"read": {{"kind": "btf.read_ubo2014", "params": {{"path": "{name}.btf"}}}}}}}}"#
         );
+        let (r, _) = run_graph(&s, name, &graph);
         assert_ne!(r.code, 0, "{name}");
         assert!(
             r.stderr.contains(&format!("{name}.btf")) && r.stderr.contains(expect),
@@ -300,19 +300,7 @@ fn crop_stride_and_downsampling_act_on_the_factors_or_the_values_alike() {
         "b": {"kind": "npy.write", "inputs": {"value": "expanded.btf"}, "params": {"path": "factors.npy"}},
         "c": {"kind": "npy.write", "inputs": {"value": "full.btf"}, "params": {"path": "full.npy"}}
     }}"#;
-    let g = s.write("down.json", graph);
-    let out = s.path("out");
-    let r = mesoflow(
-        &[
-            "run",
-            &g.display().to_string(),
-            "--quiet",
-            "--no-cache",
-            "--out-dir",
-            &out.display().to_string(),
-        ],
-        dir,
-    );
+    let (r, out) = run_graph(&s, "down", graph);
     assert_eq!(r.code, 0, "{}", r.stderr);
     let (shape, values) = read_npy(&out.join("values.npy"));
     let (_, factors) = read_npy(&out.join("factors.npy"));
@@ -335,18 +323,8 @@ fn crop_stride_and_downsampling_act_on_the_factors_or_the_values_alike() {
         .collect();
     same_bits("strided", &strided, &picked);
     // A size the factor does not divide is refused, naming the parameter.
-    let bad = s.write("bad.json", r#"{"mesoflow": 1, "nodes": {"r": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf", "downsample": 2}}}}"#);
-    let r = mesoflow(
-        &[
-            "run",
-            &bad.display().to_string(),
-            "--quiet",
-            "--no-cache",
-            "--out-dir",
-            &s.path("o2").display().to_string(),
-        ],
-        dir,
-    );
+    let bad = r#"{"mesoflow": 1, "nodes": {"r": {"kind": "btf.read_ubo2014", "params": {"path": "ours.btf", "downsample": 2}}}}"#;
+    let (r, _) = run_graph(&s, "bad", bad);
     assert!(
         r.code != 0 && r.stderr.contains("downsample") && r.stderr.contains("4×3"),
         "{}",

@@ -162,7 +162,9 @@ impl<'a> GpuRenderer<'a> {
         };
         let peel = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("peel"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("peel.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(
+                concat!(include_str!("raster.wgsl"), include_str!("peel.wgsl")).into(),
+            ),
         });
         let peel_pipeline = |cull: wgpu::Face| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {

@@ -2,14 +2,7 @@
 // draws only front faces or only back faces; a fragment survives if it lies beyond the previous
 // layer's sample at its pixel, and the depth test keeps the nearest survivor. The target holds
 // (t, b1, b2, triangle) with t the distance along the pixel's ray, -1 where empty.
-
-struct Cam {
-    eye: vec4<f32>,    // xyz, w = 1 for orthographic
-    fwd: vec4<f32>,    // xyz, w = tan(fov/2) or half height
-    right: vec4<f32>,  // xyz, w = aspect
-    up: vec4<f32>,
-    size: vec4<f32>,   // width, height, near, far
-};
+// The camera block and projection come from raster.wgsl, prepended.
 
 struct Peel {
     cam: Cam,
@@ -32,22 +25,10 @@ struct VOut {
 fn vs(@builtin(vertex_index) vi: u32) -> VOut {
     let v = indices[vi];
     let p = vec3<f32>(positions[3u * v], positions[3u * v + 1u], positions[3u * v + 2u]);
-    let rel = p - U.cam.eye.xyz;
-    let z = dot(rel, U.cam.fwd.xyz);
-    let half = U.cam.fwd.w;
-    let sx = dot(rel, U.cam.right.xyz) / (half * U.cam.right.w);
-    let sy = dot(rel, U.cam.up.xyz) / half;
-    let near = U.cam.size.z;
-    let far = U.cam.size.w;
     var out: VOut;
-    if (U.cam.eye.w > 0.5) {
-        out.clip = vec4<f32>(sx, sy, (z - near) / (far - near), 1.0);
-    } else {
-        out.clip = vec4<f32>(sx, sy, far * (z - near) / (far - near), z);
-    }
+    out.clip = clip_of(U.cam, p);
     out.world = p;
-    let corner = vi % 3u;
-    out.bary = vec3<f32>(select(0.0, 1.0, corner == 0u), select(0.0, 1.0, corner == 1u), select(0.0, 1.0, corner == 2u));
+    out.bary = corner_bary(vi);
     out.tri = vi / 3u;
     return out;
 }

@@ -3,14 +3,7 @@
 // pixel's barycentrics and follows the view ray down through the height field in tangent space
 // (linear, then binary search), shades the hit with the Ward maps and searches towards the light
 // for self-shadowing. The formulas and their order are relief.rs's; see there for the units.
-
-struct Cam {
-    eye: vec4<f32>,    // xyz, w = 1 for orthographic
-    fwd: vec4<f32>,    // xyz, w = tan(fov/2) or half height
-    right: vec4<f32>,  // xyz, w = aspect
-    up: vec4<f32>,
-    size: vec4<f32>,   // width, height, near, far
-};
+// The camera block and projection come from raster.wgsl, prepended.
 
 struct Params {
     cam: Cam,
@@ -44,21 +37,9 @@ fn pos(v: u32) -> vec3<f32> {
 @vertex
 fn vs(@builtin(vertex_index) vi: u32) -> VOut {
     let p = pos(indices[vi]);
-    let rel = p - U.cam.eye.xyz;
-    let z = dot(rel, U.cam.fwd.xyz);
-    let half = U.cam.fwd.w;
-    let sx = dot(rel, U.cam.right.xyz) / (half * U.cam.right.w);
-    let sy = dot(rel, U.cam.up.xyz) / half;
-    let near = U.cam.size.z;
-    let far = U.cam.size.w;
     var out: VOut;
-    if (U.cam.eye.w > 0.5) {
-        out.clip = vec4<f32>(sx, sy, (z - near) / (far - near), 1.0);
-    } else {
-        out.clip = vec4<f32>(sx, sy, far * (z - near) / (far - near), z);
-    }
-    let corner = vi % 3u;
-    out.bary = vec3<f32>(select(0.0, 1.0, corner == 0u), select(0.0, 1.0, corner == 1u), select(0.0, 1.0, corner == 2u));
+    out.clip = clip_of(U.cam, p);
+    out.bary = corner_bary(vi);
     out.tri = vi / 3u;
     return out;
 }

@@ -107,7 +107,9 @@ pub fn render(
     );
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("relief"),
-        source: wgpu::ShaderSource::Wgsl(include_str!("relief.wgsl").into()),
+        source: wgpu::ShaderSource::Wgsl(
+            concat!(include_str!("raster.wgsl"), include_str!("relief.wgsl")).into(),
+        ),
     });
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
