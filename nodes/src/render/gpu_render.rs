@@ -17,6 +17,49 @@ fn gpu_err(what: &str) -> impl Fn(String) -> NodeError + '_ {
     move |e| NodeError::Gpu(format!("render.mesh: {what}: {e}"))
 }
 
+/// A rasterising pass over the mesh's triangles (vertices pulled from storage buffers by
+/// `vs`), culling `cull` faces, nearest fragment by a 32-bit depth test, `fs` writing one
+/// Rgba32Float target: the depth-peeling passes and the relief pass.
+pub(crate) fn raster_pipeline(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    label: &str,
+    cull: wgpu::Face,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: None,
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs"),
+            compilation_options: Default::default(),
+            buffers: &[],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            front_face: wgpu::FrontFace::Ccw,
+            cull_mode: Some(cull),
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: wgpu::TextureFormat::Depth32Float,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some("fs"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::TextureFormat::Rgba32Float.into())],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
 /// The bytes of a mappable buffer once the queue has finished with it.
 pub(crate) fn read_back(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, String> {
     let slice = buffer.slice(..);
@@ -166,40 +209,7 @@ impl<'a> GpuRenderer<'a> {
                 concat!(include_str!("raster.wgsl"), include_str!("peel.wgsl")).into(),
             ),
         });
-        let peel_pipeline = |cull: wgpu::Face| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("peel"),
-                layout: None,
-                vertex: wgpu::VertexState {
-                    module: &peel,
-                    entry_point: Some("vs"),
-                    compilation_options: Default::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    front_face: wgpu::FrontFace::Ccw,
-                    cull_mode: Some(cull),
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: wgpu::TextureFormat::Depth32Float,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: Default::default(),
-                }),
-                multisample: Default::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &peel,
-                    entry_point: Some("fs"),
-                    compilation_options: Default::default(),
-                    targets: &[Some(wgpu::TextureFormat::Rgba32Float.into())],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
-        };
+        let peel_pipeline = |cull| raster_pipeline(device, &peel, "peel", cull);
         // OpenGL ES adapters may lack float render targets: a validation error, caught and
         // turned into a message rather than a panic in wgpu's default handler.
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);

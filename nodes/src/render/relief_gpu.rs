@@ -2,7 +2,7 @@
 //! search and shading (`relief.wgsl`), into a float target read back as the image and mask.
 
 use super::camera::Camera;
-use super::gpu_render::{cam_block, read_back};
+use super::gpu_render::{cam_block, raster_pipeline, read_back};
 use super::relief::Relief;
 use crate::geometry::bounding_sphere;
 use mesoflow_runtime::{Gpu, NodeError};
@@ -112,38 +112,7 @@ pub fn render(
         ),
     });
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("relief"),
-        layout: None,
-        vertex: wgpu::VertexState {
-            module: &module,
-            entry_point: Some("vs"),
-            compilation_options: Default::default(),
-            buffers: &[],
-        },
-        primitive: wgpu::PrimitiveState {
-            topology: wgpu::PrimitiveTopology::TriangleList,
-            front_face: wgpu::FrontFace::Ccw,
-            cull_mode: Some(wgpu::Face::Back),
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: wgpu::TextureFormat::Depth32Float,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: Default::default(),
-        fragment: Some(wgpu::FragmentState {
-            module: &module,
-            entry_point: Some("fs"),
-            compilation_options: Default::default(),
-            targets: &[Some(wgpu::TextureFormat::Rgba32Float.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    });
+    let pipeline = raster_pipeline(device, &module, "relief", wgpu::Face::Back);
     if let Some(e) = pollster::block_on(scope.pop()) {
         return Err(NodeError::Gpu(format!("render.relief: {} cannot build the relief pass (32-bit float render targets): {e}; use --device cpu", gpu.describe())));
     }
