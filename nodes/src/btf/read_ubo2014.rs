@@ -8,7 +8,7 @@
 //! whose cosine flag says the cosine is not in its data has each pair multiplied by cos θi. The
 //! header's RGB scale factor is reported, not applied.
 
-use super::reconstruct::reconstruct;
+use super::reconstruct::pair_into;
 use super::ubo2014::{self, Ubo2014};
 use crate::types::{Btf, BtfBasis, Direction};
 use mesoflow_graph::DevicePreference;
@@ -142,9 +142,8 @@ impl Node for ReadUbo2014 {
                     ),
                     p.memory_budget_gb,
                 )?;
-                let full = reconstruct(&basis);
                 ctx.progress(2, 3);
-                let btf = finish(&file, full, &keep).map_err(|e| NodeError::file(&path, e))?;
+                let btf = finish(&file, &basis, &keep).map_err(|e| NodeError::file(&path, e))?;
                 // After the non-linear steps: a mean of logarithms is not a mean of values.
                 Outputs::new().with("btf", boxed_btf(btf, p)?)
             }
@@ -297,33 +296,30 @@ fn subset(b: &BtfBasis, p: &Params) -> Result<Vec<usize>, NodeError> {
     Ok((0..b.pairs.len()).filter(|i| v[*i] && l[*i]).collect())
 }
 
-/// The kept pairs, with the file's non-linear steps and the cosine applied.
-fn finish(file: &Ubo2014, full: Btf, keep: &[usize]) -> Result<Btf, String> {
-    let t = full.width * full.height;
-    let mut data = Vec::with_capacity(keep.len() * 3 * t);
-    for &pair in keep {
-        let img = &full.data[pair * 3 * t..(pair + 1) * 3 * t];
+/// The kept pairs expanded, with the file's non-linear steps and the cosine applied.
+fn finish(file: &Ubo2014, basis: &BtfBasis, keep: &[usize]) -> Result<Btf, String> {
+    // Only the kept pairs are expanded: the memory check counted those alone.
+    let t = basis.texels();
+    let owners = basis.column_owners();
+    let mut data = vec![0f32; keep.len() * 3 * t];
+    for (out, &pair) in data.chunks_mut(3 * t).zip(keep) {
+        pair_into(basis, &owners, pair, out);
         let cos = if file.header.cosine_in_data {
             1.0
         } else {
-            full.pairs[pair].light.theta.cos()
+            basis.pairs[pair].light.theta.cos()
         };
-        let mut planes = vec![0f32; 3 * t];
         for i in 0..t {
-            let v = ubo2014::finish_values(
-                file,
-                [img[i] as f64, img[t + i] as f64, img[2 * t + i] as f64],
-            )?;
+            let v = ubo2014::finish_values(file, [0, 1, 2].map(|c| out[c * t + i] as f64))?;
             for c in 0..3 {
-                planes[c * t + i] = (v[c] * cos) as f32;
+                out[c * t + i] = (v[c] * cos) as f32;
             }
         }
-        data.extend(planes);
     }
     Ok(Btf {
-        width: full.width,
-        height: full.height,
-        pairs: keep.iter().map(|i| full.pairs[*i]).collect(),
+        width: basis.width,
+        height: basis.height,
+        pairs: keep.iter().map(|i| basis.pairs[*i]).collect(),
         data,
     })
 }
