@@ -3,9 +3,11 @@
 
 use crate::cache::{DiskCache, MemoryCache};
 use crate::gpu::GpuProvider;
+use crate::node::Outputs;
 use crate::registry::Registry;
 use crate::report::{NodeReport, RunReport};
 use mesoflow_graph::{CheckedGraph, PortRef};
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -86,7 +88,15 @@ pub struct Engine {
     pub(crate) registry: Arc<Registry>,
     pub(crate) memory: Arc<MemoryCache>,
     pub(crate) disk: Option<DiskCache>,
-    pub(crate) gpu: GpuProvider,
+    pub(crate) gpu: Arc<GpuProvider>,
+}
+
+/// A run's report and the values of the nodes it was asked for (by default the sinks), by node
+/// id: what an embedding (the Python package) hands back to its caller. A node that failed or
+/// was cancelled has no entry.
+pub struct RunOutcome {
+    pub report: RunReport,
+    pub values: BTreeMap<String, Outputs>,
 }
 
 impl Engine {
@@ -95,7 +105,18 @@ impl Engine {
             registry: Arc::new(registry),
             memory: Arc::new(MemoryCache::new(config.memory_budget)),
             disk: config.disk,
-            gpu: GpuProvider::default(),
+            gpu: Arc::new(GpuProvider::default()),
+        }
+    }
+
+    /// An engine with another registry (an embedding adds kinds of its own) that shares this
+    /// one's memory cache, disk cache and GPU, so what earlier runs computed is still found.
+    pub fn with_registry(&self, registry: Registry) -> Engine {
+        Engine {
+            registry: Arc::new(registry),
+            memory: self.memory.clone(),
+            disk: self.disk.clone(),
+            gpu: self.gpu.clone(),
         }
     }
 
@@ -118,6 +139,16 @@ impl Engine {
         opts: &RunOptions,
         observer: Arc<dyn RunObserver>,
     ) -> Result<RunReport, EngineError> {
+        self.run_values(graph, opts, observer).map(|o| o.report)
+    }
+
+    /// [`Engine::run`], also handing back the values of the requested nodes.
+    pub fn run_values(
+        &self,
+        graph: &CheckedGraph,
+        opts: &RunOptions,
+        observer: Arc<dyn RunObserver>,
+    ) -> Result<RunOutcome, EngineError> {
         for o in &opts.outputs {
             let node = graph
                 .nodes

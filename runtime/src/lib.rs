@@ -15,10 +15,12 @@ pub mod report;
 mod scheduler;
 pub mod value;
 
-pub use engine::{DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, SilentObserver};
+pub use engine::{
+    DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, RunOutcome, SilentObserver,
+};
 pub use gpu::{Gpu, GpuProvider};
 pub use key::{Key, KEY_SCHEME};
-pub use node::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
+pub use node::{DynNode, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Prepared};
 pub use registry::Registry;
 pub use report::{NodeReport, NodeStatus, RunReport, Warning};
 pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};

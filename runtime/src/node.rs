@@ -313,6 +313,19 @@ pub struct Prepared {
     pub canonical: serde_json::Value,
 }
 
+impl Prepared {
+    /// For a [`DynNode`] implemented outside this crate: `canonical` is what enters the cache
+    /// key, so it must hold everything the output depends on.
+    pub fn new(params: Box<dyn std::any::Any + Send + Sync>, canonical: serde_json::Value) -> Self {
+        Prepared { params, canonical }
+    }
+
+    /// The parameters as [`Prepared::new`] received them.
+    pub fn params(&self) -> &(dyn std::any::Any + Send + Sync) {
+        self.params.as_ref()
+    }
+}
+
 /// The object-safe face of [`Node`], which the registry stores.
 pub trait DynNode: Send + Sync {
     fn spec(&self) -> &NodeSpec;

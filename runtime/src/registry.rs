@@ -30,6 +30,13 @@ impl Registry {
         self
     }
 
+    /// A kind implemented outside Rust's type system (the Python package's `@mesoflow.node`):
+    /// it describes itself through [`DynNode`] directly. It replaces a kind of the same name.
+    pub fn register_dyn(&mut self, node: Arc<dyn DynNode>) -> &mut Self {
+        self.nodes.insert(node.spec().kind.to_string(), node);
+        self
+    }
+
     pub fn register_type(&mut self, name: &'static str, decode: DecodeFn) -> &mut Self {
         self.codecs.insert(name, decode);
         self

@@ -18,7 +18,7 @@ mod verify;
 mod write;
 
 use crate::cache::Timing;
-use crate::engine::{Engine, RunObserver, RunOptions};
+use crate::engine::{Engine, RunObserver, RunOptions, RunOutcome};
 use crate::key::Key;
 use crate::node::{DynNode, Outputs, Prepared, ProgressSink};
 use crate::report::{NodeReport, NodeStatus, RunReport, Warning};
@@ -110,7 +110,7 @@ pub(crate) fn execute(
     graph: &CheckedGraph,
     opts: &RunOptions,
     observer: Arc<dyn RunObserver>,
-) -> RunReport {
+) -> RunOutcome {
     let t0 = Instant::now();
     let sink = Arc::new(Sink {
         observer: observer.clone(),
@@ -175,7 +175,15 @@ pub(crate) fn execute(
         )
     });
     let warnings = std::mem::take(&mut *sink.warnings.lock().unwrap_or_else(|e| e.into_inner()));
-    RunReport {
+    let values = plan
+        .requested
+        .iter()
+        .filter_map(|&i| {
+            let out = slots[i].as_ref()?.outputs.clone()?;
+            Some((graph.nodes[i].id.clone(), out))
+        })
+        .collect();
+    let report = RunReport {
         mesoflow: 1,
         version: env!("CARGO_PKG_VERSION").into(),
         graph: opts.graph_name.clone(),
@@ -188,7 +196,8 @@ pub(crate) fn execute(
         files: executed.files,
         cancelled,
         read: read_files.into_iter().collect(),
-    }
+    };
+    RunOutcome { report, values }
 }
 
 pub(crate) fn failure(
