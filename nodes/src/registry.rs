@@ -30,6 +30,10 @@ pub fn registry() -> Registry {
     r.register(crate::image::ramp::Ramp);
     r.register(crate::image::colorize::Colorize);
     r.register(crate::io::image_read::ImageRead);
+    r.register(crate::io::array_read::ImageArray);
+    r.register(crate::io::array_read::HeightFieldArray);
+    r.register(crate::io::array_read::BtfArray);
+    r.register(crate::io::array_read::PointsArray);
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);
     r.register(crate::mesh::displace::Displace);

@@ -1,5 +1,6 @@
 //! Reading and writing files: images (PNG, JPEG, HDR, EXR) and NPY arrays.
 
+pub mod array_read;
 pub mod formats;
 pub mod image_read;
 pub mod image_write;
