@@ -4,6 +4,17 @@
 use std::fmt;
 use thiserror::Error;
 
+/// A kind nobody mistyped may be a Python node (`@mesoflow.node`): it exists only in the Python
+/// process that defined it, so the command line cannot run it, and says so.
+fn kind_hint(s: &Option<String>) -> String {
+    match s {
+        Some(_) => hint(s),
+        None => " (no built-in kind has this name; a kind defined in Python with @mesoflow.node \
+                  exists only in the Python session that defines it: run this graph from there)"
+            .into(),
+    }
+}
+
 fn hint(s: &Option<String>) -> String {
     s.as_ref()
         .map(|s| format!(" (did you mean `{s}`?)"))
@@ -30,7 +41,7 @@ pub enum GraphError {
     BadNodeId { node: String },
     #[error("node id `{node}` is defined more than once")]
     DuplicateId { node: String },
-    #[error("node `{node}`: unknown kind `{kind}`{}", hint(suggestion))]
+    #[error("node `{node}`: unknown kind `{kind}`{}", kind_hint(suggestion))]
     UnknownKind {
         node: String,
         kind: String,
