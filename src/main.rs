@@ -4,7 +4,6 @@
 //! (0 ok, 1 run failed, 2 invalid graph or arguments, 130 cancelled).
 
 mod args;
-mod chart;
 mod commands;
 mod env;
 mod exit;

@@ -6,29 +6,15 @@ use super::run::{
     cache_dir, device_mode, engine, graph_dir, graph_name, parse_outputs, require_gpu, write_report,
 };
 use crate::args::SweepArgs;
-use crate::chart::{self, Chart, Series};
 use crate::exit::invalid;
 use crate::load;
 use crate::progress::summary;
+use mesoflow::sweep_table::{cartesian, cell, write_all, Row, Vary};
 use mesoflow_graph::{edit::parse_value, PortRef};
 use mesoflow_runtime::{RunOptions, SilentObserver};
 use serde_json::Value;
-use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::sync::Arc;
-
-struct Vary {
-    node: String,
-    param: String,
-    values: Vec<Value>,
-}
-
-impl Vary {
-    fn name(&self) -> String {
-        format!("{}.{}", self.node, self.param)
-    }
-}
 
 /// Splits on commas outside brackets and quotes, so `[1,2],[3,4]` is two values.
 fn split_values(text: &str) -> Vec<String> {
@@ -73,30 +59,6 @@ fn parse_vary(text: &str) -> anyhow::Result<Vary> {
         param: param.into(),
         values,
     })
-}
-
-fn cell(v: &Value) -> String {
-    match v {
-        Value::String(s) => s.clone(),
-        other => other.to_string(),
-    }
-}
-
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
-/// One row of the sweep: the values chosen and what was measured.
-struct Row {
-    values: Vec<Value>,
-    measures: Vec<Option<f64>>,
-    node_seconds: Vec<Option<f64>>,
-    run_seconds: f64,
-    ok: bool,
 }
 
 pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
@@ -285,83 +247,14 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             break;
         }
     }
-    std::fs::create_dir_all(&out_dir)?;
-    write_csv(
-        &out_dir.join("sweep.csv"),
+    let chart_errors = write_all(
+        &out_dir,
         &varies,
         &measures,
         &measured_nodes,
+        &versus,
         &rows,
     )?;
-    let mut chart_errors = Vec::new();
-    for (mi, m) in measures.iter().enumerate() {
-        let measure_name = m.to_string();
-        let is_time = m.port == "seconds";
-        for (vi, v) in varies.iter().enumerate() {
-            let c = chart_against(&varies, vi, &rows, mi, &measure_name);
-            if let Err(e) = chart::write(
-                &out_dir.join(format!("{}.{}_vs_{}", m.node, m.port, v.name())),
-                &c,
-            ) {
-                chart_errors.push(e);
-            }
-        }
-        let ni = measured_nodes
-            .iter()
-            .position(|n| *n == m.node)
-            .unwrap_or(0);
-        // One series per combination of the non-numeric varied values (e.g. each solver), so
-        // methods can be told apart on the cost–error plane.
-        let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-        for r in &rows {
-            let (Some(t), Some(y)) = (r.node_seconds[ni], r.measures[mi]) else {
-                continue;
-            };
-            let name: Vec<String> = varies
-                .iter()
-                .zip(&r.values)
-                .filter(|(_, x)| !x.is_number())
-                .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
-                .collect();
-            groups.entry(name.join(" ")).or_default().push((t, y));
-        }
-        let c = Chart {
-            title: format!("{}.{} against the time of `{}`", m.node, m.port, m.node),
-            x_label: "seconds",
-            y_label: &m.port,
-            series: groups
-                .into_iter()
-                // In sweep order (e.g. increasing rank), so a line traces one method's trade-off.
-                .map(|(name, points)| Series {
-                    name,
-                    points,
-                    scatter: false,
-                })
-                .collect(),
-            x_names: None,
-        };
-        if is_time {
-            continue; // its own time against itself says nothing
-        }
-        if let Err(e) = chart::write(
-            &out_dir.join(format!("{}.{}_vs_seconds", m.node, m.port)),
-            &c,
-        ) {
-            chart_errors.push(e);
-        }
-    }
-    for x in &versus {
-        let xi = measures.iter().position(|m| m == x).unwrap_or(0);
-        for (mi, m) in measures.iter().enumerate().filter(|(_, m)| *m != x) {
-            let c = chart_versus(&varies, &rows, (xi, x), (mi, m));
-            if let Err(e) = chart::write(
-                &out_dir.join(format!("{}.{}_vs_{}.{}", m.node, m.port, x.node, x.port)),
-                &c,
-            ) {
-                chart_errors.push(e);
-            }
-        }
-    }
     if let Some(e) = chart_errors.first() {
         eprintln!("warning: charts not written: {e}");
     }
@@ -381,163 +274,6 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         crate::exit::FAILED
     };
     Ok(code)
-}
-
-fn cartesian(varies: &[Vary]) -> Vec<Vec<Value>> {
-    let mut combos = vec![Vec::new()];
-    for v in varies {
-        combos = combos
-            .into_iter()
-            .flat_map(|c| {
-                v.values
-                    .iter()
-                    .map(move |x| [c.clone(), vec![x.clone()]].concat())
-            })
-            .collect();
-    }
-    combos
-}
-
-fn write_csv(
-    path: &std::path::Path,
-    varies: &[Vary],
-    measures: &[PortRef],
-    nodes: &[String],
-    rows: &[Row],
-) -> anyhow::Result<()> {
-    let mut out = String::new();
-    let mut header: Vec<String> = varies.iter().map(Vary::name).collect();
-    header.extend(measures.iter().map(|m| m.to_string()));
-    // One column per measure: a node's seconds column only where it was not measured already.
-    let extra: Vec<bool> = nodes
-        .iter()
-        .map(|n| !measures.iter().any(|m| m.node == *n && m.port == "seconds"))
-        .collect();
-    header.extend(
-        nodes
-            .iter()
-            .zip(&extra)
-            .filter(|(_, e)| **e)
-            .map(|(n, _)| format!("{n}.seconds")),
-    );
-    header.extend(["run_seconds".to_string(), "ok".to_string()]);
-    writeln!(
-        out,
-        "{}",
-        header
-            .iter()
-            .map(|h| csv_field(h))
-            .collect::<Vec<_>>()
-            .join(",")
-    )?;
-    let num = |x: &Option<f64>| x.map(|v| format!("{v}")).unwrap_or_default();
-    for r in rows {
-        let mut cells: Vec<String> = r.values.iter().map(|v| csv_field(&cell(v))).collect();
-        cells.extend(r.measures.iter().map(num));
-        cells.extend(
-            r.node_seconds
-                .iter()
-                .zip(&extra)
-                .filter(|(_, e)| **e)
-                .map(|(s, _)| num(s)),
-        );
-        cells.push(format!("{}", r.run_seconds));
-        cells.push(r.ok.to_string());
-        writeln!(out, "{}", cells.join(","))?;
-    }
-    std::fs::write(path, out)?;
-    Ok(())
-}
-
-/// Measure `mi` against varied parameter `vi`; one series per combination of the other parameters.
-fn chart_against<'a>(
-    varies: &'a [Vary],
-    vi: usize,
-    rows: &[Row],
-    mi: usize,
-    measure: &'a str,
-) -> Chart<'a> {
-    let numeric = varies[vi].values.iter().all(Value::is_number);
-    let position = |v: &Value| -> f64 {
-        if numeric {
-            v.as_f64().unwrap_or(f64::NAN)
-        } else {
-            varies[vi].values.iter().position(|x| x == v).unwrap_or(0) as f64
-        }
-    };
-    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    for r in rows {
-        let Some(y) = r.measures[mi] else { continue };
-        let others: Vec<String> = varies
-            .iter()
-            .zip(&r.values)
-            .enumerate()
-            .filter(|(j, _)| *j != vi)
-            .map(|(_, (v, x))| format!("{}={}", v.name(), cell(x)))
-            .collect();
-        groups
-            .entry(others.join(" "))
-            .or_default()
-            .push((position(&r.values[vi]), y));
-    }
-    Chart {
-        title: format!("{measure} against {}", varies[vi].name()),
-        x_label: &varies[vi].param,
-        y_label: measure,
-        series: groups
-            .into_iter()
-            .map(|(name, points)| Series {
-                name,
-                points,
-                scatter: false,
-            })
-            .collect(),
-        x_names: (!numeric).then(|| varies[vi].values.iter().map(cell).collect()),
-    }
-}
-
-/// Measure `m` against measure `x`: each series traces the first varied parameter (e.g. the
-/// rank) with the other varied values fixed (one series per combination), so a line is one
-/// configuration's cost–error trade-off.
-fn chart_versus<'a>(
-    varies: &[Vary],
-    rows: &[Row],
-    (xi, x): (usize, &'a PortRef),
-    (mi, m): (usize, &'a PortRef),
-) -> Chart<'a> {
-    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
-    for r in rows {
-        let (Some(a), Some(b)) = (r.measures[xi], r.measures[mi]) else {
-            continue;
-        };
-        let name: Vec<String> = varies
-            .iter()
-            .zip(&r.values)
-            .skip(1)
-            .map(|(v, val)| format!("{}={}", v.name(), cell(val)))
-            .collect();
-        groups.entry(name.join(" ")).or_default().push((a, b));
-    }
-    Chart {
-        title: format!(
-            "{m} against {x}, along {}",
-            varies.first().map_or(String::new(), |v| v.name())
-        ),
-        x_label: &x.port,
-        y_label: &m.port,
-        series: groups
-            .into_iter()
-            .map(|(name, mut points)| {
-                points.sort_by(|p, q| p.0.total_cmp(&q.0));
-                Series {
-                    name,
-                    points,
-                    scatter: false,
-                }
-            })
-            .collect(),
-        x_names: None,
-    }
 }
 
 #[cfg(test)]

@@ -1,0 +1,297 @@
+//! What a sweep leaves behind, shared by `mesoflow sweep` and the Python package's
+//! `mesoflow.sweep`: the grid of combinations, `sweep.csv`, and the charts of every measure
+//! against every varied parameter, against the measured node's time and against `versus`
+//! measures. Both front ends write them through this one module, so their files are the same.
+
+use crate::chart::{self, Chart, Series};
+use mesoflow_graph::PortRef;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// One varied parameter and its values, in sweep order.
+pub struct Vary {
+    pub node: String,
+    pub param: String,
+    pub values: Vec<Value>,
+}
+
+impl Vary {
+    pub fn name(&self) -> String {
+        format!("{}.{}", self.node, self.param)
+    }
+}
+
+pub fn cell(v: &Value) -> String {
+    match v {
+        Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// One row of the sweep: the values chosen and what was measured.
+pub struct Row {
+    pub values: Vec<Value>,
+    pub measures: Vec<Option<f64>>,
+    /// Per measured node: the compute time of its value (for a cache hit, as first measured).
+    pub node_seconds: Vec<Option<f64>>,
+    pub run_seconds: f64,
+    pub ok: bool,
+}
+
+/// Writes `sweep.csv` and every chart under `out_dir`; returns the charts that could not be
+/// written (a missing font), which the caller reports as a warning.
+pub fn write_all(
+    out_dir: &Path,
+    varies: &[Vary],
+    measures: &[PortRef],
+    measured_nodes: &[String],
+    versus: &[PortRef],
+    rows: &[Row],
+) -> std::io::Result<Vec<String>> {
+    std::fs::create_dir_all(out_dir)?;
+    write_csv(
+        &out_dir.join("sweep.csv"),
+        varies,
+        measures,
+        measured_nodes,
+        rows,
+    )?;
+    let mut chart_errors = Vec::new();
+    for (mi, m) in measures.iter().enumerate() {
+        let measure_name = m.to_string();
+        let is_time = m.port == "seconds";
+        for (vi, v) in varies.iter().enumerate() {
+            let c = chart_against(varies, vi, rows, mi, &measure_name);
+            if let Err(e) = chart::write(
+                &out_dir.join(format!("{}.{}_vs_{}", m.node, m.port, v.name())),
+                &c,
+            ) {
+                chart_errors.push(e);
+            }
+        }
+        let ni = measured_nodes
+            .iter()
+            .position(|n| *n == m.node)
+            .unwrap_or(0);
+        // One series per combination of the non-numeric varied values (e.g. each solver), so
+        // methods can be told apart on the cost–error plane.
+        let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+        for r in rows {
+            let (Some(t), Some(y)) = (r.node_seconds[ni], r.measures[mi]) else {
+                continue;
+            };
+            let name: Vec<String> = varies
+                .iter()
+                .zip(&r.values)
+                .filter(|(_, x)| !x.is_number())
+                .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
+                .collect();
+            groups.entry(name.join(" ")).or_default().push((t, y));
+        }
+        let c = Chart {
+            title: format!("{}.{} against the time of `{}`", m.node, m.port, m.node),
+            x_label: "seconds",
+            y_label: &m.port,
+            series: groups
+                .into_iter()
+                // In sweep order (e.g. increasing rank), so a line traces one method's trade-off.
+                .map(|(name, points)| Series {
+                    name,
+                    points,
+                    scatter: false,
+                })
+                .collect(),
+            x_names: None,
+        };
+        if is_time {
+            continue; // its own time against itself says nothing
+        }
+        if let Err(e) = chart::write(
+            &out_dir.join(format!("{}.{}_vs_seconds", m.node, m.port)),
+            &c,
+        ) {
+            chart_errors.push(e);
+        }
+    }
+    for x in versus {
+        let xi = measures.iter().position(|m| m == x).unwrap_or(0);
+        for (mi, m) in measures.iter().enumerate().filter(|(_, m)| *m != x) {
+            let c = chart_versus(varies, rows, (xi, x), (mi, m));
+            if let Err(e) = chart::write(
+                &out_dir.join(format!("{}.{}_vs_{}.{}", m.node, m.port, x.node, x.port)),
+                &c,
+            ) {
+                chart_errors.push(e);
+            }
+        }
+    }
+    Ok(chart_errors)
+}
+
+pub fn cartesian(varies: &[Vary]) -> Vec<Vec<Value>> {
+    let mut combos = vec![Vec::new()];
+    for v in varies {
+        combos = combos
+            .into_iter()
+            .flat_map(|c| {
+                v.values
+                    .iter()
+                    .map(move |x| [c.clone(), vec![x.clone()]].concat())
+            })
+            .collect();
+    }
+    combos
+}
+
+fn write_csv(
+    path: &std::path::Path,
+    varies: &[Vary],
+    measures: &[PortRef],
+    nodes: &[String],
+    rows: &[Row],
+) -> std::io::Result<()> {
+    let mut out = String::new();
+    let mut header: Vec<String> = varies.iter().map(Vary::name).collect();
+    header.extend(measures.iter().map(|m| m.to_string()));
+    // One column per measure: a node's seconds column only where it was not measured already.
+    let extra: Vec<bool> = nodes
+        .iter()
+        .map(|n| !measures.iter().any(|m| m.node == *n && m.port == "seconds"))
+        .collect();
+    header.extend(
+        nodes
+            .iter()
+            .zip(&extra)
+            .filter(|(_, e)| **e)
+            .map(|(n, _)| format!("{n}.seconds")),
+    );
+    header.extend(["run_seconds".to_string(), "ok".to_string()]);
+    writeln!(
+        out,
+        "{}",
+        header
+            .iter()
+            .map(|h| csv_field(h))
+            .collect::<Vec<_>>()
+            .join(",")
+    )
+    .map_err(std::io::Error::other)?;
+    let num = |x: &Option<f64>| x.map(|v| format!("{v}")).unwrap_or_default();
+    for r in rows {
+        let mut cells: Vec<String> = r.values.iter().map(|v| csv_field(&cell(v))).collect();
+        cells.extend(r.measures.iter().map(num));
+        cells.extend(
+            r.node_seconds
+                .iter()
+                .zip(&extra)
+                .filter(|(_, e)| **e)
+                .map(|(s, _)| num(s)),
+        );
+        cells.push(format!("{}", r.run_seconds));
+        cells.push(r.ok.to_string());
+        writeln!(out, "{}", cells.join(",")).map_err(std::io::Error::other)?;
+    }
+    std::fs::write(path, out)?;
+    Ok(())
+}
+
+/// Measure `mi` against varied parameter `vi`; one series per combination of the other parameters.
+fn chart_against<'a>(
+    varies: &'a [Vary],
+    vi: usize,
+    rows: &[Row],
+    mi: usize,
+    measure: &'a str,
+) -> Chart<'a> {
+    let numeric = varies[vi].values.iter().all(Value::is_number);
+    let position = |v: &Value| -> f64 {
+        if numeric {
+            v.as_f64().unwrap_or(f64::NAN)
+        } else {
+            varies[vi].values.iter().position(|x| x == v).unwrap_or(0) as f64
+        }
+    };
+    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    for r in rows {
+        let Some(y) = r.measures[mi] else { continue };
+        let others: Vec<String> = varies
+            .iter()
+            .zip(&r.values)
+            .enumerate()
+            .filter(|(j, _)| *j != vi)
+            .map(|(_, (v, x))| format!("{}={}", v.name(), cell(x)))
+            .collect();
+        groups
+            .entry(others.join(" "))
+            .or_default()
+            .push((position(&r.values[vi]), y));
+    }
+    Chart {
+        title: format!("{measure} against {}", varies[vi].name()),
+        x_label: &varies[vi].param,
+        y_label: measure,
+        series: groups
+            .into_iter()
+            .map(|(name, points)| Series {
+                name,
+                points,
+                scatter: false,
+            })
+            .collect(),
+        x_names: (!numeric).then(|| varies[vi].values.iter().map(cell).collect()),
+    }
+}
+
+/// Measure `m` against measure `x`: each series traces the first varied parameter (e.g. the
+/// rank) with the other varied values fixed (one series per combination), so a line is one
+/// configuration's cost–error trade-off.
+fn chart_versus<'a>(
+    varies: &[Vary],
+    rows: &[Row],
+    (xi, x): (usize, &'a PortRef),
+    (mi, m): (usize, &'a PortRef),
+) -> Chart<'a> {
+    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    for r in rows {
+        let (Some(a), Some(b)) = (r.measures[xi], r.measures[mi]) else {
+            continue;
+        };
+        let name: Vec<String> = varies
+            .iter()
+            .zip(&r.values)
+            .skip(1)
+            .map(|(v, val)| format!("{}={}", v.name(), cell(val)))
+            .collect();
+        groups.entry(name.join(" ")).or_default().push((a, b));
+    }
+    Chart {
+        title: format!(
+            "{m} against {x}, along {}",
+            varies.first().map_or(String::new(), |v| v.name())
+        ),
+        x_label: &x.port,
+        y_label: &m.port,
+        series: groups
+            .into_iter()
+            .map(|(name, mut points)| {
+                points.sort_by(|p, q| p.0.total_cmp(&q.0));
+                Series {
+                    name,
+                    points,
+                    scatter: false,
+                }
+            })
+            .collect(),
+        x_names: None,
+    }
+}
