@@ -1,0 +1,64 @@
+"""Type stubs of the extension module ``mesoflow._native`` (Rust, PyO3). Use the package's
+public API (``mesoflow.Graph``, ``mesoflow.load``, …); these are its building blocks."""
+
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+__version__: str
+
+class ArrayBuffer:
+    """A read-only array exported through the buffer protocol (``numpy.asarray`` wraps it
+    without a copy)."""
+
+    type_name: str
+    @property
+    def shape(self) -> List[int]: ...
+
+class Opaque:
+    """A value with no array layout (a mesh, a material): its type and size in bytes."""
+
+    type_name: str
+    bytes: int
+
+def catalog() -> str:
+    """Every kind's signature, as JSON text."""
+
+def validate(text: str, name: str) -> List[Tuple[Optional[str], Optional[str], str]]:
+    """The graph file's errors as (node, field, message); empty when valid."""
+
+def register_node(
+    kind: str,
+    version: int,
+    doc: str,
+    inputs: Sequence[Tuple[str, str, bool]],
+    outputs: Sequence[Tuple[str, str]],
+    schema: str,
+    defaults: str,
+    source_hash: str,
+    func: Callable[[Dict[str, Any], Dict[str, Any]], Tuple[Dict[str, Any], List[str]]],
+    disk_cache: bool = True,
+) -> None:
+    """Registers a Python node kind (see ``mesoflow.node``)."""
+
+def run(
+    text: str,
+    name: str,
+    base_dir: str,
+    out_dir: str,
+    outputs: Sequence[str],
+    sets: Sequence[str],
+    device: str = "auto",
+    cache_dir: Optional[str] = None,
+    use_cache: bool = True,
+    verify_cache: bool = False,
+) -> Tuple[str, Dict[str, Any]]:
+    """Runs a graph file's text; returns the report (JSON text) and the values by "node.port"."""
+
+def write_sweep(
+    out_dir: str,
+    varies: Sequence[Tuple[str, str]],
+    measures: Sequence[str],
+    measured_nodes: Sequence[str],
+    versus: Sequence[str],
+    rows: Sequence[Tuple[str, Sequence[Optional[float]], Sequence[Optional[float]], float, bool]],
+) -> List[str]:
+    """Writes sweep.csv and the charts; returns the charts that could not be drawn."""
