@@ -23,11 +23,22 @@ fn in_flight() -> &'static Mutex<Option<InFlight>> {
     RUN.get_or_init(|| Mutex::new(None))
 }
 
+/// Set when the command line runs inside another program (the Python package's `mesoflow.cli`):
+/// Ctrl-C is then the host's to handle, and it cancels through [`cancel_flag`] itself.
+static EMBEDDED: AtomicBool = AtomicBool::new(false);
+
+pub fn set_embedded() {
+    EMBEDDED.store(true, Ordering::SeqCst);
+}
+
 /// The run's cancellation flag, set by the first Ctrl-C.
 pub fn cancel_flag() -> Arc<AtomicBool> {
     static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
     FLAG.get_or_init(|| {
         let flag = Arc::new(AtomicBool::new(false));
+        if EMBEDDED.load(Ordering::SeqCst) {
+            return flag;
+        }
         let f = flag.clone();
         let _ = ctrlc::set_handler(move || {
             if f.swap(true, Ordering::SeqCst) {

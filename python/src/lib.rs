@@ -2,6 +2,7 @@
 //! catalog, validation, runs and Python node kinds. The Python layer (`pysrc/mesoflow/`) builds
 //! graphs, converts arguments and raises the package's exceptions; this crate only bridges.
 
+mod cli;
 mod convert;
 mod pynode;
 mod session;
@@ -16,6 +17,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(session::register_node, m)?)?;
     m.add_function(wrap_pyfunction!(session::run, m)?)?;
     m.add_function(wrap_pyfunction!(sweep::write_sweep, m)?)?;
+    m.add_function(wrap_pyfunction!(cli::cli, m)?)?;
     m.add_class::<convert::ArrayBuffer>()?;
     m.add_class::<convert::Opaque>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -100,3 +100,28 @@ def test_two_threads_run_at_once_and_python_goes_on(tmp_path, cache):
         g.add("heightfield.normals", "n", height=s["height"])
         alone = g.run(["n.normals"], out_dir=tmp_path / "alone", use_cache=False, device="cpu")
         assert np.array_equal(alone["n.normals"], results[name]["n.normals"])
+
+
+def test_the_command_line_runs_in_process(repo, tmp_path, capfd):
+    graph = repo / "graphs" / "quickstart.json"
+    assert mesoflow.cli("validate", graph) == 0
+    code = mesoflow.cli("run", graph, "--quiet", "--set", "surface.size=32",
+                        "--out-dir", tmp_path / "o", "--cache-dir", tmp_path / "c")
+    assert code == 0 and (tmp_path / "o" / "normals.png").exists()
+    assert mesoflow.cli("run", graph, "--no-such-flag") == 2
+    assert "--no-such-flag" in capfd.readouterr().err
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"mesoflow": 1, "nodes": {"a": {"kind": "heightfield.procedural", "params": {"size": -4}}}}')
+    assert mesoflow.cli("validate", bad) == 2
+    assert "size" in capfd.readouterr().err
+
+
+def test_ctrl_c_stops_an_in_process_watch(repo, tmp_path):
+    graph = repo / "graphs" / "quickstart.json"
+    timer = threading.Timer(1.5, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        mesoflow.cli("watch", graph, "--quiet", "--set", "surface.size=16",
+                     "--out-dir", tmp_path / "o", "--cache-dir", tmp_path / "c")
+    # The next command is not born cancelled.
+    assert mesoflow.cli("validate", graph) == 0

@@ -9,7 +9,7 @@ use crate::args::SweepArgs;
 use crate::exit::invalid;
 use crate::load;
 use crate::progress::summary;
-use mesoflow::sweep_table::{cartesian, cell, write_all, Row, Vary};
+use crate::sweep_table::{cartesian, cell, write_all, Row, Vary};
 use mesoflow_graph::{edit::parse_value, PortRef};
 use mesoflow_runtime::{RunOptions, SilentObserver};
 use serde_json::Value;

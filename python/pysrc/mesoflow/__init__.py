@@ -25,6 +25,17 @@ from ._graph import Graph, Node, Output, Result, load  # noqa: E402
 from ._node import node  # noqa: E402
 from ._sweep import sweep  # noqa: E402
 
+
+def cli(*args: str) -> int:
+    """Runs the command line in this process: ``mesoflow.cli("plan", "graphs/mdf_render.json",
+    "--render", "render", "--budget", "flip=0.05")`` does what ``mesoflow plan …`` does, and
+    returns its exit code (0 ok, 1 run failed, 2 invalid, 130 cancelled). Its output goes to the
+    process's stdout and stderr (in Jupyter, the kernel's console). Kinds defined with
+    :func:`node` are not seen by it, as they are not by the ``mesoflow`` binary."""
+    from ._native import cli as _cli
+
+    return _cli([str(a) for a in args])
+
 __all__ = [
     "Graph",
     "GraphError",
@@ -34,6 +45,7 @@ __all__ = [
     "Output",
     "Result",
     "__version__",
+    "cli",
     "describe",
     "kinds",
     "load",

@@ -62,3 +62,6 @@ def write_sweep(
     rows: Sequence[Tuple[str, Sequence[Optional[float]], Sequence[Optional[float]], float, bool]],
 ) -> List[str]:
     """Writes sweep.csv and the charts; returns the charts that could not be drawn."""
+
+def cli(args: Sequence[str]) -> int:
+    """Runs the command line (``mesoflow ARGS…``) in this process; returns its exit code."""
