@@ -4,6 +4,7 @@
 
 mod cli;
 mod convert;
+mod observe;
 mod pynode;
 mod session;
 mod sweep;

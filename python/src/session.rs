@@ -6,11 +6,13 @@
 //! registry that has it; the new engine shares the old one's caches and GPU.
 
 use crate::convert::to_python;
+use crate::observe::PyObserver;
 use crate::pynode::PyNode;
 use mesoflow_graph::{check, parse_override, GraphFile, PortRef};
 use mesoflow_runtime::cache::{default_memory_budget, DiskCache};
 use mesoflow_runtime::{
-    DeviceMode, DynNode, Engine, EngineConfig, Registry, RunOptions, RunOutcome, SilentObserver,
+    DeviceMode, DynNode, Engine, EngineConfig, Registry, RunObserver, RunOptions, RunOutcome,
+    SilentObserver,
 };
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -204,7 +206,7 @@ fn device_mode(device: &str) -> PyResult<DeviceMode> {
 /// and raises KeyboardInterrupt once the engine has stopped.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (text, name, base_dir, out_dir, outputs, sets, device="auto", cache_dir=None, use_cache=true, verify_cache=false))]
+#[pyo3(signature = (text, name, base_dir, out_dir, outputs, sets, device="auto", cache_dir=None, use_cache=true, verify_cache=false, progress=None))]
 pub fn run<'py>(
     py: Python<'py>,
     text: &str,
@@ -217,6 +219,7 @@ pub fn run<'py>(
     cache_dir: Option<String>,
     use_cache: bool,
     verify_cache: bool,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
     let mut file = GraphFile::parse(text).map_err(|e| {
         PyValueError::new_err(
@@ -257,7 +260,11 @@ pub fn run<'py>(
     std::thread::Builder::new()
         .name("mesoflow-run".into())
         .spawn(move || {
-            let _ = tx.send(worker.run_values(&graph, &opts, Arc::new(SilentObserver)));
+            let observer: Arc<dyn RunObserver> = match progress {
+                Some(callback) => Arc::new(PyObserver::new(callback)),
+                None => Arc::new(SilentObserver),
+            };
+            let _ = tx.send(worker.run_values(&graph, &opts, observer));
         })
         .map_err(|e| PyRuntimeError::new_err(format!("cannot start the run: {e}")))?;
     // Wait without the GIL (other Python threads, and Python nodes, go on), waking to let

@@ -125,3 +125,16 @@ def test_ctrl_c_stops_an_in_process_watch(repo, tmp_path):
                      "--out-dir", tmp_path / "o", "--cache-dir", tmp_path / "c")
     # The next command is not born cancelled.
     assert mesoflow.cli("validate", graph) == 0
+
+
+def test_progress_events_reach_a_callback(tmp_path, cache):
+    events = []
+    g = mesoflow.Graph(base_dir=tmp_path)
+    s = g.add("heightfield.procedural", "s", pattern="weave", size=32)
+    g.add("btf.capture", "cap", height=s["height"], views="ubo81", lights={"thetas": [30], "phis": [0]})
+    g.run(out_dir=tmp_path / "o", cache_dir=cache, progress=lambda *e: events.append(e))
+    assert ("started", "cap") in [(e[0], e[1]) for e in events]
+    assert ("finished", "cap", "computed") in [e[:3] for e in events]
+    steps = [e for e in events if e[0] == "progress" and e[1] == "cap"]
+    # 81 views report as they go; forwarded in 5% steps, so at most 21 of them reach Python.
+    assert 1 <= len(steps) <= 21 and steps[-1][3] <= steps[-1][4]

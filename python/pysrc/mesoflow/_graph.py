@@ -9,9 +9,10 @@ import json
 import os
 import re
 import shutil
+import sys
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -270,6 +271,7 @@ class Graph:
         use_cache: bool = True,
         verify_cache: bool = False,
         check: bool = True,
+        progress: Union[bool, Callable[[str, str, str, int, int], None], None] = None,
     ) -> "Result":
         """Runs the graph on the engine, as ``mesoflow run`` does, and returns the values.
 
@@ -278,7 +280,10 @@ class Graph:
         (default ``$MESOFLOW_CACHE``, else ``.mesoflow/cache`` in the graph's folder).
         ``set``: ``{"node.param": value}`` for this run only. ``out_dir``: where files and
         ``report.json`` go (default ``out/<name>``, as the command line). With ``check`` a
-        failed node raises :class:`NodeError`; the report is on the exception.
+        failed node raises :class:`NodeError`; the report is on the exception. ``progress``:
+        ``True`` prints each node's start, progress (in 5% steps) and end to stderr; a callable
+        receives ``(event, node, detail, done, total)`` with event ``"started"`` (detail: the
+        device), ``"progress"`` or ``"finished"`` (detail: the status).
 
         The GIL is released while the engine runs; Ctrl-C cancels the run and raises
         ``KeyboardInterrupt`` once it has stopped (``report.json`` is still written).
@@ -302,11 +307,21 @@ class Graph:
             cache_dir=cache,
             use_cache=use_cache,
             verify_cache=verify_cache,
+            progress=_printer if progress is True else (progress or None),
         )
         result = Result(json.loads(report_text), values, out)
         if check and not result.ok:
             raise NodeError(result.report)
         return result
+
+
+def _printer(event: str, node: str, detail: str, done: int, total: int) -> None:
+    if event == "started":
+        print(f"  {node}: started ({detail})", file=sys.stderr)
+    elif event == "progress":
+        print(f"  {node}: {100 * done / max(total, 1):.0f}%", file=sys.stderr)
+    else:
+        print(f"  {node}: {detail}", file=sys.stderr)
 
 
 def _first_output(kind: str) -> str:

@@ -50,6 +50,7 @@ def run(
     cache_dir: Optional[str] = None,
     use_cache: bool = True,
     verify_cache: bool = False,
+    progress: Optional[Callable[[str, str, str, int, int], None]] = None,
 ) -> Tuple[str, Dict[str, Any]]:
     """Runs a graph file's text; returns the report (JSON text) and the values by "node.port"."""
 
