@@ -166,3 +166,24 @@ def test_a_python_node_cannot_shadow_a_built_in_kind():
         @mesoflow.node(kind="btf.pca", inputs={}, outputs={"value": "Scalar"})
         def pca():
             return 1.0
+
+
+def test_a_declared_schema_checks_parameters(tmp_path, cache):
+    @mesoflow.node(kind="user.clip", inputs={"height": "HeightField"}, outputs={"height": "HeightField"},
+                   params={"low": {"type": "number", "default": 0.0},
+                           "high": {"type": "number", "minimum": 0, "maximum": 100}})
+    def clip(height, **limits):
+        return np.clip(height, limits["low"], limits["high"])
+
+    g = mesoflow.Graph(base_dir=tmp_path)
+    s = g.add("heightfield.procedural", "s", pattern="weave", size=8)
+    with pytest.raises(mesoflow.GraphError) as e:
+        g.add("user.clip", "c", height=s["height"], high=500)
+    assert e.value.field == "high" and "out of range" in str(e.value)
+    with pytest.raises(mesoflow.GraphError) as e:
+        g.add("user.clip", "c", height=s["height"], high=1, hihg=2)
+    assert e.value.field == "hihg" and "did you mean `high`" in str(e.value)
+    c = g.add("user.clip", "c", height=s["height"], high=1.0)
+    r = g.run([s["height"], c["height"]], out_dir=tmp_path / "o", cache_dir=cache)
+    # The default `low` applied: the clip of the heights to [0, 1], computed here with numpy.
+    assert np.array_equal(r["c.height"], np.clip(r["s.height"], 0.0, 1.0))
