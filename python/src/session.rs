@@ -30,6 +30,8 @@ struct State {
     generation: u64,
     /// By cache folder ("" without a disk cache): the engine and the generation it was built at.
     engines: BTreeMap<String, (u64, Arc<Engine>)>,
+    /// The registry of the current generation (building one derives every kind's schema).
+    registry: Option<(u64, Arc<Registry>)>,
 }
 
 fn state() -> MutexGuard<'static, State> {
@@ -37,16 +39,24 @@ fn state() -> MutexGuard<'static, State> {
         python_kinds: BTreeMap::new(),
         generation: 0,
         engines: BTreeMap::new(),
+        registry: None,
     });
     // The state is a few maps replaced whole; a panic elsewhere cannot leave it half-updated.
     STATE.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-fn registry(s: &State) -> Registry {
+fn registry(s: &mut State) -> Arc<Registry> {
+    if let Some((g, r)) = &s.registry {
+        if *g == s.generation {
+            return r.clone();
+        }
+    }
     let mut r = mesoflow_nodes::registry();
     for node in s.python_kinds.values() {
         r.register_dyn(node.clone());
     }
+    let r = Arc::new(r);
+    s.registry = Some((s.generation, r.clone()));
     r
 }
 
@@ -59,7 +69,7 @@ fn engine(cache_dir: Option<&str>) -> Arc<Engine> {
             return e.clone();
         }
     }
-    let reg = registry(&s);
+    let reg = Registry::clone(&registry(&mut s));
     let engine = match s.engines.get(&name) {
         Some((_, old)) => Arc::new(old.with_registry(reg)),
         None => Arc::new(Engine::new(
@@ -80,8 +90,7 @@ type Problem = (Option<String>, Option<String>, String);
 /// Every kind's signature (built-in and Python) as JSON text.
 #[pyfunction]
 pub fn catalog() -> PyResult<String> {
-    let s = state();
-    let reg = registry(&s);
+    let reg = registry(&mut state());
     let sigs: Vec<_> = reg.signatures().collect();
     serde_json::to_string(&sigs).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }
@@ -93,8 +102,8 @@ pub fn validate(text: &str, name: &str) -> PyResult<Vec<Problem>> {
     let errors = match GraphFile::parse(text) {
         Err(errors) => errors,
         Ok(file) => {
-            let reg = registry(&state());
-            match check(name, &file, &reg) {
+            let reg = registry(&mut state());
+            match check(name, &file, &*reg) {
                 Ok(_) => Vec::new(),
                 Err(e) => e.errors,
             }
