@@ -69,6 +69,21 @@ pub enum CacheAction {
     Stats(CacheArgs),
     /// Remove every entry.
     Clear(CacheArgs),
+    /// Remove entries unused for longer than --older-than, then the least recently used until
+    /// at most --max-bytes remain (a hit renews an entry), and orphaned temporary files.
+    Gc(GcArgs),
+}
+
+#[derive(Args)]
+pub struct GcArgs {
+    #[command(flatten)]
+    pub cache: CacheArgs,
+    /// Keep at most this many bytes: a number or a size such as 512M, 20G.
+    #[arg(long)]
+    pub max_bytes: Option<String>,
+    /// Remove entries not used for this long: 30d, 12h, 45m or 90s.
+    #[arg(long)]
+    pub older_than: Option<String>,
 }
 
 #[derive(Args)]

@@ -1495,3 +1495,62 @@ fn ctrl_c_stops_a_monte_carlo_profile_within_a_second() {
     let rep = report(&out);
     assert_eq!(statuses(&rep)["profile"], "cancelled");
 }
+
+#[test]
+fn cache_gc_keeps_what_was_used_recently_and_fits_the_budget() {
+    let s = Scratch::new();
+    let g = pipeline(&s);
+    let (_, rep) = run(&s, &g, "o", &[]);
+    assert_eq!(rep["ok"], true);
+    let cache = s.path("data/.mesoflow/cache");
+    let cache = cache.to_str().unwrap();
+    let stats = |s: &Scratch| -> serde_json::Value {
+        let r = mesoflow(
+            &["cache", "stats", "--json", "--cache-dir", cache],
+            s.dir.path(),
+        );
+        serde_json::from_str(&r.stdout).unwrap()
+    };
+    let before = stats(&s);
+    assert!(before["entries"].as_u64().unwrap() >= 4, "{before}");
+    // Everything was used seconds ago: an age limit of a day removes nothing.
+    let r = mesoflow(
+        &["cache", "gc", "--older-than", "1d", "--cache-dir", cache],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(stats(&s)["entries"], before["entries"]);
+    // A budget of half the bytes leaves at most half.
+    let half = before["bytes"].as_u64().unwrap() / 2;
+    let r = mesoflow(
+        &[
+            "cache",
+            "gc",
+            "--max-bytes",
+            &half.to_string(),
+            "--cache-dir",
+            cache,
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(stats(&s)["bytes"].as_u64().unwrap() <= half);
+    // The next run recomputes only what was removed, and every result is the same.
+    let (_, again) = run(&s, &g, "o2", &[]);
+    assert_eq!(again["ok"], true);
+    for f in ["tile.png", "surface.npy"] {
+        assert_eq!(
+            std::fs::read(s.path("o").join(f)).unwrap(),
+            std::fs::read(s.path("o2").join(f)).unwrap()
+        );
+    }
+    let bad = mesoflow(&["cache", "gc", "--cache-dir", cache], s.dir.path());
+    assert_eq!(bad.code, 2);
+    assert!(bad.stderr.contains("--max-bytes"), "{}", bad.stderr);
+    let bad = mesoflow(
+        &["cache", "gc", "--older-than", "soon", "--cache-dir", cache],
+        s.dir.path(),
+    );
+    assert_eq!(bad.code, 2);
+    assert!(bad.stderr.contains("30d"), "{}", bad.stderr);
+}

@@ -1,6 +1,7 @@
-//! `mesoflow cache stats` and `mesoflow cache clear`.
+//! `mesoflow cache stats`, `mesoflow cache clear` and `mesoflow cache gc`.
 
-use crate::args::CacheArgs;
+use crate::args::{CacheArgs, GcArgs};
+use crate::exit::invalid;
 use mesoflow_runtime::cache::DiskCache;
 use std::path::PathBuf;
 
@@ -80,6 +81,69 @@ pub fn clear(a: &CacheArgs) -> anyhow::Result<i32> {
         let cache = DiskCache::new(&dir);
         let n = cache.clear()?;
         println!("{}: removed {n} entries", cache.dir().display());
+    }
+    Ok(0)
+}
+
+/// `30d`, `12h`, `45m`, `90s` (or plain seconds).
+fn parse_age(text: &str) -> anyhow::Result<std::time::Duration> {
+    let t = text.trim();
+    let (digits, unit) = match t.chars().last() {
+        Some('d') => (&t[..t.len() - 1], 86_400.0),
+        Some('h') => (&t[..t.len() - 1], 3_600.0),
+        Some('m') => (&t[..t.len() - 1], 60.0),
+        Some('s') => (&t[..t.len() - 1], 1.0),
+        _ => (t, 1.0),
+    };
+    match digits.trim().parse::<f64>() {
+        Ok(n) if n.is_finite() && n >= 0.0 && n * unit < 1e12 => {
+            Ok(std::time::Duration::from_secs_f64(n * unit))
+        }
+        _ => Err(invalid(format!(
+            "--older-than {text}: expected an age such as 30d, 12h, 45m or 90s"
+        ))),
+    }
+}
+
+pub fn gc(a: &GcArgs) -> anyhow::Result<i32> {
+    let max_bytes = match &a.max_bytes {
+        Some(s) => Some(super::run::parse_size(s).map_err(|_| {
+            invalid(format!(
+                "--max-bytes {s}: expected bytes or a size like 512M, 20G"
+            ))
+        })? as u64),
+        None => None,
+    };
+    let older_than = a.older_than.as_deref().map(parse_age).transpose()?;
+    if max_bytes.is_none() && older_than.is_none() {
+        return Err(invalid(
+            "cache gc: say what to keep with --max-bytes and/or --older-than",
+        ));
+    }
+    let mut all = Vec::new();
+    for dir in dirs(&a.cache) {
+        let cache = DiskCache::new(&dir);
+        let s = cache.gc(max_bytes, older_than);
+        if a.cache.json {
+            all.push(serde_json::json!({"dir": dir.display().to_string(), "gc": s}));
+        } else {
+            println!(
+                "{}: removed {} entries ({} bytes); kept {} ({} bytes){}",
+                cache.dir().display(),
+                s.removed,
+                s.freed_bytes,
+                s.kept,
+                s.kept_bytes,
+                if s.reclaimed > 0 {
+                    format!("; {} orphaned temporary files", s.reclaimed)
+                } else {
+                    String::new()
+                }
+            );
+        }
+    }
+    if a.cache.json {
+        println!("{}", serde_json::to_string_pretty(&all)?);
     }
     Ok(0)
 }

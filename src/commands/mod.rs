@@ -29,5 +29,8 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
         Command::Cache {
             action: CacheAction::Clear(a),
         } => cache::clear(&a),
+        Command::Cache {
+            action: CacheAction::Gc(a),
+        } => cache::gc(&a),
     }
 }

@@ -84,6 +84,17 @@ pub struct CacheStats {
     pub by_kind: BTreeMap<String, KindStats>,
 }
 
+/// What [`DiskCache::gc`] removed and kept.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct GcStats {
+    pub removed: u64,
+    pub freed_bytes: u64,
+    pub kept: u64,
+    pub kept_bytes: u64,
+    /// Orphaned temporary files removed as well.
+    pub reclaimed: u64,
+}
+
 static TMP_COUNTER: AtomicU64 = AtomicU64::new(0);
 
 impl DiskCache {
@@ -126,12 +137,19 @@ impl DiskCache {
         if bytes.starts_with(MAGIC_PREFIX) && !bytes.starts_with(MAGIC) {
             return Ok(None); // an older format: recomputed and overwritten
         }
-        decode_entry(&bytes, key, kind, registry)
-            .map(Some)
-            .map_err(|message| DiskError::Corrupt {
-                path: path.display().to_string(),
-                message,
-            })
+        let entry = decode_entry(&bytes, key, kind, registry);
+        if entry.is_ok() {
+            // A hit renews the entry's modification time: `gc` removes the least recently used
+            // first. A cache on a read-only filesystem still serves, unrenewed.
+            let _ = std::fs::File::options()
+                .write(true)
+                .open(&path)
+                .and_then(|f| f.set_modified(std::time::SystemTime::now()));
+        }
+        entry.map(Some).map_err(|message| DiskError::Corrupt {
+            path: path.display().to_string(),
+            message,
+        })
     }
 
     /// Removes an entry (after it was found corrupt).
@@ -215,6 +233,51 @@ impl DiskCache {
             })?;
         }
         Ok(stats.entries)
+    }
+
+    /// Removes the entries not used for longer than `older_than`, then the least recently used
+    /// (by modification time, which a hit renews; ties by name) until at most `max_bytes`
+    /// remain, and orphaned temporary files. A shared cache must not grow without end.
+    pub fn gc(&self, max_bytes: Option<u64>, older_than: Option<std::time::Duration>) -> GcStats {
+        let mut stats = GcStats {
+            reclaimed: reclaim_orphans(&self.dir.join("tmp")),
+            ..GcStats::default()
+        };
+        let now = std::time::SystemTime::now();
+        let mut entries: Vec<(std::time::SystemTime, PathBuf, u64)> = Vec::new();
+        for shard in std::fs::read_dir(&self.dir).into_iter().flatten().flatten() {
+            if shard.file_name() == "tmp" {
+                continue;
+            }
+            for f in std::fs::read_dir(shard.path())
+                .into_iter()
+                .flatten()
+                .flatten()
+            {
+                let Ok(meta) = f.metadata() else { continue };
+                if !meta.is_file() {
+                    continue;
+                }
+                let used = meta.modified().unwrap_or(std::time::UNIX_EPOCH);
+                entries.push((used, f.path(), meta.len()));
+            }
+        }
+        entries.sort();
+        let mut total: u64 = entries.iter().map(|e| e.2).sum();
+        for (used, path, len) in entries {
+            let stale =
+                older_than.is_some_and(|d| now.duration_since(used).is_ok_and(|age| age > d));
+            let over = max_bytes.is_some_and(|m| total > m);
+            if (stale || over) && std::fs::remove_file(&path).is_ok() {
+                stats.removed += 1;
+                stats.freed_bytes += len;
+                total -= len;
+            } else {
+                stats.kept += 1;
+                stats.kept_bytes += len;
+            }
+        }
+        stats
     }
 
     pub fn stats(&self) -> CacheStats {
@@ -432,6 +495,45 @@ mod tests {
         let err = cache.get(&a, "other.kind", &reg).unwrap_err().to_string();
         assert!(err.contains("written by kind `test.kind`"), "{err}");
         assert!(cache.get(&a, "test.kind", &reg).unwrap().is_some());
+    }
+
+    #[test]
+    fn gc_removes_stale_entries_then_the_least_recently_used_down_to_the_budget() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = DiskCache::new(dir.path());
+        let reg = Registry::new();
+        let day = std::time::Duration::from_secs(86_400);
+        let now = std::time::SystemTime::now();
+        let keys: Vec<Key> = (1..=4).map(|i| Key([i; 32])).collect();
+        for (i, k) in keys.iter().enumerate() {
+            cache
+                .put(k, "test.kind", &sample(), &Timing::default())
+                .unwrap();
+            // Entry i was last used i + 1 days ago, except entry 3, 40 days ago.
+            let age = if i == 3 {
+                40 * day
+            } else {
+                (i as u32 + 1) * day
+            };
+            let f = std::fs::File::options()
+                .write(true)
+                .open(cache.entry_path(k))
+                .unwrap();
+            f.set_modified(now - age).unwrap();
+        }
+        let size = std::fs::metadata(cache.entry_path(&keys[0])).unwrap().len();
+        // A hit renews entry 2 (3 days old): it becomes the most recently used.
+        assert!(cache.get(&keys[2], "test.kind", &reg).unwrap().is_some());
+        let s = cache.gc(None, Some(30 * day));
+        assert_eq!((s.removed, s.kept, s.freed_bytes), (1, 3, size));
+        assert!(!cache.contains(&keys[3]));
+        // Room for two: the least recently used go first (entry 1, 2 days; then entry 0, 1 day).
+        let s = cache.gc(Some(2 * size), None);
+        assert_eq!((s.removed, s.kept, s.kept_bytes), (1, 2, 2 * size));
+        assert!(!cache.contains(&keys[1]) && cache.contains(&keys[0]) && cache.contains(&keys[2]));
+        let s = cache.gc(Some(0), None);
+        assert_eq!((s.removed, s.kept), (2, 0));
+        assert_eq!(cache.stats().entries, 0);
     }
 
     #[test]
