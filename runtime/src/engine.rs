@@ -7,7 +7,7 @@ use crate::node::Outputs;
 use crate::registry::Registry;
 use crate::report::{NodeReport, RunReport};
 use mesoflow_graph::{CheckedGraph, PortRef};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -66,7 +66,18 @@ pub struct RunOptions {
     /// Recompute cache hits and fail on a mismatch.
     pub verify_cache: bool,
     pub cancel: Arc<AtomicBool>,
+    /// Only these nodes may be computed; any other node whose value is not in a cache fails
+    /// with [`NOT_IN_CACHE`] instead of running (a cluster job runs its unit, never its inputs;
+    /// the driver's final pass computes nothing). `None`: every node may run.
+    pub compute_only: Option<BTreeSet<String>>,
+    /// Write every computed value to the disk cache, also those of kinds that are cheaper to
+    /// recompute than to read (`NodeSpec::disk_cache` false): a cluster job hands its values
+    /// over to other jobs only through the cache.
+    pub cache_everything: bool,
 }
+
+/// The start of the error of a node that a `compute_only` run would have had to compute.
+pub const NOT_IN_CACHE: &str = "not in the cache, and not computed here";
 
 impl RunOptions {
     pub fn new(graph_name: &str, base_dir: PathBuf, out_dir: PathBuf) -> Self {
@@ -80,6 +91,8 @@ impl RunOptions {
             use_cache: true,
             verify_cache: false,
             cancel: Arc::new(AtomicBool::new(false)),
+            compute_only: None,
+            cache_everything: false,
         }
     }
 }
@@ -140,6 +153,17 @@ impl Engine {
         observer: Arc<dyn RunObserver>,
     ) -> Result<RunReport, EngineError> {
         self.run_values(graph, opts, observer).map(|o| o.report)
+    }
+
+    /// The cache key of every node the requested outputs need, computed without running
+    /// anything (parameters prepared, declared files hashed): what a cluster driver splits into
+    /// units. A node whose key cannot be made maps to its error.
+    pub fn keys(
+        &self,
+        graph: &CheckedGraph,
+        opts: &RunOptions,
+    ) -> BTreeMap<String, Result<crate::key::Key, String>> {
+        crate::scheduler::keys(self, graph, opts)
     }
 
     /// [`Engine::run`], also handing back the values of the requested nodes.

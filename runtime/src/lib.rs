@@ -10,6 +10,7 @@ pub mod engine;
 pub mod gpu;
 pub mod key;
 pub mod node;
+pub mod producer;
 pub mod registry;
 pub mod report;
 mod scheduler;
@@ -17,6 +18,7 @@ pub mod value;
 
 pub use engine::{
     DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, RunOutcome, SilentObserver,
+    NOT_IN_CACHE,
 };
 pub use gpu::{Gpu, GpuProvider};
 pub use key::{Key, KEY_SCHEME};

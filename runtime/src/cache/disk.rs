@@ -50,6 +50,9 @@ struct Header {
     #[serde(flatten)]
     timing: Timing,
     outputs: Vec<OutputHeader>,
+    /// Absent in entries written before it was recorded.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    producer: Option<crate::producer::Producer>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -184,6 +187,7 @@ impl DiskCache {
             kind: kind.into(),
             timing: timing.clone(),
             outputs: headers,
+            producer: Some(crate::producer::producer().clone()),
         })
         .map_err(|e| DiskError::Corrupt {
             path: String::new(),
@@ -198,11 +202,11 @@ impl DiskCache {
         if let Some(parent) = final_path.parent() {
             std::fs::create_dir_all(parent).map_err(io(parent))?;
         }
+        // Hosts sharing the cache over a network filesystem may have the same process ids.
         let tmp = tmp_dir.join(format!(
-            "{}.{}.{}.tmp",
+            "{}.{}.tmp",
             key.hex(),
-            std::process::id(),
-            TMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+            crate::producer::unique_suffix(TMP_COUNTER.fetch_add(1, Ordering::Relaxed))
         ));
         let write = || -> std::io::Result<()> {
             let mut f = std::io::BufWriter::new(std::fs::File::create(&tmp)?);
@@ -280,6 +284,12 @@ impl DiskCache {
         stats
     }
 
+    /// Who wrote an entry (`None` for a missing entry or one written before producers were
+    /// recorded).
+    pub fn producer(&self, key: &Key) -> Option<crate::producer::Producer> {
+        read_header(&self.entry_path(key)).and_then(|h| h.producer)
+    }
+
     pub fn stats(&self) -> CacheStats {
         let mut stats = CacheStats::default();
         let Ok(shards) = std::fs::read_dir(&self.dir) else {
@@ -348,6 +358,10 @@ fn checksum(parts: &[&[u8]]) -> blake3::Hash {
 }
 
 fn read_kind(path: &Path) -> Option<String> {
+    read_header(path).map(|h| h.kind)
+}
+
+fn read_header(path: &Path) -> Option<Header> {
     use std::io::Read;
     let mut f = std::fs::File::open(path).ok()?;
     let mut head = [0u8; 24];
@@ -358,9 +372,7 @@ fn read_kind(path: &Path) -> Option<String> {
     let len = u64::from_le_bytes(head[16..24].try_into().ok()?);
     let mut header = vec![0u8; usize::try_from(len).ok().filter(|l| *l < 1 << 20)?];
     f.read_exact(&mut header).ok()?;
-    serde_json::from_slice::<Header>(&header)
-        .ok()
-        .map(|h| h.kind)
+    serde_json::from_slice::<Header>(&header).ok()
 }
 
 fn decode_entry(
@@ -445,6 +457,12 @@ mod tests {
         cache.put(&key, "test.kind", &sample(), &timing).unwrap();
         let (out, back) = cache.get(&key, "test.kind", &reg).unwrap().unwrap();
         assert_eq!(back, timing);
+        let producer = cache.producer(&key).unwrap();
+        assert!(
+            producer.build.starts_with(env!("CARGO_PKG_VERSION")),
+            "{producer:?}"
+        );
+        assert!(!producer.host.is_empty() && !producer.cpu.is_empty());
         assert_eq!(out.get("x").unwrap().as_scalar(), Some(2.5));
         let full = std::fs::read(cache.entry_path(&key)).unwrap();
         for cut in [0, 10, 30, full.len() / 2, full.len() - 1] {

@@ -8,7 +8,7 @@ use super::verify::{check_outputs, compare, mismatch};
 use super::write::write_artifacts;
 use super::{cancel_dependants, failure, metrics, timings_of, Sink, Slot};
 use crate::cache::Timing;
-use crate::engine::{Engine, RunObserver, RunOptions};
+use crate::engine::{Engine, RunObserver, RunOptions, NOT_IN_CACHE};
 use crate::key::Key;
 use crate::node::{DynNode, Inputs, NodeContext, NodeError, Outputs, Prepared};
 use crate::report::{NodeReport, NodeStatus};
@@ -67,6 +67,27 @@ pub(crate) fn run_all(
                 continue; // failed while preparing
             }
             let cn = &graph.nodes[i];
+            if opts
+                .compute_only
+                .as_ref()
+                .is_some_and(|only| !only.contains(&cn.id))
+            {
+                if let Some(slot) = slots[i].as_mut() {
+                    let message = format!(
+                        "{NOT_IN_CACHE} (this run computes only {})",
+                        opts.compute_only
+                            .as_ref()
+                            .map(|o| o.iter().cloned().collect::<Vec<_>>().join(", "))
+                            .filter(|t| !t.is_empty())
+                            .unwrap_or_else(|| "nothing: every value must be cached".into())
+                    );
+                    let r = failure(cn, &slot.node, NodeStatus::Failed, message, slot.key);
+                    observer.node_finished(&r);
+                    slot.report = Some(r);
+                }
+                cancel_dependants(i, graph, &plan.upstream, compute, slots, observer);
+                continue;
+            }
             let mut inputs = Inputs::new();
             for e in &cn.inputs {
                 let value = plan
@@ -110,7 +131,7 @@ pub(crate) fn run_all(
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
                 memory: opts.use_cache.then(|| engine.memory.clone()),
-                disk: if opts.use_cache && slot.node.spec().disk_cache {
+                disk: if opts.use_cache && (slot.node.spec().disk_cache || opts.cache_everything) {
                     engine.disk.clone()
                 } else {
                     None

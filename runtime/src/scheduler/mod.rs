@@ -105,6 +105,29 @@ pub(crate) fn timings_of(timing: &Timing) -> BTreeMap<String, f64> {
     t
 }
 
+pub(crate) fn keys(
+    engine: &Engine,
+    graph: &CheckedGraph,
+    opts: &RunOptions,
+) -> BTreeMap<String, Result<Key, String>> {
+    let plan = plan::Plan::new(graph, opts);
+    let keyed = keying::key_all(engine, graph, &plan, opts);
+    graph
+        .nodes
+        .iter()
+        .zip(keyed.slots)
+        .filter_map(|(cn, slot)| {
+            let slot = slot?;
+            let key = match (slot.key, slot.report) {
+                (Some(k), _) => Ok(k),
+                (None, Some(r)) => Err(r.error.unwrap_or_default()),
+                (None, None) => Err("no key".into()),
+            };
+            Some((cn.id.clone(), key))
+        })
+        .collect()
+}
+
 pub(crate) fn execute(
     engine: &Engine,
     graph: &CheckedGraph,
