@@ -56,6 +56,17 @@ pub enum Command {
     /// Choose each stage's cheapest model for a render's view and a FLIP budget; write the
     /// planned graph and plan.json.
     Plan(PlanArgs),
+    /// The body of a cluster job: run one unit of a cluster run from the shared cache.
+    Exec {
+        /// The run folder the driver made (`<out-dir>/cluster` by default).
+        run: PathBuf,
+        #[arg(long)]
+        unit: String,
+    },
+    /// The state of a cluster run: every unit, where it ran, its attempts.
+    Status { run: PathBuf },
+    /// Cancel a cluster run: its jobs are cancelled and its driver stops.
+    Cancel { run: PathBuf },
     /// Inspect or clear the disk cache.
     Cache {
         #[command(subcommand)]
@@ -129,6 +140,42 @@ pub struct RunArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub cache: CacheOptions,
+    #[command(flatten)]
+    pub cluster: ClusterOptions,
+}
+
+#[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
+pub enum EngineArg {
+    /// Here, on this machine's cores and GPU.
+    Local,
+    /// As Slurm jobs (`sbatch`), sharing `--cache-dir`, which must be on a shared filesystem.
+    Slurm,
+}
+
+#[derive(Args, Clone)]
+pub struct ClusterOptions {
+    /// Where the work runs.
+    #[arg(long, value_enum, default_value_t = EngineArg::Local)]
+    pub engine: EngineArg,
+    /// Passed to every sbatch, e.g. '--partition gpu --gres gpu:1 --time 30'.
+    #[arg(long, value_name = "'ARGS'", allow_hyphen_values = true)]
+    pub sbatch_args: Option<String>,
+    /// At most this many jobs queued or running at once.
+    #[arg(long, default_value_t = 64)]
+    pub max_queued: usize,
+    /// Resubmissions of a unit whose job was lost or killed, or found an input missing.
+    #[arg(long, default_value_t = 2)]
+    pub retries: u32,
+    /// Submit the driver itself as a Slurm job and return; `mesoflow status RUN` follows it.
+    #[arg(long)]
+    pub detach: bool,
+    /// Make these nodes units of their own (by default a unit is a chain of nodes each with
+    /// one consumer).
+    #[arg(long, value_delimiter = ',', value_name = "ID,…")]
+    pub split: Vec<String>,
+    /// The run folder (default: <out-dir>/cluster).
+    #[arg(long)]
+    pub run_dir: Option<PathBuf>,
 }
 
 #[derive(Args, Clone)]
@@ -171,6 +218,8 @@ pub struct SweepArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub cache: CacheOptions,
+    #[command(flatten)]
+    pub cluster: ClusterOptions,
 }
 
 #[derive(Args)]

@@ -8,6 +8,7 @@
 
 mod args;
 pub mod chart;
+mod cluster;
 mod commands;
 mod env;
 mod exit;

@@ -3,7 +3,7 @@
 mod cache;
 mod info;
 mod plan;
-mod run;
+pub(crate) mod run;
 mod sweep;
 mod watch;
 
@@ -22,6 +22,9 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
             max_runs,
         } => watch::watch(&run, interval_ms, max_runs),
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::Exec { run, unit } => crate::cluster::exec::exec(&run, &unit),
+        Command::Status { run } => crate::cluster::status(&run),
+        Command::Cancel { run } => crate::cluster::cancel(&run),
         Command::Plan(args) => plan::plan(&args),
         Command::Cache {
             action: CacheAction::Stats(a),

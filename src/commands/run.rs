@@ -1,7 +1,7 @@
 //! `mesoflow run`, and the set-up that `watch` and `sweep` share with it: the engine, the cache
 //! folder, the output folder, Ctrl-C.
 
-use crate::args::{CacheOptions, DeviceArg, RunArgs};
+use crate::args::{CacheOptions, ClusterOptions, DeviceArg, EngineArg, RunArgs};
 use crate::exit::{self, invalid};
 use crate::load;
 use crate::progress::{summary, Bars};
@@ -171,6 +171,8 @@ impl Runner {
             require_gpu: self.base.require_gpu,
             use_cache: self.base.use_cache,
             verify_cache: self.base.verify_cache,
+            compute_only: self.base.compute_only.clone(),
+            cache_everything: self.base.cache_everything,
             cancel: self.base.cancel.clone(),
         };
         let shown: Arc<dyn RunObserver> = if self.quiet {
@@ -245,10 +247,60 @@ pub fn exit_code(report: &RunReport) -> i32 {
     }
 }
 
+pub fn device_name(d: DeviceArg) -> &'static str {
+    match d {
+        DeviceArg::Auto => "auto",
+        DeviceArg::Cpu => "cpu",
+        DeviceArg::Gpu => "gpu",
+    }
+}
+
+/// The cluster run folder: `--run-dir`, else `cluster` in the output folder.
+pub fn run_dir(cluster: &ClusterOptions, out_dir: &Path) -> PathBuf {
+    cluster
+        .run_dir
+        .clone()
+        .unwrap_or_else(|| out_dir.join("cluster"))
+}
+
 pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
-    let runner = Runner::new(args)?;
+    let mut runner = Runner::new(args)?;
     let graph = load::load(&args.graph, &args.set, runner.engine.registry())?;
     check_outputs(&runner.base.outputs, &graph, &runner.engine)?;
+    if args.cluster.engine == EngineArg::Slurm {
+        if args.cache.no_cache {
+            return Err(invalid(
+                "--engine slurm: the jobs hand their results over through the cache; drop --no-cache",
+            ));
+        }
+        let run_dir = run_dir(&args.cluster, &runner.base.out_dir);
+        if args.cluster.detach {
+            let job =
+                crate::cluster::driver::detach(&run_dir, args.cluster.sbatch_args.as_deref())?;
+            println!(
+                "submitted the driver as job {job}; follow it with: mesoflow status {}",
+                run_dir.display()
+            );
+            return Ok(exit::OK);
+        }
+        let mut file = load::read(&args.graph)?;
+        load::apply_sets(&mut file, &args.set)?;
+        let outcome = crate::cluster::driver::drive(
+            &runner.engine,
+            &[(file.to_json(), graph.clone())],
+            &runner.base,
+            &cache_dir(&args.cache, &args.graph),
+            &run_dir,
+            &args.cluster,
+            device_name(args.device),
+            runner.quiet,
+        )?;
+        if outcome.interrupted {
+            return Ok(exit::CANCELLED);
+        }
+        // The final pass computes nothing: every value came from the cluster, through the cache.
+        runner.base.compute_only = Some(Default::default());
+    }
     let report = runner.run_once(&graph, &runner.base.out_dir)?;
     Ok(exit_code(&report))
 }

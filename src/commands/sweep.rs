@@ -5,7 +5,7 @@
 use super::run::{
     cache_dir, device_mode, engine, graph_dir, graph_name, parse_outputs, require_gpu, write_report,
 };
-use crate::args::SweepArgs;
+use crate::args::{EngineArg, SweepArgs};
 use crate::exit::invalid;
 use crate::load;
 use crate::progress::summary;
@@ -87,6 +87,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
     // Check every combination before running any, so a bad value fails fast with exit code 2.
     let combos = cartesian(&varies);
     let mut graphs = Vec::new();
+    let mut texts = Vec::new();
     for combo in &combos {
         let mut file = base_file.clone();
         for (v, value) in varies.iter().zip(combo) {
@@ -98,6 +99,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             .map_err(invalid)?;
         }
         graphs.push(load::checked(&args.graph, &file, engine.registry())?);
+        texts.push(file.to_json());
     }
     // The first output of a node: how a node is asked for when what is measured is not an output.
     let first_output = |kind: &str| {
@@ -171,6 +173,47 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(format!("{}-sweep", graph_name(&args.graph))));
     let cancel = super::run::cancel_flag();
+    let slurm = args.cluster.engine == EngineArg::Slurm;
+    if slurm {
+        if args.cache.no_cache {
+            return Err(invalid(
+                "--engine slurm: the jobs hand their results over through the cache; drop --no-cache",
+            ));
+        }
+        let run_dir = super::run::run_dir(&args.cluster, &out_dir);
+        if args.cluster.detach {
+            let job =
+                crate::cluster::driver::detach(&run_dir, args.cluster.sbatch_args.as_deref())?;
+            println!(
+                "submitted the driver as job {job}; follow it with: mesoflow status {}",
+                run_dir.display()
+            );
+            return Ok(0);
+        }
+        let mut opts = RunOptions::new(
+            &args.graph.display().to_string(),
+            graph_dir(&args.graph),
+            out_dir.clone(),
+        );
+        opts.outputs = outputs.clone();
+        opts.device = device_mode(args.device);
+        opts.cancel = cancel.clone();
+        let variants: Vec<(String, mesoflow_graph::CheckedGraph)> =
+            texts.into_iter().zip(graphs.iter().cloned()).collect();
+        let outcome = crate::cluster::driver::drive(
+            &engine,
+            &variants,
+            &opts,
+            &cache_dir(&args.cache, &args.graph),
+            &run_dir,
+            &args.cluster,
+            super::run::device_name(args.device),
+            args.quiet,
+        )?;
+        if outcome.interrupted {
+            return Ok(crate::exit::CANCELLED);
+        }
+    }
     let mut rows = Vec::new();
     for (i, (combo, graph)) in combos.iter().zip(&graphs).enumerate() {
         let run_dir = out_dir.join("runs").join(format!("{i:03}"));
@@ -185,6 +228,10 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         opts.use_cache = !args.cache.no_cache;
         opts.verify_cache = args.cache.verify_cache;
         opts.cancel = cancel.clone();
+        if slurm {
+            // Every value came from the cluster, through the cache: this pass computes nothing.
+            opts.compute_only = Some(Default::default());
+        }
         let report = engine
             .run(graph, &opts, Arc::new(SilentObserver))
             .map_err(|e| invalid(e.to_string()))?;

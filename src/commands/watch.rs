@@ -21,6 +21,11 @@ fn fingerprint(paths: &[PathBuf]) -> Vec<Option<(u64, [u8; 32])>> {
 }
 
 pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyhow::Result<i32> {
+    if args.cluster.engine != crate::args::EngineArg::Local {
+        return Err(crate::exit::invalid(
+            "watch runs here: --engine slurm is for run and sweep",
+        ));
+    }
     let runner = Runner::new(args)?;
     let mut runs = 0usize;
     loop {
