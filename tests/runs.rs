@@ -172,6 +172,21 @@ fn keys_do_not_depend_on_folder_process_or_parameter_order() {
     let (_, ra) = run(&a, &ga, "o", &[]);
     let (_, rb) = run(&b, &gb, "o", &[]);
     assert_eq!(keys(&ra), keys(&rb));
+    // The file named by an absolute path (as on another machine's shared filesystem): the same
+    // keys, because a key holds the file's name and contents, not where it was found.
+    let abs = b.path("elsewhere/tile.npy");
+    let gc = b.write(
+        "other/g.json",
+        &text.replace(
+            r#""path": "tile.npy""#,
+            &format!(r#""path": "{}""#, abs.display()),
+        ),
+    );
+    assert!(std::fs::read_to_string(&gc)
+        .unwrap()
+        .contains(&abs.display().to_string()));
+    let (_, rc) = run(&b, &gc, "o2", &[]);
+    assert_eq!(keys(&ra), keys(&rc));
 
     // The last bit of a float parameter changes the key (6.0 and the next double up).
     let (_, r1) = run(&a, &ga, "p", &["--set", "surface.depth=6.0", "--no-cache"]);

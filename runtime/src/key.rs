@@ -5,7 +5,7 @@ use serde_json::Value;
 use std::fmt;
 
 /// Bump when the way keys are computed changes; every old cache entry then misses.
-pub const KEY_SCHEME: u32 = 2;
+pub const KEY_SCHEME: u32 = 3;
 
 #[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub struct Key(pub [u8; 32]);

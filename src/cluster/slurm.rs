@@ -88,11 +88,8 @@ pub fn sbatch(
 
 /// Every job of this user that Slurm still knows as pending or running, with its state.
 pub fn queue() -> anyhow::Result<BTreeMap<String, String>> {
-    let user = std::env::var("USER")
-        .or_else(|_| std::env::var("LOGNAME"))
-        .unwrap_or_else(|_| "root".into());
     let out = run(
-        Command::new("squeue").args(["-h", "-u", &user, "-o", "%i %T"]),
+        Command::new("squeue").args(["-h", "--me", "-o", "%i %T"]),
         "squeue",
     )?;
     Ok(out

@@ -87,8 +87,9 @@ fn prepare_and_key(
     read_files: &mut BTreeSet<String>,
 ) -> Result<(Prepared, Key), NodeError> {
     let prepared = node.prepare(&cn.params)?;
+    let declared = node.files(&prepared, base)?;
     let mut files = Vec::new();
-    for path in node.files(&prepared, base)? {
+    for path in declared.iter().cloned() {
         let hash = key::hash_file(&path).map_err(|e| NodeError::file(&path, e))?;
         let name = path
             .file_name()
@@ -108,13 +109,38 @@ fn prepare_and_key(
         inputs.push((e.port.as_str(), k, e.from.port.as_str()));
     }
     let spec = node.spec();
+    let params = paths_as_files(&prepared.canonical, base, &declared);
     let key = key::compute(&KeyParts {
         kind: spec.kind,
         version: spec.version,
-        params: &prepared.canonical,
+        params: &params,
         inputs,
         files,
         device,
     });
     Ok((prepared, key))
+}
+
+/// A parameter that names a declared file enters the key as its place in the list of files
+/// (`<file 0>`), not as written: the file's name and contents are in the key already, and a path
+/// that is absolute on one machine and relative on another must not make their keys differ.
+fn paths_as_files(
+    v: &serde_json::Value,
+    base: &Path,
+    files: &[std::path::PathBuf],
+) -> serde_json::Value {
+    use serde_json::Value;
+    match v {
+        Value::String(s) => match files.iter().position(|f| *f == base.join(s)) {
+            Some(i) => Value::String(format!("<file {i}>")),
+            None => v.clone(),
+        },
+        Value::Array(a) => Value::Array(a.iter().map(|x| paths_as_files(x, base, files)).collect()),
+        Value::Object(o) => Value::Object(
+            o.iter()
+                .map(|(k, x)| (k.clone(), paths_as_files(x, base, files)))
+                .collect(),
+        ),
+        other => other.clone(),
+    }
 }
