@@ -503,3 +503,83 @@ fn a_node_error_fails_its_branch_and_the_rest_is_cached() {
     assert_eq!(failed[0]["attempt"], 1);
     assert!(failed[0]["error"].as_str().unwrap().contains("slow0"));
 }
+
+#[test]
+fn status_follows_a_run_and_cancel_stops_it() {
+    let _one = lock();
+    let Some(dir) = cluster() else { return };
+    nodes_up(&dir);
+    let s = Scratch::new();
+    let g = slow_graph(&s, false);
+    let mut driver = spawn(&s, &g, "o");
+    let run = s.path("o/cluster");
+    wait_for("a running job", 60, || {
+        !running().is_empty() && run.join("run.json").exists()
+    });
+    let st = mesoflow(&["status", run.to_str().unwrap()], s.dir.path());
+    assert_eq!(st.code, 0, "{}", st.stderr);
+    assert!(
+        st.stdout.contains("running") && st.stdout.contains("slow0"),
+        "{}",
+        st.stdout
+    );
+    let c = mesoflow(&["cancel", run.to_str().unwrap()], s.dir.path());
+    assert_eq!(c.code, 0, "{}", c.stderr);
+    let t = Instant::now();
+    assert_eq!(driver.wait().unwrap().code(), Some(130));
+    assert!(t.elapsed() < Duration::from_secs(20), "{:?}", t.elapsed());
+    wait_for("the run's jobs to leave the queue", 30, || {
+        running().is_empty()
+    });
+}
+
+#[test]
+fn a_detached_driver_runs_as_a_job() {
+    let _one = lock();
+    let Some(dir) = cluster() else { return };
+    nodes_up(&dir);
+    let s = Scratch::new();
+    // Two short units: the driver holds one CPU, they take the other.
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "a": {"kind": "scalar.constant", "params": {"value": 2}},
+            "b": {"kind": "scalar.affine", "inputs": {"x": "a.value"}, "params": {"scale": 3}}}}"#,
+    );
+    let r = mesoflow(
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--engine",
+            "slurm",
+            "--detach",
+            "--out-dir",
+            s.path("o").to_str().unwrap(),
+            "--cache-dir",
+            s.path("shared-cache").to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains("submitted the driver as job"),
+        "{}",
+        r.stdout
+    );
+    wait_for("the detached run's report", 120, || {
+        s.path("o/report.json").exists()
+    });
+    let rep = report(&s.path("o"));
+    assert_eq!(rep["ok"], true);
+    assert_eq!(metric_y(&rep, "b"), 6.0);
+}
+
+fn metric_y(report: &Value, id: &str) -> f64 {
+    report["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == id)
+        .and_then(|n| n["metrics"]["y"].as_f64())
+        .unwrap()
+}

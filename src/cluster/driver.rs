@@ -10,7 +10,7 @@ use super::units::{self, UnitSpec};
 use crate::args::ClusterOptions;
 use mesoflow_graph::CheckedGraph;
 use mesoflow_runtime::cache::DiskCache;
-use mesoflow_runtime::{Engine, Key, RunOptions};
+use mesoflow_runtime::{Engine, Key, RunObserver, RunOptions};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 use std::sync::atomic::Ordering;
@@ -144,6 +144,36 @@ pub fn drive(
         .unwrap_or_default();
     let interval = poll_interval();
     let started = Instant::now();
+    // The progress display of a local run, with a bar per unit in flight.
+    let bars = (!quiet).then(crate::progress::Bars::new);
+    let label = |id: &str| format!("{id} {}", units[id].nodes.join(","));
+    let finished = |id: &str, ok: bool| {
+        if let Some(b) = &bars {
+            b.node_finished(&mesoflow_runtime::NodeReport {
+                id: label(id),
+                kind: "unit".into(),
+                device: "slurm".into(),
+                status: if ok {
+                    mesoflow_runtime::NodeStatus::Computed
+                } else {
+                    mesoflow_runtime::NodeStatus::Failed
+                },
+                seconds: 0.0,
+                bytes: 0,
+                key: String::new(),
+                metrics: Default::default(),
+                timings: Default::default(),
+                kind_version: 0,
+                error: None,
+                verified: false,
+            });
+        }
+    };
+    for (id, s) in &state {
+        if let (Some(b), State::Running { job, .. }) = (&bars, s) {
+            b.node_started(&label(id), "unit", &format!("slurm job {job}"));
+        }
+    }
     loop {
         if opts.cancel.load(Ordering::Relaxed) || folder.cancel_path().exists() {
             let jobs: Vec<String> = state
@@ -200,6 +230,7 @@ pub fn drive(
                 None => None,
             };
             if let Some(next) = next {
+                finished(id, next == State::Done);
                 if let State::Failed(_) = next {
                     for d in units::dependants(&units, id) {
                         if !matches!(state[&d], State::Done | State::Failed(_)) {
@@ -254,6 +285,9 @@ pub fn drive(
             )?;
             out.submitted += 1;
             running += 1;
+            if let Some(b) = &bars {
+                b.node_started(&label(id), "unit", &format!("slurm job {job}"));
+            }
             state.insert(id.clone(), State::Running { job, attempt });
         }
         let pending = state
