@@ -489,6 +489,19 @@ fn a_node_error_fails_its_branch_and_the_rest_is_cached() {
     let r = report(&s.path("o"));
     let st = per_node(&r, "status");
     assert_eq!(st["slow0"], "failed");
+    // The report says why, as the job saw it.
+    let error = r["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "slow0")
+        .and_then(|n| n["error"].as_str())
+        .unwrap()
+        .to_string();
+    assert!(
+        error.contains("failed on the cluster") && error.contains("on purpose"),
+        "{error}"
+    );
     assert_eq!(st["out0"], "cancelled");
     for i in 1..4 {
         assert_eq!(st[&format!("out{i}")], "disk", "{st:?}");

@@ -33,6 +33,8 @@ pub struct Outcome {
     pub cancelled: usize,
     pub submitted: usize,
     pub interrupted: bool,
+    /// The error of each node of a failed unit, as its job reported it.
+    pub errors: BTreeMap<String, String>,
 }
 
 fn poll_interval() -> Duration {
@@ -307,6 +309,16 @@ pub fn drive(
             break;
         }
         std::thread::sleep(interval);
+    }
+    for (id, s) in &state {
+        if let State::Failed(e) = s {
+            for node in &units[id].nodes {
+                out.errors.insert(
+                    node.clone(),
+                    format!("failed on the cluster (unit {id}): {e}"),
+                );
+            }
+        }
     }
     for s in state.values() {
         match s {

@@ -133,6 +133,9 @@ pub struct Runner {
     pub engine: Engine,
     pub base: RunOptions,
     pub quiet: bool,
+    /// After a cluster run, the errors of nodes that failed in their jobs: the final pass finds
+    /// them missing from the cache, and its report says why, as the job saw it.
+    pub cluster_errors: std::collections::BTreeMap<String, String>,
 }
 
 impl Runner {
@@ -157,6 +160,7 @@ impl Runner {
             engine,
             base,
             quiet: args.quiet,
+            cluster_errors: Default::default(),
         })
     }
 
@@ -185,10 +189,20 @@ impl Runner {
             out_dir.to_path_buf(),
             shown,
         ));
-        let report = self
+        let mut report = self
             .engine
             .run(graph, &opts, observer)
             .map_err(|e| invalid(e.to_string()))?;
+        for n in &mut report.nodes {
+            if let Some(e) = self.cluster_errors.get(&n.id) {
+                if n.error
+                    .as_deref()
+                    .is_some_and(|x| x.contains(mesoflow_runtime::NOT_IN_CACHE))
+                {
+                    n.error = Some(format!("node `{}`: {e}", n.id));
+                }
+            }
+        }
         write_report(&report, out_dir)?;
         if !self.quiet {
             print!("{}", summary(&report));
@@ -300,6 +314,25 @@ pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
         }
         // The final pass computes nothing: every value came from the cluster, through the cache.
         runner.base.compute_only = Some(Default::default());
+        let mut report = runner.run_once(&graph, &runner.base.out_dir)?;
+        // A node that failed in its job is missing from the cache: its report says why, as the
+        // job saw it, rather than that it is missing.
+        let mut patched = false;
+        for n in &mut report.nodes {
+            if let Some(e) = outcome.errors.get(&n.id) {
+                if n.error
+                    .as_deref()
+                    .is_some_and(|x| x.contains(mesoflow_runtime::NOT_IN_CACHE))
+                {
+                    n.error = Some(format!("node `{}`: {e}", n.id));
+                    patched = true;
+                }
+            }
+        }
+        if patched {
+            write_report(&report, &runner.base.out_dir)?;
+        }
+        return Ok(exit_code(&report));
     }
     let report = runner.run_once(&graph, &runner.base.out_dir)?;
     Ok(exit_code(&report))
