@@ -72,8 +72,22 @@ fn nodes_up(dir: &Path) {
     }
 }
 
-fn lock() -> std::sync::MutexGuard<'static, ()> {
-    CLUSTER.lock().unwrap_or_else(|e| e.into_inner())
+/// The cluster to myself with both nodes up, and its folder; `None` without a cluster.
+fn begin() -> Option<(std::sync::MutexGuard<'static, ()>, PathBuf)> {
+    let one = CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = cluster()?;
+    nodes_up(&dir);
+    Some((one, dir))
+}
+
+/// The driver's submissions (`units/*.job`): job id and attempt of each unit's last one.
+fn submissions(run: &Path) -> Vec<Value> {
+    std::fs::read_dir(run.join("units"))
+        .unwrap()
+        .flatten()
+        .filter(|e| e.path().extension().is_some_and(|x| x == "job"))
+        .map(|e| serde_json::from_str(&std::fs::read_to_string(e.path()).unwrap()).unwrap())
+        .collect()
 }
 
 /// Every file under `dir` except reports and the cluster folder, by relative path.
@@ -142,9 +156,7 @@ fn keys(report: &Value) -> BTreeMap<String, String> {
 
 #[test]
 fn a_sweep_on_two_workers_writes_what_a_local_sweep_writes() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, _)) = begin() else { return };
     let s = Scratch::new();
     let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/btf_compress.json");
     let sweep = |engine: &str, out: &str, cache: &str| {
@@ -366,9 +378,7 @@ fn local_reference(s: &Scratch, graph: &Path) -> Value {
 
 #[test]
 fn a_worker_killed_mid_run_is_replaced_and_the_run_completes() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, dir)) = begin() else { return };
     let s = Scratch::new();
     let g = slow_graph(&s, false);
     let mut driver = spawn(&s, &g, "o");
@@ -403,9 +413,7 @@ fn a_worker_killed_mid_run_is_replaced_and_the_run_completes() {
 
 #[test]
 fn a_killed_exec_is_resubmitted() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, _)) = begin() else { return };
     let s = Scratch::new();
     let g = slow_graph(&s, false);
     let mut driver = spawn(&s, &g, "o");
@@ -420,15 +428,9 @@ fn a_killed_exec_is_resubmitted() {
         .status()
         .unwrap();
     assert_eq!(driver.wait().unwrap().code(), Some(0));
-    let resubmitted = std::fs::read_dir(run.join("units"))
-        .unwrap()
-        .flatten()
-        .filter(|e| e.path().extension().is_some_and(|x| x == "job"))
-        .filter(|e| {
-            std::fs::read_to_string(e.path())
-                .unwrap()
-                .contains("\"attempt\":2")
-        })
+    let resubmitted = submissions(&run)
+        .iter()
+        .filter(|s| s["attempt"] == 2)
         .count();
     assert_eq!(resubmitted, 1);
     assert_eq!(
@@ -439,9 +441,7 @@ fn a_killed_exec_is_resubmitted() {
 
 #[test]
 fn a_driver_killed_and_started_again_resumes() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, _)) = begin() else { return };
     let s = Scratch::new();
     let g = slow_graph(&s, false);
     let mut first = spawn(&s, &g, "o");
@@ -465,11 +465,8 @@ fn a_driver_killed_and_started_again_resumes() {
         }
     }
     // No unit was submitted more than once (running ones were followed, not resubmitted).
-    for e in std::fs::read_dir(run.join("units")).unwrap().flatten() {
-        if e.path().extension().is_some_and(|x| x == "job") {
-            let text = std::fs::read_to_string(e.path()).unwrap();
-            assert!(text.contains("\"attempt\":1"), "{text}");
-        }
+    for sub in submissions(&run) {
+        assert_eq!(sub["attempt"], 1, "{sub}");
     }
     assert_eq!(
         metrics(&report(&s.path("o"))),
@@ -479,9 +476,7 @@ fn a_driver_killed_and_started_again_resumes() {
 
 #[test]
 fn a_node_error_fails_its_branch_and_the_rest_is_cached() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, _)) = begin() else { return };
     let s = Scratch::new();
     let g = slow_graph(&s, true);
     let mut driver = spawn(&s, &g, "o");
@@ -519,9 +514,7 @@ fn a_node_error_fails_its_branch_and_the_rest_is_cached() {
 
 #[test]
 fn status_follows_a_run_and_cancel_stops_it() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, _)) = begin() else { return };
     let s = Scratch::new();
     let g = slow_graph(&s, false);
     let mut driver = spawn(&s, &g, "o");
@@ -548,9 +541,7 @@ fn status_follows_a_run_and_cancel_stops_it() {
 
 #[test]
 fn a_detached_driver_runs_as_a_job() {
-    let _one = lock();
-    let Some(dir) = cluster() else { return };
-    nodes_up(&dir);
+    let Some((_one, _)) = begin() else { return };
     let s = Scratch::new();
     // Two short units: the driver holds one CPU, they take the other.
     let g = s.write(

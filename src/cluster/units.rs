@@ -60,9 +60,8 @@ pub fn split(
                     .cloned(),
                 _ => None,
             };
-            let id = match chained {
-                Some(id) => {
-                    let unit = units.get_mut(&id).expect("the unit was made above");
+            let id = match chained.and_then(|id| units.get_mut(&id).map(|u| (id, u))) {
+                Some((id, unit)) => {
                     unit.nodes.push(n.id.clone());
                     unit.keys.push(key.hex());
                     id
@@ -111,4 +110,99 @@ pub fn dependants(units: &BTreeMap<String, UnitSpec>, failed: &str) -> BTreeSet<
     }
     dead.remove(failed);
     dead
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use mesoflow_runtime::{Engine, EngineConfig, RunOptions};
+
+    fn variant(engine: &Engine, text: &str) -> (CheckedGraph, BTreeMap<String, Key>) {
+        let file = mesoflow_graph::GraphFile::parse(text).unwrap();
+        let graph = mesoflow_graph::check("g", &file, engine.registry()).unwrap();
+        let opts = RunOptions::new("g", ".".into(), "out".into());
+        let keys = engine
+            .keys(&graph, &opts)
+            .into_iter()
+            .map(|(id, k)| (id, k.unwrap()))
+            .collect();
+        (graph, keys)
+    }
+
+    fn graph(scale_c: f64) -> String {
+        // a → b → c and b → d: b has two consumers, so the chain from a stops at b.
+        format!(
+            r#"{{"mesoflow": 1, "nodes": {{
+              "a": {{"kind": "scalar.constant", "params": {{"value": 1}}}},
+              "b": {{"kind": "scalar.affine", "inputs": {{"x": "a.value"}}}},
+              "c": {{"kind": "scalar.affine", "inputs": {{"x": "b.y"}}, "params": {{"scale": {scale_c}}}}},
+              "d": {{"kind": "scalar.affine", "inputs": {{"x": "b.y"}}, "params": {{"offset": 1}}}}}}}}"#
+        )
+    }
+
+    fn node_lists(units: &BTreeMap<String, UnitSpec>) -> Vec<Vec<String>> {
+        let mut v: Vec<Vec<String>> = units.values().map(|u| u.nodes.clone()).collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn chains_split_where_a_node_has_two_consumers_and_shared_keys_are_one_unit() {
+        let engine = Engine::new(
+            mesoflow_nodes::registry(),
+            EngineConfig {
+                memory_budget: 1 << 20,
+                disk: None,
+            },
+        );
+        let one = variant(&engine, &graph(2.0));
+        let units = split(std::slice::from_ref(&one), &BTreeSet::new());
+        let s = |v: &[&str]| v.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+        assert_eq!(
+            node_lists(&units),
+            vec![s(&["a", "b"]), s(&["c"]), s(&["d"])]
+        );
+        // The unit of c reads b's value.
+        let c = units.values().find(|u| u.nodes == ["c"]).unwrap();
+        assert_eq!(c.inputs, vec![one.1["b"].hex()]);
+        // --split b: b alone.
+        let split_b = split(
+            std::slice::from_ref(&one),
+            &BTreeSet::from(["b".to_string()]),
+        );
+        assert_eq!(split_b.len(), 4);
+        // A second variant that differs only in c shares a, b and d: one more unit, for c.
+        let two = variant(&engine, &graph(3.0));
+        let both = split(&[one, two], &BTreeSet::new());
+        assert_eq!(both.len(), 4);
+        assert_eq!(both.values().filter(|u| u.nodes == ["c"]).count(), 2);
+        assert_eq!(both.values().filter(|u| u.variant == 1).count(), 1);
+    }
+
+    #[test]
+    fn dependants_follow_keys_transitively() {
+        let engine = Engine::new(
+            mesoflow_nodes::registry(),
+            EngineConfig {
+                memory_budget: 1 << 20,
+                disk: None,
+            },
+        );
+        let v = variant(&engine, &graph(2.0));
+        let units = split(std::slice::from_ref(&v), &BTreeSet::from(["b".to_string()]));
+        let a = units
+            .iter()
+            .find(|(_, u)| u.nodes == ["a"])
+            .unwrap()
+            .0
+            .clone();
+        assert_eq!(dependants(&units, &a).len(), 3);
+        let c = units
+            .iter()
+            .find(|(_, u)| u.nodes == ["c"])
+            .unwrap()
+            .0
+            .clone();
+        assert!(dependants(&units, &c).is_empty());
+    }
 }
