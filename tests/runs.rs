@@ -1569,3 +1569,35 @@ fn cache_gc_keeps_what_was_used_recently_and_fits_the_budget() {
     assert_eq!(bad.code, 2);
     assert!(bad.stderr.contains("30d"), "{}", bad.stderr);
 }
+
+#[test]
+fn a_tile_too_small_for_its_pattern_is_flat_and_says_so() {
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "small": {"kind": "heightfield.procedural", "params": {"pattern": "weave", "size": 16}},
+            "fine": {"kind": "heightfield.procedural", "params": {"pattern": "weave", "size": 32}}}}"#,
+    );
+    let (r, rep) = run(&s, &g, "o", &["--no-cache"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let warnings: Vec<(String, String)> = rep["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|w| {
+            (
+                w["node"].as_str().unwrap().to_string(),
+                w["message"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    // 8 threads across 16 texels: 2 texels each, every centre at the same phase.
+    assert!(
+        warnings
+            .iter()
+            .any(|(n, m)| n == "small" && m.contains("flat")),
+        "{warnings:?}"
+    );
+    assert!(!warnings.iter().any(|(n, _)| n == "fine"), "{warnings:?}");
+}

@@ -99,6 +99,16 @@ impl Node for Procedural {
         let hf = generate(ctx, p)?;
         let n = hf.width;
         let (lo, hi) = hf.min_max();
+        if hi <= lo && p.depth != 0.0 {
+            // Every texel centre fell on the same phase of the pattern: a flat tile would make
+            // every later stage's error exactly 0, which is not an answer.
+            ctx.warn(format!(
+                "the tile is flat: {} periods across {n} texels leave {:.1} texels each, which \
+                 samples the pattern at one phase; raise `size` or lower `count`",
+                p.count,
+                n as f64 / p.count.max(1) as f64
+            ));
+        }
         let span = if hi > lo { hi - lo } else { 1.0 };
         let preview = Image {
             width: n,
