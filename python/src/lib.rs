@@ -8,6 +8,7 @@ mod observe;
 mod pynode;
 mod session;
 mod sweep;
+mod wait;
 
 use pyo3::prelude::*;
 

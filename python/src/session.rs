@@ -22,7 +22,6 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
 
 struct State {
     python_kinds: BTreeMap<String, Arc<dyn DynNode>>,
@@ -262,44 +261,19 @@ pub fn run<'py>(
     opts.cancel = cancel.clone();
     let requested = opts.outputs.clone();
 
-    let (tx, rx) = std::sync::mpsc::channel();
-    // `detach` needs what it borrows to be shareable; the receiver is used by this thread only.
-    let rx = Mutex::new(rx);
     let worker = engine.clone();
-    std::thread::Builder::new()
-        .name("mesoflow-run".into())
-        .spawn(move || {
+    let (result, interrupted) = crate::wait::run_interruptibly(
+        py,
+        "the run",
+        move || {
             let observer: Arc<dyn RunObserver> = match progress {
                 Some(callback) => Arc::new(PyObserver::new(callback)),
                 None => Arc::new(SilentObserver),
             };
-            let _ = tx.send(worker.run_values(&graph, &opts, observer));
-        })
-        .map_err(|e| PyRuntimeError::new_err(format!("cannot start the run: {e}")))?;
-    // Wait without the GIL (other Python threads, and Python nodes, go on), waking to let
-    // Python see signals: Ctrl-C sets the run's cancel flag, then waits for the engine to stop.
-    let mut interrupted = None;
-    let result = loop {
-        let next = py.detach(|| {
-            rx.lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .recv_timeout(Duration::from_millis(50))
-        });
-        match next {
-            Ok(r) => break r,
-            Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
-                if interrupted.is_none() {
-                    if let Err(e) = py.check_signals() {
-                        cancel.store(true, Ordering::Relaxed);
-                        interrupted = Some(e);
-                    }
-                }
-            }
-            Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                return Err(PyRuntimeError::new_err("the run stopped without a report"))
-            }
-        }
-    };
+            worker.run_values(&graph, &opts, observer)
+        },
+        || cancel.store(true, Ordering::Relaxed),
+    )?;
     let RunOutcome { report, values } = result.map_err(|e| PyValueError::new_err(e.to_string()))?;
     let report_text = serde_json::to_string_pretty(&report)
         .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;

@@ -269,12 +269,32 @@ pub fn device_name(d: DeviceArg) -> &'static str {
     }
 }
 
-/// The cluster run folder: `--run-dir`, else `cluster` in the output folder.
-pub fn run_dir(cluster: &ClusterOptions, out_dir: &Path) -> PathBuf {
-    cluster
+/// `--engine slurm`, the checks and `--detach` that `run` and `sweep` share: the run folder
+/// (`--run-dir`, else `cluster` in the output folder), or `None` once `--detach` has submitted
+/// the driver as a job and nothing is left to do here.
+pub fn slurm_run_dir(
+    cluster: &ClusterOptions,
+    cache: &CacheOptions,
+    out_dir: &Path,
+) -> anyhow::Result<Option<PathBuf>> {
+    if cache.no_cache {
+        return Err(invalid(
+            "--engine slurm: the jobs hand their results over through the cache; drop --no-cache",
+        ));
+    }
+    let run_dir = cluster
         .run_dir
         .clone()
-        .unwrap_or_else(|| out_dir.join("cluster"))
+        .unwrap_or_else(|| out_dir.join("cluster"));
+    if cluster.detach {
+        let job = crate::cluster::driver::detach(&run_dir, cluster.sbatch_args.as_deref())?;
+        println!(
+            "submitted the driver as job {job}; follow it with: mesoflow status {}",
+            run_dir.display()
+        );
+        return Ok(None);
+    }
+    Ok(Some(run_dir))
 }
 
 pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
@@ -282,21 +302,9 @@ pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
     let graph = load::load(&args.graph, &args.set, runner.engine.registry())?;
     check_outputs(&runner.base.outputs, &graph, &runner.engine)?;
     if args.cluster.engine == EngineArg::Slurm {
-        if args.cache.no_cache {
-            return Err(invalid(
-                "--engine slurm: the jobs hand their results over through the cache; drop --no-cache",
-            ));
-        }
-        let run_dir = run_dir(&args.cluster, &runner.base.out_dir);
-        if args.cluster.detach {
-            let job =
-                crate::cluster::driver::detach(&run_dir, args.cluster.sbatch_args.as_deref())?;
-            println!(
-                "submitted the driver as job {job}; follow it with: mesoflow status {}",
-                run_dir.display()
-            );
+        let Some(run_dir) = slurm_run_dir(&args.cluster, &args.cache, &runner.base.out_dir)? else {
             return Ok(exit::OK);
-        }
+        };
         let mut file = load::read(&args.graph)?;
         load::apply_sets(&mut file, &args.set)?;
         let outcome = crate::cluster::driver::drive(

@@ -175,21 +175,9 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
     let cancel = super::run::cancel_flag();
     let slurm = args.cluster.engine == EngineArg::Slurm;
     if slurm {
-        if args.cache.no_cache {
-            return Err(invalid(
-                "--engine slurm: the jobs hand their results over through the cache; drop --no-cache",
-            ));
-        }
-        let run_dir = super::run::run_dir(&args.cluster, &out_dir);
-        if args.cluster.detach {
-            let job =
-                crate::cluster::driver::detach(&run_dir, args.cluster.sbatch_args.as_deref())?;
-            println!(
-                "submitted the driver as job {job}; follow it with: mesoflow status {}",
-                run_dir.display()
-            );
+        let Some(run_dir) = super::run::slurm_run_dir(&args.cluster, &args.cache, &out_dir)? else {
             return Ok(0);
-        }
+        };
         let mut opts = RunOptions::new(
             &args.graph.display().to_string(),
             graph_dir(&args.graph),
