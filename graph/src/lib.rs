@@ -16,6 +16,7 @@ pub mod file;
 pub mod params;
 pub mod ports;
 pub mod schema;
+pub mod source_edit;
 mod suggest;
 
 pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec, TypedProblem};
