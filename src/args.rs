@@ -53,6 +53,9 @@ pub enum Command {
     },
     /// Run a graph over a grid of parameter values; write sweep.csv and charts.
     Sweep(SweepArgs),
+    /// Open a graph in the studio, in the browser: see it, tune parameters, watch only what
+    /// changed re-run, look at every result.
+    Serve(ServeArgs),
     /// Choose each stage's cheapest model for a render's view and a FLIP budget; write the
     /// planned graph and plan.json.
     Plan(PlanArgs),
@@ -255,4 +258,29 @@ pub struct PlanArgs {
     pub quiet: bool,
     #[command(flatten)]
     pub cache: CacheOptions,
+}
+
+#[derive(Args)]
+pub struct ServeArgs {
+    pub graph: PathBuf,
+    /// Port to listen on (0: any free port).
+    #[arg(long, default_value_t = 7878)]
+    pub port: u16,
+    /// Address to listen on. The default answers this machine only; the token is required
+    /// whatever the address.
+    #[arg(long, default_value = "127.0.0.1")]
+    pub host: String,
+    /// Open the studio in the default browser.
+    #[arg(long)]
+    pub open: bool,
+    /// Output folder (default out/<graph name>).
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
+    pub device: DeviceArg,
+    #[command(flatten)]
+    pub cache: CacheOptions,
+    /// How often the graph file is checked for changes made in an editor, in milliseconds.
+    #[arg(long, default_value_t = 500)]
+    pub interval_ms: u64,
 }

@@ -16,6 +16,7 @@ mod interrupt;
 mod load;
 mod plan;
 mod progress;
+mod studio;
 pub mod sweep_table;
 
 use clap::Parser;

@@ -4,7 +4,8 @@
 //! measures. Both front ends write them through this one module, so their files are the same.
 
 use crate::chart::{self, Chart, Series};
-use mesoflow_graph::PortRef;
+use mesoflow_graph::{CheckedGraph, PortRef};
+use mesoflow_runtime::{Registry, RunReport};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -293,5 +294,120 @@ fn chart_versus<'a>(
             })
             .collect(),
         x_names: None,
+    }
+}
+
+/// Each measured node once, in the order of first mention.
+pub fn measured_nodes(measures: &[PortRef]) -> Vec<String> {
+    let mut nodes: Vec<String> = Vec::new();
+    for m in measures {
+        if !nodes.contains(&m.node) {
+            nodes.push(m.node.clone());
+        }
+    }
+    nodes
+}
+
+/// The outputs a sweep's runs ask for: the measured scalars, the first output of a node whose
+/// timing is measured (a timing is read from the report, not an output), and the graph's sinks,
+/// so a measure is reported even when a sink's cached result would make its node unnecessary.
+/// An error names the `--measure` that cannot be measured.
+pub fn sweep_outputs(
+    registry: &Registry,
+    graph: &CheckedGraph,
+    measures: &[PortRef],
+) -> Result<Vec<PortRef>, String> {
+    let first_output = |kind: &str| {
+        registry
+            .node(kind)
+            .and_then(|n| n.signature().outputs.first().map(|o| o.name.clone()))
+    };
+    let mut outputs: Vec<PortRef> = Vec::new();
+    for m in measures {
+        let Some(node) = graph.index(&m.node).map(|i| &graph.nodes[i]) else {
+            return Err(format!("--measure {m}: no node `{}` in the graph", m.node));
+        };
+        let sig = registry.node(&node.kind).map(|n| n.signature());
+        let ty = sig.and_then(|s| s.output(&m.port).map(|o| o.ty.clone()));
+        let timing =
+            m.port == "seconds" || sig.is_some_and(|s| s.timings.iter().any(|t| t.name == m.port));
+        match ty.as_deref() {
+            Some("Scalar") => outputs.push(m.clone()),
+            _ if timing => outputs.extend(first_output(&node.kind).map(|port| PortRef {
+                node: m.node.clone(),
+                port,
+            })),
+            Some(other) => {
+                return Err(format!(
+                    "--measure {m}: `{}` is a {other}; a measure must be a scalar output",
+                    m.port
+                ))
+            }
+            None => {
+                let names: Vec<&str> = sig
+                    .into_iter()
+                    .flat_map(|s| {
+                        s.outputs
+                            .iter()
+                            .filter(|o| o.ty == "Scalar")
+                            .chain(&s.timings)
+                            .map(|o| o.name.as_str())
+                    })
+                    .chain(["seconds"])
+                    .collect();
+                let hint = mesoflow_graph::did_you_mean(&m.port, names.iter().copied());
+                return Err(format!(
+                    "--measure {m}: `{}` ({}) has no scalar output or timing `{}`{hint}; it has {}",
+                    m.node,
+                    node.kind,
+                    m.port,
+                    names.join(", ")
+                ));
+            }
+        }
+    }
+    for sink in graph.sinks() {
+        let Some(i) = graph.index(sink) else { continue };
+        if let Some(port) = first_output(&graph.nodes[i].kind) {
+            outputs.push(PortRef {
+                node: sink.to_string(),
+                port,
+            });
+        }
+    }
+    Ok(outputs)
+}
+
+/// One row from one run's report: each measure (a scalar output or a timing) and each measured
+/// node's compute time (for a cache hit, as measured when it was computed).
+pub fn row_of(
+    report: &RunReport,
+    values: Vec<Value>,
+    measures: &[PortRef],
+    measured_nodes: &[String],
+) -> Row {
+    Row {
+        values,
+        measures: measures
+            .iter()
+            .map(|m| {
+                report.node(&m.node).and_then(|n| {
+                    n.metrics
+                        .get(&m.port)
+                        .or_else(|| n.timings.get(&m.port))
+                        .copied()
+                })
+            })
+            .collect(),
+        node_seconds: measured_nodes
+            .iter()
+            .map(|n| {
+                report
+                    .node(n)
+                    .and_then(|r| r.timings.get("seconds").copied())
+            })
+            .collect(),
+        run_seconds: report.seconds,
+        ok: report.ok,
     }
 }

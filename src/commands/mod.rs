@@ -22,6 +22,7 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
             max_runs,
         } => watch::watch(&run, interval_ms, max_runs),
         Command::Sweep(args) => sweep::sweep(&args),
+        Command::Serve(args) => crate::studio::serve(&args),
         Command::Exec { run, unit } => crate::cluster::exec::exec(&run, &unit),
         Command::Status { run } => crate::cluster::status(&run),
         Command::Cancel { run } => crate::cluster::cancel(&run),

@@ -9,8 +9,8 @@ use crate::args::{EngineArg, SweepArgs};
 use crate::exit::invalid;
 use crate::load;
 use crate::progress::summary;
-use crate::sweep_table::{cartesian, cell, write_all, Row, Vary};
-use mesoflow_graph::{edit::parse_value, PortRef};
+use crate::sweep_table::{cartesian, cell, write_all, Vary};
+use mesoflow_graph::edit::parse_value;
 use mesoflow_runtime::{RunOptions, SilentObserver};
 use serde_json::Value;
 use std::path::PathBuf;
@@ -74,13 +74,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             "--versus {x}: measure it too (--measure {x})"
         )));
     }
-    // Each measured node once, in the order of first mention.
-    let mut measured_nodes: Vec<String> = Vec::new();
-    for m in &measures {
-        if !measured_nodes.contains(&m.node) {
-            measured_nodes.push(m.node.clone());
-        }
-    }
+    let measured_nodes = crate::sweep_table::measured_nodes(&measures);
     let engine = engine(&args.cache, &args.graph)?;
     let mut base_file = load::read(&args.graph)?;
     load::apply_sets(&mut base_file, &args.set)?;
@@ -101,73 +95,8 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         graphs.push(load::checked(&args.graph, &file, engine.registry())?);
         texts.push(file.to_json());
     }
-    // The first output of a node: how a node is asked for when what is measured is not an output.
-    let first_output = |kind: &str| {
-        engine
-            .registry()
-            .node(kind)
-            .and_then(|n| n.signature().outputs.first().map(|o| o.name.clone()))
-    };
-    // Ask for the measured outputs as well as the sinks, so a measure is reported even when a
-    // sink's cached result would otherwise make its node unnecessary. A timing is not an output:
-    // its node is asked for through its first output.
-    let mut outputs: Vec<PortRef> = Vec::new();
-    for m in &measures {
-        let Some(node) = graphs[0].index(&m.node).map(|i| &graphs[0].nodes[i]) else {
-            return Err(invalid(format!(
-                "--measure {m}: no node `{}` in the graph",
-                m.node
-            )));
-        };
-        let sig = engine.registry().node(&node.kind).map(|n| n.signature());
-        let ty = sig.and_then(|s| s.output(&m.port).map(|o| o.ty.clone()));
-        // A timing (the node's `seconds`, or one the kind declares) is read from the report.
-        let timing =
-            m.port == "seconds" || sig.is_some_and(|s| s.timings.iter().any(|t| t.name == m.port));
-        match ty.as_deref() {
-            Some("Scalar") => outputs.push(m.clone()),
-            _ if timing => outputs.extend(first_output(&node.kind).map(|port| PortRef {
-                node: m.node.clone(),
-                port,
-            })),
-            Some(other) => {
-                return Err(invalid(format!(
-                    "--measure {m}: `{}` is a {other}; a measure must be a scalar output",
-                    m.port
-                )))
-            }
-            None => {
-                let names: Vec<&str> = sig
-                    .into_iter()
-                    .flat_map(|s| {
-                        s.outputs
-                            .iter()
-                            .filter(|o| o.ty == "Scalar")
-                            .chain(&s.timings)
-                            .map(|o| o.name.as_str())
-                    })
-                    .chain(["seconds"])
-                    .collect();
-                let hint = mesoflow_graph::did_you_mean(&m.port, names.iter().copied());
-                return Err(invalid(format!(
-                    "--measure {m}: `{}` ({}) has no scalar output or timing `{}`{hint}; it has {}",
-                    m.node,
-                    node.kind,
-                    m.port,
-                    names.join(", ")
-                )));
-            }
-        }
-    }
-    for sink in graphs[0].sinks() {
-        let kind = &graphs[0].nodes[graphs[0].index(sink).unwrap_or(0)].kind;
-        if let Some(port) = first_output(kind) {
-            outputs.push(PortRef {
-                node: sink.to_string(),
-                port,
-            });
-        }
-    }
+    let outputs = crate::sweep_table::sweep_outputs(engine.registry(), &graphs[0], &measures)
+        .map_err(invalid)?;
     let out_dir = args
         .out_dir
         .clone()
@@ -229,21 +158,12 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             .zip(combo)
             .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
             .collect();
-        let measured: Vec<Option<f64>> = measures
-            .iter()
-            .map(|m| {
-                report.node(&m.node).and_then(|n| {
-                    n.metrics
-                        .get(&m.port)
-                        .or_else(|| n.timings.get(&m.port))
-                        .copied()
-                })
-            })
-            .collect();
+        let row = crate::sweep_table::row_of(&report, combo.clone(), &measures, &measured_nodes);
+        let measured = &row.measures;
         if !args.quiet {
             let shown: Vec<String> = measures
                 .iter()
-                .zip(&measured)
+                .zip(measured)
                 .map(|(m, v)| match v {
                     Some(v) => format!("{m}={v:.4e}"),
                     None => format!("{m}=—"),
@@ -263,21 +183,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         if !report.ok && !args.quiet {
             print!("{}", summary(&report));
         }
-        rows.push(Row {
-            values: combo.clone(),
-            measures: measured,
-            // The compute time of the value (for a cache hit, as measured when it was computed).
-            node_seconds: measured_nodes
-                .iter()
-                .map(|n| {
-                    report
-                        .node(n)
-                        .and_then(|r| r.timings.get("seconds").copied())
-                })
-                .collect(),
-            run_seconds: report.seconds,
-            ok: report.ok,
-        });
+        rows.push(row);
         if report.cancelled {
             break;
         }

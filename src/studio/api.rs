@@ -1,0 +1,541 @@
+//! The studio's HTTP interface: the page, the JSON API the page uses, the event stream, pixels
+//! and files. Every request passes [`Guard`] (token and Host) first.
+
+use super::preview;
+use super::session::{Problem, Refused, Studio};
+use super::sweep;
+use mesoflow_graph::{GraphFile, NodeDecl, PortRef};
+use mesoflow_runtime::{SilentObserver, ValueRef};
+use serde::Deserialize;
+use serde_json::{json, Value};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+use tiny_http::{Header, Method, Request, Response, StatusCode};
+
+const PAGE: &str = include_str!("assets/index.html");
+const STYLE: &str = include_str!("assets/studio.css");
+const SCRIPT: &str = include_str!("assets/studio.js");
+/// The largest request body accepted (a graph edit is a few hundred bytes).
+const MAX_BODY: u64 = 4 << 20;
+
+pub struct Guard {
+    token: String,
+    /// Host headers accepted; empty when listening on every interface (the token still holds).
+    hosts: Vec<String>,
+}
+
+impl Guard {
+    pub fn new(token: String, host: &str, port: u16) -> Guard {
+        let loopback = ["127.0.0.1", "localhost", "[::1]"];
+        let hosts = if host == "0.0.0.0" || host == "::" {
+            Vec::new()
+        } else {
+            loopback
+                .iter()
+                .copied()
+                .chain([host])
+                .map(|h| format!("{h}:{port}"))
+                .collect()
+        };
+        Guard { token, hosts }
+    }
+
+    fn admits(&self, req: &Request, query: &[(String, String)]) -> Result<(), (u16, &'static str)> {
+        let host = header(req, "Host").unwrap_or_default();
+        if !self.hosts.is_empty() && !self.hosts.iter().any(|h| *h == host) {
+            return Err((403, "this server answers only to its own address (Host header)"));
+        }
+        let given = query
+            .iter()
+            .find(|(k, _)| k == "token")
+            .map(|(_, v)| v.clone())
+            .or_else(|| header(req, "X-Mesoflow-Token"));
+        // Compared in full whatever the first difference, so timing tells nothing.
+        let ok = given.is_some_and(|g| {
+            g.len() == self.token.len()
+                && g.bytes()
+                    .zip(self.token.bytes())
+                    .fold(0u8, |acc, (a, b)| acc | (a ^ b))
+                    == 0
+        });
+        if ok {
+            Ok(())
+        } else {
+            Err((401, "a token is required: open the URL that `mesoflow serve` printed"))
+        }
+    }
+}
+
+fn header(req: &Request, name: &str) -> Option<String> {
+    req.headers()
+        .iter()
+        .find(|h| h.field.as_str().as_str().eq_ignore_ascii_case(name))
+        .map(|h| h.value.as_str().to_string())
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        match b[i] {
+            b'+' => out.push(b' '),
+            b'%' if i + 2 < b.len() => {
+                match u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("zz"), 16) {
+                    Ok(v) => {
+                        out.push(v);
+                        i += 2;
+                    }
+                    Err(_) => out.push(b'%'),
+                }
+            }
+            c => out.push(c),
+        }
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+fn split_url(url: &str) -> (String, Vec<(String, String)>) {
+    let (path, query) = url.split_once('?').unwrap_or((url, ""));
+    let pairs = query
+        .split('&')
+        .filter(|p| !p.is_empty())
+        .map(|p| {
+            let (k, v) = p.split_once('=').unwrap_or((p, ""));
+            (percent_decode(k), percent_decode(v))
+        })
+        .collect();
+    (path.to_string(), pairs)
+}
+
+fn content_type(value: &str) -> Header {
+    Header::from_bytes(&b"Content-Type"[..], value.as_bytes())
+        .unwrap_or_else(|_| Header::from_bytes(&b"X-Invalid"[..], &b"1"[..]).expect("static header"))
+}
+
+fn json_response(status: u16, v: &Value) -> Response<std::io::Cursor<Vec<u8>>> {
+    Response::from_data(v.to_string().into_bytes())
+        .with_status_code(StatusCode(status))
+        .with_header(content_type("application/json"))
+        .with_header(no_store())
+}
+
+fn no_store() -> Header {
+    Header::from_bytes(&b"Cache-Control"[..], &b"no-store"[..]).expect("static header")
+}
+
+fn error(status: u16, message: &str) -> Response<std::io::Cursor<Vec<u8>>> {
+    json_response(status, &json!({ "error": message, "errors": [{ "message": message }] }))
+}
+
+fn refused(r: Refused) -> Response<std::io::Cursor<Vec<u8>>> {
+    let first = r.errors.first().map(|p| p.message.clone()).unwrap_or_default();
+    json_response(422, &json!({ "error": first, "errors": r.errors }))
+}
+
+fn body<T: for<'de> Deserialize<'de>>(req: &mut Request) -> Result<T, String> {
+    let mut text = String::new();
+    req.as_reader()
+        .take(MAX_BODY)
+        .read_to_string(&mut text)
+        .map_err(|e| format!("cannot read the request: {e}"))?;
+    serde_json::from_str(&text).map_err(|e| format!("bad request body: {e}"))
+}
+
+fn q<'a>(query: &'a [(String, String)], key: &str) -> Option<&'a str> {
+    query.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+}
+
+pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
+    let (path, query) = split_url(req.url());
+    if let Err((status, message)) = guard.admits(&req, &query) {
+        let _ = req.respond(error(status, message));
+        return;
+    }
+    let method = req.method().clone();
+    let response = match (&method, path.as_str()) {
+        (Method::Get, "/") | (Method::Get, "/index.html") => {
+            let page = PAGE
+                .replace("/*STYLE*/", STYLE)
+                .replace("/*SCRIPT*/", SCRIPT);
+            Response::from_data(page.into_bytes())
+                .with_header(content_type("text/html; charset=utf-8"))
+                .with_header(no_store())
+        }
+        (Method::Get, "/api/events") => {
+            events(studio, req);
+            return;
+        }
+        (Method::Get, "/api/state") => json_response(200, &state(studio)),
+        (Method::Get, "/api/kinds") => {
+            let reg = studio.engine.registry();
+            let kinds: Vec<Value> = mesoflow_graph::Catalog::kinds(reg)
+                .into_iter()
+                .filter_map(|k| reg.node(k).map(|n| json!(n.signature())))
+                .collect();
+            json_response(200, &json!(kinds))
+        }
+        (Method::Get, "/api/value") => match target(&query) {
+            Ok(t) => match value(studio, &t) {
+                Ok(v) => json_response(200, &preview::describe(&v)),
+                Err((s, m)) => error(s, &m),
+            },
+            Err(m) => error(400, &m),
+        },
+        (Method::Get, "/api/pixels") => match target(&query) {
+            Ok(t) => {
+                let index = q(&query, "index").and_then(|i| i.parse().ok()).unwrap_or(0);
+                match value(studio, &t).map(|v| preview::pixels(&v, index)) {
+                    Ok(Some(p)) => pixels_response(p),
+                    Ok(None) => error(404, &format!("{t} has no image {index}")),
+                    Err((s, m)) => error(s, &m),
+                }
+            }
+            Err(m) => error(400, &m),
+        },
+        (Method::Get, "/api/file") => match q(&query, "path") {
+            Some(p) => file(studio, p),
+            None => error(400, "?path= is required"),
+        },
+        (Method::Get, "/api/sweep") => json_response(
+            200,
+            &studio
+                .sweep
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .json(),
+        ),
+        (Method::Post, "/api/set") => edit_response(studio, set(studio, &mut req)),
+        (Method::Post, "/api/add") => edit_response(studio, add(studio, &mut req)),
+        (Method::Post, "/api/remove") => edit_response(studio, remove(studio, &mut req)),
+        (Method::Post, "/api/connect") => edit_response(studio, connect(studio, &mut req)),
+        (Method::Post, "/api/save") => match studio.save() {
+            Ok(changed) => json_response(200, &json!({ "saved": true, "changed": changed })),
+            Err(e) => error(500, &format!("cannot write {}: {e}", studio.graph_path.display())),
+        },
+        (Method::Post, "/api/run") => {
+            studio.request_run();
+            json_response(200, &json!({ "queued": true }))
+        }
+        (Method::Post, "/api/sweep") => match body::<sweep::SweepSpec>(&mut req) {
+            Ok(spec) => match sweep::start(studio, spec) {
+                Ok(id) => json_response(200, &json!({ "sweep": id })),
+                Err(r) => refused(r),
+            },
+            Err(m) => error(400, &m),
+        },
+        _ => error(404, &format!("no such page: {} {path}", method)),
+    };
+    let _ = req.respond(response);
+}
+
+fn edit_response(
+    studio: &Studio,
+    result: Result<Result<u64, Refused>, String>,
+) -> Response<std::io::Cursor<Vec<u8>>> {
+    match result {
+        Err(m) => error(400, &m),
+        Ok(Err(r)) => refused(r),
+        Ok(Ok(revision)) => {
+            let _ = studio;
+            json_response(200, &json!({ "ok": true, "revision": revision }))
+        }
+    }
+}
+
+#[derive(Deserialize)]
+struct SetBody {
+    node: String,
+    param: String,
+    value: Value,
+}
+
+fn set(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
+    let b: SetBody = body(req)?;
+    Ok(studio.set_param(&b.node, &b.param, b.value))
+}
+
+#[derive(Deserialize)]
+struct AddBody {
+    kind: String,
+    id: Option<String>,
+}
+
+fn add(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
+    let b: AddBody = body(req)?;
+    Ok(studio.edit(true, |f: &mut GraphFile| {
+        let id = match b.id.filter(|s| !s.is_empty()) {
+            Some(id) => id,
+            None => fresh_id(f, &b.kind),
+        };
+        if !mesoflow_graph::file::valid_id(&id) {
+            return Err(format!("node id `{id}`: ids are [a-z][a-z0-9_]*"));
+        }
+        if f.node(&id).is_some() {
+            return Err(format!("node id `{id}` is taken"));
+        }
+        f.nodes.push((
+            id,
+            NodeDecl {
+                kind: b.kind.clone(),
+                params: Default::default(),
+                inputs: Default::default(),
+            },
+        ));
+        Ok(())
+    }))
+}
+
+/// `render_mesh`, `render_mesh2`, …: the kind's name made an id, numbered when taken.
+fn fresh_id(f: &GraphFile, kind: &str) -> String {
+    let mut stem: String = kind
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '_' })
+        .collect();
+    if !stem.starts_with(|c: char| c.is_ascii_lowercase()) {
+        stem.insert(0, 'n');
+    }
+    (1..)
+        .map(|i| if i == 1 { stem.clone() } else { format!("{stem}{i}") })
+        .find(|id| f.node(id).is_none())
+        .unwrap_or(stem)
+}
+
+#[derive(Deserialize)]
+struct RemoveBody {
+    id: String,
+}
+
+fn remove(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
+    let b: RemoveBody = body(req)?;
+    Ok(studio.edit(true, |f| {
+        if f.node(&b.id).is_none() {
+            return Err(format!("no node `{}`", b.id));
+        }
+        f.nodes.retain(|(id, _)| *id != b.id);
+        let prefix = format!("{}.", b.id);
+        for (_, d) in &mut f.nodes {
+            d.inputs.retain(|_, from| !from.starts_with(&prefix));
+        }
+        Ok(())
+    }))
+}
+
+#[derive(Deserialize)]
+struct ConnectBody {
+    node: String,
+    port: String,
+    /// `node.port`, or null to disconnect.
+    from: Option<String>,
+}
+
+fn connect(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
+    let b: ConnectBody = body(req)?;
+    Ok(studio.edit(true, |f| {
+        let decl = f
+            .node_mut(&b.node)
+            .ok_or_else(|| format!("no node `{}`", b.node))?;
+        match b.from {
+            Some(from) => {
+                decl.inputs.insert(b.port.clone(), from);
+            }
+            None => {
+                decl.inputs.remove(&b.port);
+            }
+        }
+        Ok(())
+    }))
+}
+
+fn state(studio: &Studio) -> Value {
+    let doc = studio.doc();
+    let reg = studio.engine.registry();
+    let nodes: Vec<Value> = doc
+        .file
+        .nodes
+        .iter()
+        .map(|(id, d)| {
+            let sig = reg.node(&d.kind).map(|n| n.signature());
+            json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
+                    "outputs": sig.map(|s| json!(s.outputs)).unwrap_or(json!([])),
+                    "ports": sig.map(|s| json!(s.inputs)).unwrap_or(json!([])),
+                    "timings": sig.map(|s| json!(s.timings)).unwrap_or(json!([])) })
+        })
+        .collect();
+    let errors: Vec<Problem> = doc
+        .errors
+        .iter()
+        .map(|e| Problem {
+            node: e.node().map(str::to_string),
+            field: e.field().map(str::to_string),
+            message: e.to_string(),
+        })
+        .collect();
+    json!({
+        "graph": studio.graph_path.display().to_string(),
+        "description": doc.file.description,
+        "revision": doc.revision,
+        "dirty": doc.disk.as_ref() != Some(&doc.file),
+        "load_error": doc.load_error,
+        "errors": errors,
+        "nodes": nodes,
+        "report": doc.report,
+        "running": studio.running(),
+        "clients": studio.hub.clients(),
+        "out_dir": studio.out_dir.display().to_string(),
+    })
+}
+
+fn target(query: &[(String, String)]) -> Result<PortRef, String> {
+    match (q(query, "node"), q(query, "port")) {
+        (Some(node), Some(port)) => Ok(PortRef {
+            node: node.into(),
+            port: port.into(),
+        }),
+        _ => Err("?node=…&port=… are required".into()),
+    }
+}
+
+/// A value of the current graph, from the caches the runs filled; computed (with what it needs)
+/// only when no run has produced it, e.g. an input skipped because its dependants were cached.
+fn value(studio: &Studio, t: &PortRef) -> Result<ValueRef, (u16, String)> {
+    let graph = studio
+        .doc()
+        .checked
+        .clone()
+        .ok_or((409, "the graph has errors; fix them to see values".to_string()))?;
+    let attempt = |cached_only: bool| {
+        let mut opts = studio.options(&studio.out_dir, Arc::new(AtomicBool::new(false)));
+        opts.outputs = vec![t.clone()];
+        if cached_only {
+            opts.compute_only = Some(Default::default());
+        }
+        studio
+            .engine
+            .run_values(&graph, &opts, Arc::new(SilentObserver))
+            .map_err(|e| (404, e.to_string()))
+    };
+    let mut outcome = attempt(true)?;
+    if !outcome.values.contains_key(&t.node) {
+        outcome = attempt(false)?;
+    }
+    if let Some(v) = outcome.values.get(&t.node).and_then(|o| o.get(&t.port)) {
+        return Ok(v.clone());
+    }
+    let why = outcome
+        .report
+        .node(&t.node)
+        .and_then(|n| n.error.clone())
+        .unwrap_or_else(|| "no value".into());
+    Err((404, format!("{t}: {why}")))
+}
+
+fn pixels_response(p: preview::Pixels) -> Response<std::io::Cursor<Vec<u8>>> {
+    let mut bytes = Vec::with_capacity(p.data.len() * 4);
+    for x in &p.data {
+        bytes.extend_from_slice(&x.to_le_bytes());
+    }
+    let h = |k: &str, v: usize| {
+        Header::from_bytes(k.as_bytes(), v.to_string().as_bytes()).expect("ascii header")
+    };
+    Response::from_data(bytes)
+        .with_header(content_type("application/octet-stream"))
+        .with_header(h("X-Width", p.width))
+        .with_header(h("X-Height", p.height))
+        .with_header(h("X-Channels", p.channels))
+        .with_header(no_store())
+}
+
+/// Whether `path` (resolved against the output folder when relative) lies inside one of the
+/// studio's folders, symbolic links and `..` followed.
+pub fn allowed(roots: &[PathBuf], out_dir: &Path, path: &str) -> Result<PathBuf, (u16, String)> {
+    let p = Path::new(path);
+    let full = if p.is_absolute() {
+        p.to_path_buf()
+    } else {
+        out_dir.join(p)
+    };
+    let real = full
+        .canonicalize()
+        .map_err(|_| (404, format!("{path}: no such file")))?;
+    if roots.iter().any(|r| real.starts_with(r)) {
+        Ok(real)
+    } else {
+        Err((
+            403,
+            format!("{path}: outside the graph's folder, the output folder and the cache"),
+        ))
+    }
+}
+
+fn file(studio: &Studio, path: &str) -> Response<std::io::Cursor<Vec<u8>>> {
+    let real = match allowed(&studio.roots, &studio.out_dir, path) {
+        Ok(p) => p,
+        Err((s, m)) => return error(s, &m),
+    };
+    match std::fs::read(&real) {
+        Ok(bytes) => {
+            let ext = real
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default();
+            let ty = match ext.as_str() {
+                "png" => "image/png",
+                "svg" => "image/svg+xml",
+                "jpg" | "jpeg" => "image/jpeg",
+                "json" => "application/json",
+                "csv" | "txt" => "text/plain; charset=utf-8",
+                _ => "application/octet-stream",
+            };
+            Response::from_data(bytes)
+                .with_header(content_type(ty))
+                .with_header(no_store())
+        }
+        Err(e) => error(404, &format!("{path}: {e}")),
+    }
+}
+
+/// The event stream: headers, then events until the client goes (or the server stops).
+fn events(studio: &Arc<Studio>, req: Request) {
+    let rx = studio.hub.subscribe();
+    let head = Response::empty(StatusCode(200))
+        .with_header(content_type("text/event-stream"))
+        .with_header(no_store());
+    let mut stream = req.upgrade("event-stream", head);
+    let quit = crate::interrupt::cancel_flag();
+    super::events::stream(rx, &mut stream, &|| {
+        quit.load(std::sync::atomic::Ordering::Relaxed)
+    });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn query_strings_are_percent_decoded() {
+        let (path, q) = split_url("/api/file?path=a%2Fb%20c.png&token=x+y");
+        assert_eq!(path, "/api/file");
+        assert_eq!(q[0], ("path".into(), "a/b c.png".into()));
+        assert_eq!(q[1], ("token".into(), "x y".into()));
+        assert_eq!(split_url("/x?p=%zz%4").1[0].1, "%zz%4");
+    }
+
+    #[test]
+    fn paths_outside_the_roots_are_refused_even_through_dot_dot() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let root = dir.path().join("out");
+        std::fs::create_dir_all(&root).expect("mkdir");
+        std::fs::write(root.join("a.png"), b"x").expect("write");
+        std::fs::write(dir.path().join("secret"), b"x").expect("write");
+        let roots = vec![root.canonicalize().expect("canonical")];
+        assert!(allowed(&roots, &root, "a.png").is_ok());
+        assert_eq!(allowed(&roots, &root, "../secret").unwrap_err().0, 403);
+        let abs = dir.path().join("secret").display().to_string();
+        assert_eq!(allowed(&roots, &root, &abs).unwrap_err().0, 403);
+        assert_eq!(allowed(&roots, &root, "missing.png").unwrap_err().0, 404);
+    }
+}
