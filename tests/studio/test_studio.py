@@ -1,0 +1,351 @@
+"""The studio (`mesoflow serve`) in a real browser: Debian's Chromium driven by Selenium through
+Debian's chromedriver (no browser is downloaded at run time).
+
+Run by the README's test command (scripts/test). Without Chromium the tests skip, unless
+MESOFLOW_REQUIRE_BROWSER=1 (CI sets it), when they fail. The screenshots in the README are made
+here, into MESOFLOW_STUDIO_SCREENSHOTS (default target/studio-screenshots).
+"""
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import time
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BIN = os.environ.get("MESOFLOW_BIN", str(ROOT / "target" / "release" / "mesoflow"))
+CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+DRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
+REQUIRED = os.environ.get("MESOFLOW_REQUIRE_BROWSER") == "1"
+SHOTS = Path(os.environ.get("MESOFLOW_STUDIO_SCREENSHOTS", ROOT / "target" / "studio-screenshots"))
+
+
+def _browser_missing():
+    if not (os.path.exists(CHROMIUM) and os.path.exists(DRIVER)):
+        return "Chromium and chromedriver are not installed (Debian: chromium chromium-driver)"
+    try:
+        import selenium  # noqa: F401
+    except ImportError:
+        return "selenium is not installed"
+    return None
+
+
+MISSING = _browser_missing()
+if MISSING and REQUIRED:
+    raise RuntimeError(f"MESOFLOW_REQUIRE_BROWSER=1 but {MISSING}")
+needs_browser = pytest.mark.skipif(MISSING is not None, reason=MISSING or "")
+
+
+class Studio:
+    """`mesoflow serve` on a copy of a graph, in a temporary folder of its own."""
+
+    def __init__(self, tmp: Path, graph: Path):
+        self.dir = tmp
+        self.graph = tmp / graph.name
+        shutil.copy(graph, self.graph)
+        self.proc = subprocess.Popen(
+            [BIN, "serve", str(self.graph), "--port", "0", "--out-dir", str(tmp / "out"),
+             "--cache-dir", str(tmp / "cache"), "--interval-ms", "200"],
+            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        line = ""
+        deadline = time.time() + 60
+        while "http://" not in line:
+            line = self.proc.stdout.readline()
+            if not line and self.proc.poll() is not None or time.time() > deadline:
+                raise RuntimeError("mesoflow serve did not start")
+        self.url = re.search(r"http://\S+", line).group(0)
+        self.base, self.token = self.url.split("/?token=")
+
+    def get(self, path, token=True):
+        sep = "&" if "?" in path else "?"
+        full = self.base + path + (f"{sep}token={self.token}" if token else "")
+        try:
+            with urllib.request.urlopen(full, timeout=30) as r:
+                return r.status, r.read()
+        except urllib.error.HTTPError as e:
+            return e.code, e.read()
+
+    def report(self):
+        return json.loads((self.dir / "out" / "report.json").read_text())
+
+    def close(self):
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+@pytest.fixture
+def studio_of(tmp_path):
+    made = []
+
+    def start(graph):
+        d = tmp_path / f"studio{len(made)}"
+        d.mkdir()
+        made.append(Studio(d, graph))
+        return made[-1]
+
+    yield start
+    for s in made:
+        s.close()
+
+
+@pytest.fixture
+def browser():
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    opts = webdriver.ChromeOptions()
+    opts.binary_location = CHROMIUM
+    for a in ["--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1500,900",
+              "--disable-dev-shm-usage", "--no-first-run", "--disable-background-networking",
+              "--disable-component-update", "--disable-sync"]:
+        opts.add_argument(a)
+    opts.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    d = webdriver.Chrome(service=Service(DRIVER), options=opts)
+    d.set_script_timeout(60)
+    yield d
+    # Any script error in the page fails the test that caused it.
+    # (Refused edits are answered 422 on purpose; Chromium logs those as network errors.)
+    errors = [e for e in d.get_log("browser") if e["level"] == "SEVERE" and e.get("source") != "network"]
+    d.quit()
+    assert not errors, errors
+
+
+def wait(browser, script, timeout=120, what=""):
+    deadline = time.time() + timeout
+    while time.time() < deadline:
+        v = browser.execute_script(script)
+        if v:
+            return v
+        time.sleep(0.1)
+    raise AssertionError(f"timed out waiting for {what or script}")
+
+
+def wait_loaded(browser, timeout=600):
+    """Waits until the studio shows the finished run of the graph it loaded."""
+    return wait(browser, """const s = window.studio;
+        return s.state && !s.state.running && s.state.report ? true : null;""", timeout, "the first run")
+
+
+def edit_and_wait(browser, param, value, timeout=600):
+    """Types a parameter's new value, waits for the server to accept it and for the run of that
+    revision to finish; returns that run (its `reran` list)."""
+    before = browser.execute_script("return window.studio.editRevision || 0")
+    set_field(browser, param, value)
+    rev = wait(browser, f"return (window.studio.editRevision || 0) > {before} && window.studio.editRevision",
+               30, f"the server to accept {param}")
+    return wait(browser, f"""const r = window.studio.lastRun;
+        return r && !r.cancelled && r.revision >= {rev} ? r : null;""", timeout, f"the run after {param}")
+
+
+def descendants(graph: dict, start: str):
+    nodes = graph["nodes"]
+    out = {start}
+    changed = True
+    while changed:
+        changed = False
+        for nid, d in nodes.items():
+            if nid not in out and any(v.split(".")[0] in out for v in d.get("inputs", {}).values()):
+                out.add(nid)
+                changed = True
+    return out
+
+
+def click(browser, selector):
+    """Clicks an element, looking it up again if the page rebuilt it meanwhile."""
+    from selenium.common.exceptions import StaleElementReferenceException
+
+    for _ in range(10):
+        try:
+            browser.find_element("css selector", selector).click()
+            return
+        except StaleElementReferenceException:
+            time.sleep(0.2)
+    raise AssertionError(f"could not click {selector}")
+
+
+def select(browser, node_id, tab):
+    click(browser, f'g.node[data-id="{node_id}"]')
+    click(browser, f'#tabs button[data-tab="{tab}"]')
+
+
+def set_field(browser, param, value):
+    """Types a value into a parameter's number box and leaves it, as a user does."""
+    from selenium.common.exceptions import StaleElementReferenceException
+    from selenium.webdriver.common.keys import Keys
+
+    for _ in range(5):
+        try:
+            box = browser.find_element("css selector", f'#tab-node input[type=number][data-param="{param}"]')
+            box.send_keys(Keys.CONTROL, "a")
+            box.send_keys(str(value), Keys.TAB)
+            return
+        except StaleElementReferenceException:
+            time.sleep(0.2)  # the form was being rebuilt (a run or an edit arrived)
+    raise AssertionError(f"could not type into {param}")
+
+
+def canvas_data(browser, selector="#preview-canvas"):
+    return wait(browser, f"""const c = document.querySelector('{selector}');
+        return c && c.width > 0 && +c.dataset.draws > 0 ? c.toDataURL() : null;""", 60, selector)
+
+
+def shot(browser, name):
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    browser.save_screenshot(str(SHOTS / name))
+
+
+# ---- tests --------------------------------------------------------------------------------
+
+def test_the_token_is_required(studio_of):
+    s = studio_of(ROOT / "graphs" / "quickstart.json")
+    for path in ["/", "/api/state", "/api/events", "/api/file?path=report.json"]:
+        code, body = s.get(path, token=False)
+        assert code == 401, path
+        assert b"token" in body
+    code, _ = s.get("/api/state?token=" + "0" * len(s.token), token=False)
+    assert code == 401
+    code, body = s.get("/api/state")
+    assert code == 200 and json.loads(body)["nodes"]
+
+
+def test_a_path_outside_the_allowed_folders_is_refused(studio_of, tmp_path):
+    s = studio_of(ROOT / "graphs" / "quickstart.json")
+    secret = tmp_path / "secret.txt"
+    secret.write_text("no")
+    for p in ["../../secret.txt", str(secret), "/etc/passwd", "../" * 12 + "etc/passwd"]:
+        code, body = s.get("/api/file?path=" + urllib.request.quote(p))
+        assert code == 403, (p, body)
+    # Inside the output folder it is served (the run writes report.json there).
+    deadline = time.time() + 60
+    while not (s.dir / "out" / "report.json").exists() and time.time() < deadline:
+        time.sleep(0.2)
+    code, body = s.get("/api/file?path=report.json")
+    assert code == 200 and json.loads(body)["ok"]
+
+
+@needs_browser
+def test_a_change_reruns_exactly_its_dependants_and_the_preview_changes(studio_of, browser):
+    s = studio_of(ROOT / "graphs" / "quickstart.json")
+    graph = json.loads(s.graph.read_text())
+    browser.get(s.url)
+    wait_loaded(browser)
+    select(browser, "surface", "preview")
+    browser.find_element("css selector", '.preview-tabs button[data-port="preview"]').click()
+    wait(browser, "return document.querySelector('#preview-body')?.dataset.view === 'image'")
+    before = canvas_data(browser)
+    shot(browser, "studio-quickstart.png")
+
+    browser.find_element("css selector", '#tabs button[data-tab="node"]').click()
+    run = edit_and_wait(browser, "size", 128)
+    assert set(run["reran"]) == descendants(graph, "surface")
+    report = s.report()
+    computed = {n["id"] for n in report["nodes"] if n["status"] == "computed"}
+    assert computed == descendants(graph, "surface")
+    browser.find_element("css selector", '#tabs button[data-tab="preview"]').click()
+    after = wait(browser, f"""const c = document.querySelector('#preview-canvas');
+        return c && c.width === 128 ? c.toDataURL() : null;""", 60, "the 128² preview")
+    assert after != before
+
+    # A parameter of one writer: that writer alone re-runs, everything else is a memory hit.
+    select(browser, "height_png", "node")
+    run = edit_and_wait(browser, "bits", 8)
+    assert run["reran"] == ["height_png"]
+    statuses = {n["id"]: n["status"] for n in s.report()["nodes"]}
+    assert statuses["height_png"] == "computed"
+    assert all(v == "memory" for k, v in statuses.items() if k != "height_png"), statuses
+
+
+@needs_browser
+def test_an_invalid_value_shows_the_validators_message(studio_of, browser):
+    s = studio_of(ROOT / "graphs" / "quickstart.json")
+    browser.get(s.url)
+    wait_loaded(browser)
+    select(browser, "surface", "node")
+    set_field(browser, "size", 2)
+    shown = wait(browser, """const e = document.querySelector('#tab-node .param-error[data-param="size"]');
+        return e && e.textContent;""", 30, "the error message")
+    cli = subprocess.run([BIN, "validate", str(s.graph), "--set", "surface.size=2"],
+                         capture_output=True, text=True)
+    assert cli.returncode == 2
+    # `validate` prints "<file>: <message>"; the studio shows the same message.
+    messages = [line.split(": ", 1)[1] for line in cli.stderr.splitlines() if "surface" in line and ": " in line]
+    assert any(m.strip() in shown or shown.strip() in m for m in messages), (shown, cli.stderr)
+    assert "size" in shown
+    # Refused: the graph and its file keep the old value, and nothing re-ran.
+    state = json.loads(s.get("/api/state")[1])
+    assert next(n for n in state["nodes"] if n["id"] == "surface")["params"]["size"] == 256
+    shot(browser, "studio-invalid-value.png")
+
+
+BTF_GRAPH = {
+    "mesoflow": 1,
+    "description": "A small captured BTF for the studio's BTF browser",
+    "nodes": {
+        "surface": {"kind": "heightfield.procedural",
+                    "params": {"pattern": "bumps", "size": 32, "count": 4, "depth": 4.0}},
+        "capture": {"kind": "btf.capture", "inputs": {"height": "surface.height"},
+                    "params": {"views": {"thetas": [0, 30, 60], "phis": [0, 90, 180, 270]},
+                               "lights": {"thetas": [0, 30, 60], "phis": [0, 90, 180, 270]}}},
+        "pca": {"kind": "btf.pca", "inputs": {"btf": "capture.btf"}, "params": {"rank": 4}},
+    },
+}
+
+
+@needs_browser
+def test_the_btf_browser_shows_the_chosen_direction_pair(studio_of, browser, tmp_path):
+    g = tmp_path / "btf_small.json"
+    g.write_text(json.dumps(BTF_GRAPH, indent=2))
+    s = studio_of(g)
+    browser.get(s.url)
+    wait_loaded(browser)
+    select(browser, "capture", "preview")
+    wait(browser, "return document.querySelector('#btf-pair')?.dataset.pair !== undefined")
+    first = canvas_data(browser)
+    click(browser, 'svg[data-role="view"] circle.dir[data-theta="30"][data-phi="90"]')
+    click(browser, 'svg[data-role="light"] circle.dir[data-theta="60"][data-phi="180"]')
+    text = wait(browser, """const e = document.querySelector('#btf-pair');
+        return e && e.textContent.includes('light θ 60°') ? e.textContent : null;""", 30)
+    assert "view θ 30° φ 90°, light θ 60° φ 180°" in text
+    pair = int(browser.execute_script("return document.querySelector('#btf-pair').dataset.pair"))
+    meta = json.loads(s.get("/api/value?node=capture&port=btf")[1])
+    v = meta["pairs"][pair]
+    assert [round(x) for x in v] == [30, 90, 60, 180]
+    second = canvas_data(browser)
+    assert second != first
+    shot(browser, "studio-btf-browser.png")
+
+
+@needs_browser
+def test_acceptance_mdf_render_rank_change_reruns_only_what_it_affects(studio_of, browser):
+    s = studio_of(ROOT / "graphs" / "mdf_render.json")
+    graph = json.loads(s.graph.read_text())
+    browser.get(s.url)
+    wait_loaded(browser)
+    select(browser, "torus_mdf", "preview")
+    before = canvas_data(browser)
+    select(browser, "pca", "node")
+    run = edit_and_wait(browser, "rank", 2)
+    affected = descendants(graph, "pca")
+    assert set(run["reran"]) == affected
+    statuses = {n["id"]: n["status"] for n in s.report()["nodes"]}
+    for nid in graph["nodes"]:
+        if nid in affected:
+            assert statuses[nid] == "computed", nid
+        elif nid in statuses:
+            assert statuses[nid] == "memory", (nid, statuses[nid])
+    # The render shown is the new one.
+    select(browser, "torus_mdf", "preview")
+    after = wait(browser, f"""const c = document.querySelector('#preview-canvas');
+        const d = c && +c.dataset.draws > 0 ? c.toDataURL() : null;
+        return d && d !== {json.dumps(before)} ? d : null;""", 60, "the new render")
+    assert after != before
+    shot(browser, "studio-mdf-render.png")
