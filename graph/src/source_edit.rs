@@ -246,7 +246,13 @@ fn sync_object(
         return;
     }
     let Some(entry) = find(node, member) else {
-        insert_entry(text, node, member, &inline_json(&Value::Object(new.clone())), out);
+        insert_entry(
+            text,
+            node,
+            member,
+            &inline_json(&Value::Object(new.clone())),
+            out,
+        );
         return;
     };
     for (k, v) in new {
@@ -395,7 +401,10 @@ mod tests {
         let surface = new.node_mut("surface").unwrap();
         surface.params.insert("depth".into(), json!(6));
         surface.params.insert("seed".into(), json!(1));
-        new.node_mut("surface").unwrap().params.shift_remove("count");
+        new.node_mut("surface")
+            .unwrap()
+            .params
+            .shift_remove("count");
         new.nodes.retain(|(id, _)| id != "save");
         new.nodes.push((
             "png".into(),

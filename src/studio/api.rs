@@ -44,8 +44,11 @@ impl Guard {
 
     fn admits(&self, req: &Request, query: &[(String, String)]) -> Result<(), (u16, &'static str)> {
         let host = header(req, "Host").unwrap_or_default();
-        if !self.hosts.is_empty() && !self.hosts.iter().any(|h| *h == host) {
-            return Err((403, "this server answers only to its own address (Host header)"));
+        if !self.hosts.is_empty() && !self.hosts.contains(&host) {
+            return Err((
+                403,
+                "this server answers only to its own address (Host header)",
+            ));
         }
         let given = query
             .iter()
@@ -63,7 +66,10 @@ impl Guard {
         if ok {
             Ok(())
         } else {
-            Err((401, "a token is required: open the URL that `mesoflow serve` printed"))
+            Err((
+                401,
+                "a token is required: open the URL that `mesoflow serve` printed",
+            ))
         }
     }
 }
@@ -83,7 +89,8 @@ fn percent_decode(s: &str) -> String {
         match b[i] {
             b'+' => out.push(b' '),
             b'%' if i + 2 < b.len() => {
-                match u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("zz"), 16) {
+                match u8::from_str_radix(std::str::from_utf8(&b[i + 1..i + 3]).unwrap_or("zz"), 16)
+                {
                     Ok(v) => {
                         out.push(v);
                         i += 2;
@@ -112,8 +119,9 @@ fn split_url(url: &str) -> (String, Vec<(String, String)>) {
 }
 
 fn content_type(value: &str) -> Header {
-    Header::from_bytes(&b"Content-Type"[..], value.as_bytes())
-        .unwrap_or_else(|_| Header::from_bytes(&b"X-Invalid"[..], &b"1"[..]).expect("static header"))
+    Header::from_bytes(&b"Content-Type"[..], value.as_bytes()).unwrap_or_else(|_| {
+        Header::from_bytes(&b"X-Invalid"[..], &b"1"[..]).expect("static header")
+    })
 }
 
 fn json_response(status: u16, v: &Value) -> Response<std::io::Cursor<Vec<u8>>> {
@@ -128,11 +136,18 @@ fn no_store() -> Header {
 }
 
 fn error(status: u16, message: &str) -> Response<std::io::Cursor<Vec<u8>>> {
-    json_response(status, &json!({ "error": message, "errors": [{ "message": message }] }))
+    json_response(
+        status,
+        &json!({ "error": message, "errors": [{ "message": message }] }),
+    )
 }
 
 fn refused(r: Refused) -> Response<std::io::Cursor<Vec<u8>>> {
-    let first = r.errors.first().map(|p| p.message.clone()).unwrap_or_default();
+    let first = r
+        .errors
+        .first()
+        .map(|p| p.message.clone())
+        .unwrap_or_default();
     json_response(422, &json!({ "error": first, "errors": r.errors }))
 }
 
@@ -146,7 +161,10 @@ fn body<T: for<'de> Deserialize<'de>>(req: &mut Request) -> Result<T, String> {
 }
 
 fn q<'a>(query: &'a [(String, String)], key: &str) -> Option<&'a str> {
-    query.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
+    query
+        .iter()
+        .find(|(k, _)| k == key)
+        .map(|(_, v)| v.as_str())
 }
 
 pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
@@ -208,13 +226,16 @@ pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
                 .unwrap_or_else(|e| e.into_inner())
                 .json(),
         ),
-        (Method::Post, "/api/set") => edit_response(studio, set(studio, &mut req)),
-        (Method::Post, "/api/add") => edit_response(studio, add(studio, &mut req)),
-        (Method::Post, "/api/remove") => edit_response(studio, remove(studio, &mut req)),
-        (Method::Post, "/api/connect") => edit_response(studio, connect(studio, &mut req)),
+        (Method::Post, "/api/set") => edit_response(set(studio, &mut req)),
+        (Method::Post, "/api/add") => edit_response(add(studio, &mut req)),
+        (Method::Post, "/api/remove") => edit_response(remove(studio, &mut req)),
+        (Method::Post, "/api/connect") => edit_response(connect(studio, &mut req)),
         (Method::Post, "/api/save") => match studio.save() {
             Ok(changed) => json_response(200, &json!({ "saved": true, "changed": changed })),
-            Err(e) => error(500, &format!("cannot write {}: {e}", studio.graph_path.display())),
+            Err(e) => error(
+                500,
+                &format!("cannot write {}: {e}", studio.graph_path.display()),
+            ),
         },
         (Method::Post, "/api/run") => {
             studio.request_run();
@@ -232,17 +253,14 @@ pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
     let _ = req.respond(response);
 }
 
+/// 200 with the graph's new revision, 422 with the validator's errors, 400 for a bad request.
 fn edit_response(
-    studio: &Studio,
     result: Result<Result<u64, Refused>, String>,
 ) -> Response<std::io::Cursor<Vec<u8>>> {
     match result {
         Err(m) => error(400, &m),
         Ok(Err(r)) => refused(r),
-        Ok(Ok(revision)) => {
-            let _ = studio;
-            json_response(200, &json!({ "ok": true, "revision": revision }))
-        }
+        Ok(Ok(revision)) => json_response(200, &json!({ "ok": true, "revision": revision })),
     }
 }
 
@@ -293,13 +311,25 @@ fn add(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, Strin
 fn fresh_id(f: &GraphFile, kind: &str) -> String {
     let mut stem: String = kind
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() { c.to_ascii_lowercase() } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
         .collect();
     if !stem.starts_with(|c: char| c.is_ascii_lowercase()) {
         stem.insert(0, 'n');
     }
     (1..)
-        .map(|i| if i == 1 { stem.clone() } else { format!("{stem}{i}") })
+        .map(|i| {
+            if i == 1 {
+                stem.clone()
+            } else {
+                format!("{stem}{i}")
+            }
+        })
         .find(|id| f.node(id).is_none())
         .unwrap_or(stem)
 }
@@ -402,11 +432,10 @@ fn target(query: &[(String, String)]) -> Result<PortRef, String> {
 /// A value of the current graph, from the caches the runs filled; computed (with what it needs)
 /// only when no run has produced it, e.g. an input skipped because its dependants were cached.
 fn value(studio: &Studio, t: &PortRef) -> Result<ValueRef, (u16, String)> {
-    let graph = studio
-        .doc()
-        .checked
-        .clone()
-        .ok_or((409, "the graph has errors; fix them to see values".to_string()))?;
+    let graph = studio.doc().checked.clone().ok_or((
+        409,
+        "the graph has errors; fix them to see values".to_string(),
+    ))?;
     let attempt = |cached_only: bool| {
         let mut opts = studio.options(&studio.out_dir, Arc::new(AtomicBool::new(false)));
         opts.outputs = vec![t.clone()];

@@ -66,7 +66,11 @@ pub fn stream(rx: Receiver<String>, out: &mut dyn Write, stop: &dyn Fn() -> bool
             Err(RecvTimeoutError::Timeout) => ": keep-alive\n\n".to_string(),
             Err(RecvTimeoutError::Disconnected) => return,
         };
-        if out.write_all(chunk.as_bytes()).and_then(|()| out.flush()).is_err() {
+        if out
+            .write_all(chunk.as_bytes())
+            .and_then(|()| out.flush())
+            .is_err()
+        {
             return;
         }
     }
@@ -87,7 +91,9 @@ mod tests {
         hub.publish("x", json!({ "n": 1 }));
         assert_eq!(hub.clients(), 1);
         let got = a.try_recv().expect("a still subscribed");
-        assert!(got.contains("event: x") && got.contains("\"n\":1") && got.contains("\"type\":\"x\""));
+        assert!(
+            got.contains("event: x") && got.contains("\"n\":1") && got.contains("\"type\":\"x\"")
+        );
     }
 
     #[test]

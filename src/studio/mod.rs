@@ -27,10 +27,12 @@ use std::time::Duration;
 fn random_token() -> String {
     let word = || {
         let mut h = std::collections::hash_map::RandomState::new().build_hasher();
-        h.write_u128(std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos())
-            .unwrap_or_default());
+        h.write_u128(
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map(|d| d.as_nanos())
+                .unwrap_or_default(),
+        );
         h.finish()
     };
     format!("{:016x}{:016x}", word(), word())
@@ -59,7 +61,11 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
         .map(|a| a.port())
         .unwrap_or(args.port);
     let token = random_token();
-    let shown_host = if args.host == "0.0.0.0" { "127.0.0.1" } else { &args.host };
+    let shown_host = if args.host == "0.0.0.0" {
+        "127.0.0.1"
+    } else {
+        &args.host
+    };
     let url = format!("http://{shown_host}:{port}/?token={token}");
     println!("mesoflow studio on {}: {url}", args.graph.display());
     println!("(Ctrl-C to stop; the token in the URL is required by every request)");

@@ -4,7 +4,7 @@
 //! node's) are described by their type name and size.
 
 use mesoflow_nodes::types::{
-    Btf, BtfBasis, BrdfMap, DiffusionProfile, Embedding, HeightField, Image, KnnGraph, Mdf, Mesh,
+    BrdfMap, Btf, BtfBasis, DiffusionProfile, Embedding, HeightField, Image, KnnGraph, Mdf, Mesh,
     NormalMap, PointSet, ScatteringMaterial, WARD_PARAMS,
 };
 use mesoflow_runtime::{Artifact, Artifacts, ValueRef};
@@ -57,7 +57,10 @@ pub fn describe(v: &ValueRef) -> Value {
     let mut d = if let Some(s) = v.as_scalar() {
         json!({ "view": "scalar", "value": s })
     } else if let Some(i) = any.downcast_ref::<Image>() {
-        let peak = i.data.iter().fold(0f32, |m, x| if x.is_finite() { m.max(*x) } else { m });
+        let peak = i
+            .data
+            .iter()
+            .fold(0f32, |m, x| if x.is_finite() { m.max(*x) } else { m });
         json!({ "view": "image", "width": i.width, "height": i.height, "channels": i.channels,
                 "peak": peak })
     } else if let Some(h) = any.downcast_ref::<HeightField>() {
@@ -86,7 +89,12 @@ pub fn describe(v: &ValueRef) -> Value {
         json!({ "view": "points", "n": e.n, "dims": e.components, "step": step, "points": pts,
                 "eigenvalues": e.eigenvalues })
     } else if let Some(k) = any.downcast_ref::<KnnGraph>() {
-        let finite: Vec<f64> = k.distances.iter().copied().filter(|x| x.is_finite()).collect();
+        let finite: Vec<f64> = k
+            .distances
+            .iter()
+            .copied()
+            .filter(|x| x.is_finite())
+            .collect();
         let mean = finite.iter().sum::<f64>() / finite.len().max(1) as f64;
         let max = finite.iter().fold(0f64, |m, x| m.max(*x));
         json!({ "view": "table", "rows": [["points", k.n], ["neighbours each", k.k],
@@ -257,5 +265,121 @@ mod tests {
         assert_eq!(d["step"], 3);
         assert_eq!(d["points"].as_array().unwrap().len(), MAX_POINTS);
         assert_eq!(d["points"][1][0], 6.0);
+    }
+
+    /// One value of every type a node can output, so a new type without a preview fails here.
+    fn samples() -> Vec<ValueRef> {
+        use mesoflow_nodes::types::ColorSpace;
+        use mesoflow_runtime::{Artifact, Artifacts, Scalar};
+        let mesh = Mesh {
+            positions: vec![[0., 0., 0.], [1., 0., 0.], [0., 1., 0.]],
+            indices: vec![0, 1, 2],
+            ..Default::default()
+        };
+        vec![
+            Arc::new(Scalar(1.0)),
+            Arc::new(Artifact {
+                path: "a.png".into(),
+                bytes: vec![1],
+            }),
+            Arc::new(Artifacts { files: vec![] }),
+            Arc::new(Image {
+                width: 1,
+                height: 1,
+                channels: 3,
+                data: vec![0.5; 3],
+            }),
+            Arc::new(HeightField {
+                width: 1,
+                height: 1,
+                data: vec![0.0],
+            }),
+            Arc::new(NormalMap {
+                width: 1,
+                height: 1,
+                data: vec![0., 0., 1.],
+            }),
+            Arc::new(Btf {
+                width: 1,
+                height: 1,
+                pairs: vec![],
+                data: vec![],
+            }),
+            Arc::new(BtfBasis {
+                width: 1,
+                height: 1,
+                pairs: vec![],
+                color: ColorSpace::Rgb,
+                blocks: vec![],
+            }),
+            Arc::new(Mdf {
+                width: 1,
+                height: 1,
+                views: vec![],
+                depth: 1.0,
+                data: vec![],
+            }),
+            Arc::new(DiffusionProfile {
+                model: "dipole".into(),
+                radii: vec![0.1, 1.0],
+                rd: [vec![1.0, 0.1], vec![1.0, 0.1], vec![1.0, 0.1]],
+                total: [0.5; 3],
+                mfp: [1.0; 3],
+                cdf: [vec![0.5, 1.0], vec![0.5, 1.0], vec![0.5, 1.0]],
+            }),
+            Arc::new(PointSet {
+                n: 1,
+                dims: 2,
+                data: vec![0., 1.],
+            }),
+            Arc::new(Embedding {
+                n: 1,
+                components: 1,
+                data: vec![0.],
+                eigenvalues: vec![1.],
+            }),
+            Arc::new(KnnGraph {
+                n: 1,
+                k: 1,
+                neighbors: vec![0],
+                distances: vec![0.5],
+            }),
+            Arc::new(BrdfMap {
+                width: 1,
+                height: 1,
+                data: vec![0.5; WARD_PARAMS],
+            }),
+            Arc::new(mesh),
+            Arc::new(ScatteringMaterial {
+                sigma_s_prime: [1.; 3],
+                sigma_a: [0.1; 3],
+                eta: 1.3,
+                g: 0.0,
+            }),
+        ]
+    }
+
+    #[test]
+    fn every_type_a_node_can_output_has_a_preview() {
+        let samples = samples();
+        for v in &samples {
+            let d = describe(v);
+            assert_ne!(d["view"], "none", "{}", v.type_name());
+            assert_eq!(d["type"], v.type_name());
+        }
+        let registry = mesoflow_nodes::registry();
+        for kind in mesoflow_graph::Catalog::kinds(&registry) {
+            let Some(node) = registry.node(kind) else {
+                continue;
+            };
+            for o in &node.signature().outputs {
+                assert!(
+                    samples.iter().any(|v| v.type_name() == o.ty),
+                    "{kind}.{}: type {} has no preview sample",
+                    o.name,
+                    o.ty
+                );
+            }
+        }
     }
 }

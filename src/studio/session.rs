@@ -5,9 +5,7 @@
 use super::events::Hub;
 use crate::interrupt::cancel_flag;
 use mesoflow_graph::{check, CheckedGraph, GraphError, GraphFile, Override};
-use mesoflow_runtime::{
-    DeviceMode, Engine, NodeReport, RunObserver, RunOptions, RunReport,
-};
+use mesoflow_runtime::{DeviceMode, Engine, NodeReport, RunObserver, RunOptions, RunReport};
 use serde_json::{json, Value};
 use std::collections::{BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -365,8 +363,10 @@ impl Studio {
         let report = match result {
             Ok(r) => r,
             Err(e) => {
-                self.hub
-                    .publish("run_finished", json!({ "run": run, "error": e.to_string() }));
+                self.hub.publish(
+                    "run_finished",
+                    json!({ "run": run, "error": e.to_string() }),
+                );
                 return;
             }
         };
@@ -421,9 +421,7 @@ impl RunObserver for Live {
     }
 
     fn node_finished(&self, report: &NodeReport) {
-        self.hub.publish(
-            "node_finished",
-            json!({ "run": self.run, "node": report }),
-        );
+        self.hub
+            .publish("node_finished", json!({ "run": self.run, "node": report }));
     }
 }

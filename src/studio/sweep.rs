@@ -60,7 +60,9 @@ fn port(text: &str, what: &str) -> Result<PortRef, Refused> {
 /// cancelled.
 pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
     if spec.vary.is_empty() || spec.measure.is_empty() {
-        return Err(refused("a sweep needs at least one varied parameter and one measure"));
+        return Err(refused(
+            "a sweep needs at least one varied parameter and one measure",
+        ));
     }
     let mut varies = Vec::new();
     for v in &spec.vary {
@@ -121,8 +123,8 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
         })?;
         graphs.push(g);
     }
-    let outputs =
-        sweep_table::sweep_outputs(studio.engine.registry(), &graphs[0], &measures).map_err(refused)?;
+    let outputs = sweep_table::sweep_outputs(studio.engine.registry(), &graphs[0], &measures)
+        .map_err(refused)?;
     let cancel = Arc::new(AtomicBool::new(false));
     let id = {
         let mut st = studio.sweep.lock().unwrap_or_else(|e| e.into_inner());
@@ -159,17 +161,17 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
             let run_dir = out_dir.join("runs").join(format!("{i:03}"));
             let mut opts = studio.options(&run_dir, cancel.clone());
             opts.outputs = outputs.clone();
-            let report = match studio.engine.run(
-                graph,
-                &opts,
-                Arc::new(mesoflow_runtime::SilentObserver),
-            ) {
-                Ok(r) => r,
-                Err(e) => {
-                    finish(&studio, id, Vec::new(), Some(e.to_string()));
-                    return;
-                }
-            };
+            let report =
+                match studio
+                    .engine
+                    .run(graph, &opts, Arc::new(mesoflow_runtime::SilentObserver))
+                {
+                    Ok(r) => r,
+                    Err(e) => {
+                        finish(&studio, id, Vec::new(), Some(e.to_string()));
+                        return;
+                    }
+                };
             let _ = crate::commands::run::write_report(&report, &run_dir);
             let row = sweep_table::row_of(&report, combo.clone(), &measures, &measured_nodes);
             let cells: Vec<Value> = combo

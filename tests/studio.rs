@@ -1,0 +1,752 @@
+//! The studio's server (`mesoflow serve`) through its HTTP API, as the page uses it: token and
+//! Host checks, allowed folders, edits through the validator, re-runs of only the dirty nodes
+//! with their events, concurrent clients, a client that disconnects mid-run, cancelling a stale
+//! run, saving in place, the file watch, composing nodes, previews and sweeps.
+//! The browser tests of the page itself are in tests/studio/ (Python, Chromium).
+
+mod common;
+
+use common::{bin, mesoflow, Scratch};
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::process::{Child, Stdio};
+use std::time::{Duration, Instant};
+
+struct Studio {
+    child: Child,
+    addr: String,
+    token: String,
+    scratch: Scratch,
+    graph: PathBuf,
+}
+
+impl Drop for Studio {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+const QUICKSTART: &str = include_str!("../graphs/quickstart.json");
+
+/// A graph whose middle node takes seconds on the CPU and checks for cancellation often: an MDF
+/// of a 384² tile in 180 directions.
+const SLOW: &str = r#"{
+  "mesoflow": 1,
+  "nodes": {
+    "surface": { "kind": "heightfield.procedural", "params": { "pattern": "bumps", "size": 384, "count": 8, "depth": 16.0 } },
+    "mdf": { "kind": "mdf.tabulate", "inputs": { "height": "surface.height" },
+             "params": { "views": { "thetas": [0, 10, 20, 30, 40, 50, 60, 70, 80, 85], "phis": [0, 20, 40, 60, 80, 100, 120, 140, 160, 180, 200, 220, 240, 260, 280, 300, 320, 340] } } },
+    "save": { "kind": "npy.write", "inputs": { "value": "mdf.mdf" }, "params": { "path": "mdf.npy" } }
+  }
+}
+"#;
+
+fn start(text: &str) -> Studio {
+    let scratch = Scratch::new();
+    let graph = scratch.write("g/graph.json", text);
+    let mut child = bin()
+        .args([
+            "serve",
+            "--port",
+            "0",
+            "--device",
+            "cpu",
+            "--interval-ms",
+            "100",
+        ])
+        .arg(&graph)
+        .arg("--out-dir")
+        .arg(scratch.path("out"))
+        .arg("--cache-dir")
+        .arg(scratch.path("cache"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .expect("start mesoflow serve");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout"));
+    let mut line = String::new();
+    while !line.contains("http://") {
+        line.clear();
+        assert!(
+            lines.read_line(&mut line).expect("read") > 0,
+            "serve exited"
+        );
+    }
+    let url = line[line.find("http://").unwrap()..].trim().to_string();
+    let rest = url.trim_start_matches("http://");
+    let (addr, token) = rest.split_once("/?token=").expect("url with token");
+    // Keep draining stdout so the server never blocks on a full pipe.
+    std::thread::spawn(move || {
+        let mut sink = String::new();
+        let _ = lines.read_to_string(&mut sink);
+    });
+    Studio {
+        child,
+        addr: addr.to_string(),
+        token: token.to_string(),
+        scratch,
+        graph,
+    }
+}
+
+/// One HTTP/1.1 exchange; returns the status and the body (chunked bodies decoded).
+fn exchange(addr: &str, host: &str, method: &str, path: &str, body: &str) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).expect("connect");
+    s.set_read_timeout(Some(Duration::from_secs(120))).ok();
+    write!(
+        s,
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\nContent-Type: application/json\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("write");
+    let mut raw = Vec::new();
+    s.read_to_end(&mut raw).expect("read");
+    let split = raw
+        .windows(4)
+        .position(|w| w == b"\r\n\r\n")
+        .expect("headers");
+    let head = String::from_utf8_lossy(&raw[..split]).to_string();
+    let status: u16 = head
+        .split(' ')
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .expect("status");
+    let mut payload = raw[split + 4..].to_vec();
+    if head
+        .to_ascii_lowercase()
+        .contains("transfer-encoding: chunked")
+    {
+        let mut out = Vec::new();
+        let mut rest = &payload[..];
+        loop {
+            let eol = rest
+                .windows(2)
+                .position(|w| w == b"\r\n")
+                .expect("chunk size");
+            let n = usize::from_str_radix(std::str::from_utf8(&rest[..eol]).unwrap().trim(), 16)
+                .expect("hex size");
+            if n == 0 {
+                break;
+            }
+            out.extend_from_slice(&rest[eol + 2..eol + 2 + n]);
+            rest = &rest[eol + 4 + n..];
+        }
+        payload = out;
+    }
+    (status, payload)
+}
+
+impl Studio {
+    fn call(&self, method: &str, path: &str, body: &str) -> (u16, Value) {
+        let sep = if path.contains('?') { '&' } else { '?' };
+        let (code, bytes) = exchange(
+            &self.addr,
+            &self.addr,
+            method,
+            &format!("{path}{sep}token={}", self.token),
+            body,
+        );
+        (code, serde_json::from_slice(&bytes).unwrap_or(Value::Null))
+    }
+    fn get(&self, path: &str) -> (u16, Value) {
+        self.call("GET", path, "")
+    }
+    fn post(&self, path: &str, body: Value) -> (u16, Value) {
+        self.call("POST", path, &body.to_string())
+    }
+    fn state(&self) -> Value {
+        self.get("/api/state").1
+    }
+    /// Waits until no run is pending or running and a report exists.
+    fn settle(&self) -> Value {
+        let t = Instant::now();
+        loop {
+            let s = self.state();
+            if s["running"] == false && !s["report"].is_null() {
+                return s;
+            }
+            assert!(t.elapsed() < Duration::from_secs(300), "never settled");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    fn events(&self) -> Events {
+        let mut s = TcpStream::connect(&self.addr).expect("connect");
+        write!(
+            s,
+            "GET /api/events?token={} HTTP/1.1\r\nHost: {}\r\n\r\n",
+            self.token, self.addr
+        )
+        .expect("write");
+        s.set_read_timeout(Some(Duration::from_secs(120))).ok();
+        let mut r = BufReader::new(s);
+        let mut line = String::new();
+        r.read_line(&mut line).expect("status line");
+        assert!(line.contains(" 200 "), "{line}");
+        let mut headers = String::new();
+        loop {
+            line.clear();
+            r.read_line(&mut line).expect("header");
+            if line == "\r\n" || line.is_empty() {
+                break;
+            }
+            headers.push_str(&line);
+        }
+        assert!(
+            headers.to_ascii_lowercase().contains("text/event-stream"),
+            "{headers}"
+        );
+        Events { r }
+    }
+}
+
+struct Events {
+    r: BufReader<TcpStream>,
+}
+
+impl Events {
+    /// The next event: its type and data.
+    fn next(&mut self) -> (String, Value) {
+        let (mut kind, mut data) = (String::new(), String::new());
+        let mut line = String::new();
+        loop {
+            line.clear();
+            let n = self.r.read_line(&mut line).expect("event stream");
+            assert!(n > 0, "event stream closed");
+            let l = line.trim_end();
+            if l.is_empty() {
+                if !kind.is_empty() {
+                    return (kind, serde_json::from_str(&data).expect("json data"));
+                }
+                continue;
+            }
+            if let Some(v) = l.strip_prefix("event: ") {
+                kind = v.to_string();
+            } else if let Some(v) = l.strip_prefix("data: ") {
+                data = v.to_string();
+            }
+        }
+    }
+    /// Events up to and including the first of type `kind` that `pick` accepts.
+    fn until(&mut self, kind: &str, pick: impl Fn(&Value) -> bool) -> Vec<(String, Value)> {
+        let mut seen = Vec::new();
+        loop {
+            let e = self.next();
+            let done = e.0 == kind && pick(&e.1);
+            seen.push(e);
+            if done {
+                return seen;
+            }
+        }
+    }
+}
+
+fn reran(run_finished: &Value) -> Vec<String> {
+    run_finished["reran"]
+        .as_array()
+        .expect("reran")
+        .iter()
+        .map(|v| v.as_str().unwrap().to_string())
+        .collect()
+}
+
+#[test]
+fn every_request_needs_the_token_and_this_servers_host() {
+    let s = start(QUICKSTART);
+    for path in ["/", "/api/state", "/api/events", "/api/kinds"] {
+        let (code, body) = exchange(&s.addr, &s.addr, "GET", path, "");
+        assert_eq!(code, 401, "{path}");
+        assert!(String::from_utf8_lossy(&body).contains("token"));
+    }
+    let wrong = "0".repeat(s.token.len());
+    assert_eq!(
+        exchange(
+            &s.addr,
+            &s.addr,
+            "GET",
+            &format!("/api/state?token={wrong}"),
+            ""
+        )
+        .0,
+        401
+    );
+    // A page on another site that resolves its own name to 127.0.0.1 (DNS rebinding) is refused
+    // even with the token.
+    let path = format!("/api/state?token={}", s.token);
+    assert_eq!(
+        exchange(&s.addr, "evil.example:80", "GET", &path, "").0,
+        403
+    );
+    assert_eq!(exchange(&s.addr, &s.addr, "GET", &path, "").0, 200);
+    let (code, page) = exchange(&s.addr, &s.addr, "GET", &format!("/?token={}", s.token), "");
+    assert_eq!(code, 200);
+    assert!(String::from_utf8_lossy(&page).contains("mesoflow studio"));
+}
+
+#[test]
+fn files_outside_the_graph_output_and_cache_folders_are_refused() {
+    let s = start(QUICKSTART);
+    s.settle();
+    let secret = s.scratch.write("secret.txt", "no");
+    for p in [
+        "../secret.txt".to_string(),
+        secret.display().to_string(),
+        "/etc/passwd".into(),
+        "../../../../../../../../etc/passwd".into(),
+    ] {
+        let q = p.replace('/', "%2F");
+        assert_eq!(s.get(&format!("/api/file?path={q}")).0, 403, "{p}");
+    }
+    let (code, report) = s.get("/api/file?path=report.json");
+    assert_eq!(code, 200);
+    assert_eq!(report["ok"], true);
+    // The graph's own folder is allowed.
+    assert_eq!(
+        s.get(&format!(
+            "/api/file?path={}",
+            s.graph.display().to_string().replace('/', "%2F")
+        ))
+        .0,
+        200
+    );
+}
+
+#[test]
+fn a_change_reruns_only_its_dependants_and_streams_their_status() {
+    let s = start(QUICKSTART);
+    s.settle();
+    let mut ev = s.events();
+    let (code, ok) = s.post(
+        "/api/set",
+        json!({ "node": "height_png", "param": "bits", "value": 8 }),
+    );
+    assert_eq!(code, 200, "{ok}");
+    let rev = ok["revision"].as_u64().unwrap();
+    let seen = ev.until("run_finished", |d| d["revision"].as_u64() >= Some(rev));
+    let done = &seen.last().unwrap().1;
+    assert_eq!(reran(done), vec!["height_png"]);
+    let kinds: Vec<&str> = seen.iter().map(|(k, _)| k.as_str()).collect();
+    assert!(
+        kinds.contains(&"graph") && kinds.contains(&"run_started"),
+        "{kinds:?}"
+    );
+    // Node events for the node that ran, finishing as computed; the others were memory hits.
+    assert!(seen
+        .iter()
+        .any(|(k, d)| k == "node_started" && d["id"] == "height_png"));
+    let finished: Vec<(String, String)> = seen
+        .iter()
+        .filter(|(k, _)| k == "node_finished")
+        .map(|(_, d)| {
+            (
+                d["node"]["id"].as_str().unwrap().to_string(),
+                d["node"]["status"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    for (id, status) in &finished {
+        let expected = if id == "height_png" {
+            "computed"
+        } else {
+            "memory"
+        };
+        assert_eq!(status, expected, "{id}");
+    }
+    // The report on disk says the same.
+    let report = common::report(&s.scratch.path("out"));
+    let statuses = common::statuses(&report);
+    assert_eq!(statuses["height_png"], "computed");
+    assert!(statuses
+        .iter()
+        .all(|(id, st)| id == "height_png" || st == "memory"));
+
+    // The size of the surface: everything depends on it.
+    let (_, ok) = s.post(
+        "/api/set",
+        json!({ "node": "surface", "param": "size", "value": 128 }),
+    );
+    let rev = ok["revision"].as_u64().unwrap();
+    let done = ev
+        .until("run_finished", |d| d["revision"].as_u64() >= Some(rev))
+        .pop()
+        .unwrap()
+        .1;
+    let mut all = reran(&done);
+    all.sort();
+    assert_eq!(
+        all,
+        vec![
+            "height_exr",
+            "height_npy",
+            "height_png",
+            "normals",
+            "normals_png",
+            "surface"
+        ]
+    );
+    // The preview follows: the height field is now 128².
+    let (_, v) = s.get("/api/value?node=surface&port=height");
+    assert_eq!(
+        (v["view"].clone(), v["width"].clone()),
+        (json!("height"), json!(128))
+    );
+}
+
+#[test]
+fn an_invalid_value_is_refused_with_the_validators_message() {
+    let s = start(QUICKSTART);
+    s.settle();
+    let (code, body) = s.post(
+        "/api/set",
+        json!({ "node": "surface", "param": "size", "value": 2 }),
+    );
+    assert_eq!(code, 422);
+    let e = &body["errors"][0];
+    assert_eq!(
+        (e["node"].clone(), e["field"].clone()),
+        (json!("surface"), json!("size"))
+    );
+    let cli = mesoflow(
+        &[
+            "validate",
+            s.graph.to_str().unwrap(),
+            "--set",
+            "surface.size=2",
+        ],
+        s.scratch.dir.path(),
+    );
+    assert_eq!(cli.code, 2);
+    let message = e["message"].as_str().unwrap();
+    assert!(cli.stderr.contains(message), "{message}\n{}", cli.stderr);
+    // Refused means not applied: the graph keeps its value and nothing re-ran.
+    let st = s.state();
+    assert_eq!(st["nodes"][0]["params"]["size"], 256);
+    assert_eq!(st["dirty"], false);
+    // An unknown parameter and a value of the wrong type are refused the same way.
+    assert_eq!(
+        s.post(
+            "/api/set",
+            json!({ "node": "surface", "param": "sise", "value": 2 })
+        )
+        .0,
+        422
+    );
+    assert_eq!(
+        s.post(
+            "/api/set",
+            json!({ "node": "surface", "param": "size", "value": "big" })
+        )
+        .0,
+        422
+    );
+    assert_eq!(s.post("/api/set", json!({ "nodes": 1 })).0, 400);
+}
+
+#[test]
+fn concurrent_clients_each_see_every_run_and_a_newer_change_cancels_the_running_one() {
+    let s = start(SLOW);
+    s.settle();
+    let mut a = s.events();
+    let mut b = s.events();
+    // Two clients change the graph at once, then the first changes it again mid-run.
+    std::thread::scope(|scope| {
+        scope.spawn(|| {
+            s.post(
+                "/api/set",
+                json!({ "node": "surface", "param": "depth", "value": 12.0 }),
+            )
+        });
+        scope.spawn(|| {
+            s.post(
+                "/api/set",
+                json!({ "node": "surface", "param": "count", "value": 6 }),
+            )
+        });
+    });
+    a.until("node_started", |d| d["id"] == "mdf");
+    let (_, ok) = s.post(
+        "/api/set",
+        json!({ "node": "surface", "param": "depth", "value": 10.0 }),
+    );
+    let rev = ok["revision"].as_u64().unwrap();
+    let seen_a = a.until("run_finished", |d| {
+        d["revision"].as_u64() >= Some(rev) && d["cancelled"] == false
+    });
+    let seen_b = b.until("run_finished", |d| {
+        d["revision"].as_u64() >= Some(rev) && d["cancelled"] == false
+    });
+    // The run that the last change made stale was cancelled, and both clients heard of it.
+    for seen in [&seen_a, &seen_b] {
+        assert!(
+            seen.iter()
+                .any(|(k, d)| k == "run_finished" && d["cancelled"] == true),
+            "no cancelled run in {:?}",
+            seen.iter().map(|(k, _)| k).collect::<Vec<_>>()
+        );
+    }
+    let last = &seen_a.last().unwrap().1;
+    assert_eq!(last["ok"], true);
+    let st = s.settle();
+    let params = &st["nodes"][0]["params"];
+    assert_eq!(
+        (params["depth"].clone(), params["count"].clone()),
+        (json!(10.0), json!(6))
+    );
+    // The final report is the last change's, complete.
+    let report = common::report(&s.scratch.path("out"));
+    assert_eq!(report["ok"], true);
+    assert_eq!(report["cancelled"], false);
+}
+
+#[test]
+fn a_client_that_disconnects_mid_run_leaves_the_run_and_the_others_alone() {
+    let s = start(SLOW);
+    s.settle();
+    let mut stays = s.events();
+    let mut leaves = s.events();
+    assert_eq!(s.state()["clients"], 2);
+    let (_, ok) = s.post(
+        "/api/set",
+        json!({ "node": "surface", "param": "depth", "value": 12.0 }),
+    );
+    let rev = ok["revision"].as_u64().unwrap();
+    leaves.until("node_started", |d| d["id"] == "mdf");
+    drop(leaves);
+    // The server keeps answering while it runs and streams to the one who left.
+    assert_eq!(s.get("/api/state").0, 200);
+    let done = stays
+        .until("run_finished", |d| d["revision"].as_u64() >= Some(rev))
+        .pop()
+        .unwrap()
+        .1;
+    assert_eq!(done["ok"], true);
+    assert_eq!(done["cancelled"], false);
+    let mut r = reran(&done);
+    r.sort();
+    assert_eq!(r, vec!["mdf", "save", "surface"]);
+    // The client that left is forgotten (at the next event or keep-alive, every 2 s).
+    let t = Instant::now();
+    while s.state()["clients"] != 1 {
+        assert!(
+            t.elapsed() < Duration::from_secs(10),
+            "the gone client is still counted"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn saving_changes_only_the_edited_value_and_an_editor_change_is_picked_up() {
+    let s = start(QUICKSTART);
+    s.settle();
+    assert_eq!(
+        s.post(
+            "/api/set",
+            json!({ "node": "surface", "param": "size", "value": 128 })
+        )
+        .0,
+        200
+    );
+    assert_eq!(s.state()["dirty"], true);
+    let (code, saved) = s.post("/api/save", json!({}));
+    assert_eq!((code, saved["changed"].clone()), (200, json!(true)));
+    let text = std::fs::read_to_string(&s.graph).unwrap();
+    assert_eq!(
+        text,
+        QUICKSTART.replace("\"size\": 256", "\"size\": 128"),
+        "the file's layout changed"
+    );
+    assert_eq!(s.state()["dirty"], false);
+
+    // An editor changes the file: the studio reloads it and re-runs.
+    s.settle();
+    std::fs::write(&s.graph, text.replace("\"count\": 8", "\"count\": 4")).unwrap();
+    let t = Instant::now();
+    loop {
+        let st = s.state();
+        if st["nodes"][0]["params"]["count"] == 4 && st["running"] == false {
+            let report = &st["report"];
+            let surface = report["nodes"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|n| n["id"] == "surface")
+                .unwrap();
+            if surface["status"] == "computed" {
+                break;
+            }
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(30),
+            "the edit was not picked up"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+#[test]
+fn nodes_are_added_connected_with_the_type_check_and_removed() {
+    let s = start(QUICKSTART);
+    s.settle();
+    let (code, body) = s.post("/api/add", json!({ "kind": "image.writ" }));
+    assert_eq!(code, 422);
+    assert!(
+        body["error"].as_str().unwrap().contains("image.write"),
+        "{body}"
+    );
+    assert_eq!(
+        s.post("/api/add", json!({ "kind": "image.write", "id": "extra" }))
+            .0,
+        200
+    );
+    assert_eq!(
+        s.post("/api/add", json!({ "kind": "image.write", "id": "extra" }))
+            .0,
+        422
+    );
+    // Unconnected, it leaves the graph with errors (shown, not run).
+    assert!(!s.state()["errors"].as_array().unwrap().is_empty());
+    // A height field is not an image.
+    let (code, body) = s.post(
+        "/api/connect",
+        json!({ "node": "extra", "port": "image", "from": "surface.height" }),
+    );
+    assert_eq!(code, 422);
+    assert!(
+        body["error"].as_str().unwrap().contains("HeightField"),
+        "{body}"
+    );
+    assert_eq!(
+        s.post(
+            "/api/connect",
+            json!({ "node": "extra", "port": "image", "from": "normals.preview" })
+        )
+        .0,
+        200
+    );
+    assert_eq!(
+        s.post(
+            "/api/set",
+            json!({ "node": "extra", "param": "path", "value": "extra.png" })
+        )
+        .0,
+        200
+    );
+    let st = s.settle();
+    assert!(
+        st["errors"].as_array().unwrap().is_empty(),
+        "{}",
+        st["errors"]
+    );
+    let t = Instant::now();
+    while !s.scratch.path("out/extra.png").exists() {
+        assert!(
+            t.elapsed() < Duration::from_secs(30),
+            "extra.png never written"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // Removing a node also removes the connections from it.
+    assert_eq!(s.post("/api/remove", json!({ "id": "normals" })).0, 200);
+    let st = s.state();
+    let extra = st["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "extra")
+        .unwrap();
+    assert!(extra["inputs"].as_object().unwrap().is_empty());
+}
+
+#[test]
+fn every_output_of_the_quickstart_has_a_preview_and_pixels_have_their_size() {
+    let s = start(QUICKSTART);
+    let st = s.settle();
+    for n in st["nodes"].as_array().unwrap() {
+        for o in n["outputs"].as_array().unwrap() {
+            let (id, port) = (n["id"].as_str().unwrap(), o["name"].as_str().unwrap());
+            let (code, v) = s.get(&format!("/api/value?node={id}&port={port}"));
+            assert_eq!(code, 200, "{id}.{port}: {v}");
+            assert_ne!(v["view"], "none", "{id}.{port}");
+            assert_eq!(v["type"], o["type"], "{id}.{port}");
+            if let (Some(w), Some(h)) = (v["width"].as_u64(), v["height"].as_u64()) {
+                let (code, bytes) = exchange(
+                    &s.addr,
+                    &s.addr,
+                    "GET",
+                    &format!("/api/pixels?node={id}&port={port}&token={}", s.token),
+                    "",
+                );
+                assert_eq!(code, 200);
+                let channels = v["channels"].as_u64().unwrap_or(match v["view"].as_str() {
+                    Some("normals") => 3,
+                    _ => 1,
+                });
+                assert_eq!(bytes.len() as u64, w * h * channels * 4, "{id}.{port}");
+            }
+        }
+    }
+    assert_eq!(s.get("/api/value?node=nope&port=x").0, 404);
+}
+
+#[test]
+fn a_sweep_from_the_studio_writes_what_the_command_line_writes() {
+    let s = start(QUICKSTART);
+    s.settle();
+    let mut ev = s.events();
+    let (code, body) = s.post(
+        "/api/sweep",
+        json!({ "vary": [{ "param": "surface.depth", "values": [2.0, 4.0, 8.0] }],
+                "measure": ["normals.rms_slope"] }),
+    );
+    assert_eq!(code, 200, "{body}");
+    let seen = ev.until("sweep_done", |_| true);
+    let rows = seen.iter().filter(|(k, _)| k == "sweep_row").count();
+    assert_eq!(rows, 3);
+    let studio_csv = std::fs::read_to_string(s.scratch.path("out/sweep/sweep.csv")).unwrap();
+    let cli = mesoflow(
+        &[
+            "sweep",
+            s.graph.to_str().unwrap(),
+            "--vary",
+            "surface.depth=2.0,4.0,8.0",
+            "--measure",
+            "normals.rms_slope",
+            "--device",
+            "cpu",
+            "-q",
+            "--out-dir",
+            s.scratch.path("cli").to_str().unwrap(),
+            "--cache-dir",
+            s.scratch.path("cli-cache").to_str().unwrap(),
+        ],
+        s.scratch.dir.path(),
+    );
+    assert_eq!(cli.code, 0, "{}", cli.stderr);
+    let cli_csv = std::fs::read_to_string(s.scratch.path("cli/sweep.csv")).unwrap();
+    // The same table, less the columns of times (which differ run to run).
+    let untimed = |csv: &str| -> Vec<Vec<String>> {
+        let rows: Vec<Vec<String>> = csv
+            .lines()
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect();
+        let keep: Vec<usize> = rows[0]
+            .iter()
+            .enumerate()
+            .filter(|(_, h)| !h.contains("seconds"))
+            .map(|(i, _)| i)
+            .collect();
+        rows.iter()
+            .map(|r| keep.iter().map(|i| r[*i].clone()).collect())
+            .collect()
+    };
+    assert_eq!(untimed(&studio_csv), untimed(&cli_csv));
+    // A sweep of a parameter that does not exist is refused before anything runs.
+    let (code, _) = s.post(
+        "/api/sweep",
+        json!({ "vary": [{ "param": "surface.nope", "values": [1] }], "measure": ["normals.rms_slope"] }),
+    );
+    assert_eq!(code, 422);
+}
