@@ -49,10 +49,11 @@ class Studio:
         self.dir = tmp
         self.graph = tmp / graph.name
         shutil.copy(graph, self.graph)
+        # Run from the graph's folder with relative paths, as a user would (the page shows them).
         self.proc = subprocess.Popen(
-            [BIN, "serve", str(self.graph), "--port", "0", "--out-dir", str(tmp / "out"),
-             "--cache-dir", str(tmp / "cache"), "--interval-ms", "200"],
-            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+            [BIN, "serve", graph.name, "--port", "0", "--out-dir", "out", "--cache-dir", "cache",
+             "--interval-ms", "200"],
+            cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
         line = ""
         deadline = time.time() + 60
         while "http://" not in line:

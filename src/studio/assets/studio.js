@@ -606,7 +606,6 @@ function hemisphere(role, dirs, chosen, onPick) {
   const R = 90, svg = sv("svg", { class: "hemisphere", width: 2 * R + 12, height: 2 * R + 12, "data-role": role,
     viewBox: `${-R - 6} ${-R - 6} ${2 * R + 12} ${2 * R + 12}` });
   for (const t of [30, 60, 90]) svg.append(sv("circle", { r: R * Math.sin(t * Math.PI / 180), fill: "none", stroke: "#2b3039" }));
-  svg.append(sv("text", { x: -R, y: -R + 4, fill: "#9aa2b1", "font-size": 11 }, role));
   dirs.forEach((d, i) => {
     const r = R * Math.sin(d[0] * Math.PI / 180), a = d[1] * Math.PI / 180;
     const c = sv("circle", { class: "dir" + (i === chosen ? " chosen" : ""), cx: r * Math.cos(a), cy: -r * Math.sin(a), r: 5,
@@ -614,7 +613,7 @@ function hemisphere(role, dirs, chosen, onPick) {
     c.append(sv("title", {}, `θ ${fmt(d[0])}°, φ ${fmt(d[1])}°`));
     svg.append(c);
   });
-  return svg;
+  return el("div", {}, svg, el("div", { class: "caption" }, `${role} direction (centre: θ 0°; φ 0° to the right)`));
 }
 function uniqueDirs(list) {
   const out = [];
