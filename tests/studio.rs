@@ -32,11 +32,11 @@ impl Drop for Studio {
 const QUICKSTART: &str = include_str!("../graphs/quickstart.json");
 
 /// A graph whose middle node takes seconds on the CPU and checks for cancellation often: an MDF
-/// of a 384² tile in 180 directions.
+/// of a 256² tile in 180 directions (1.5 s here).
 const SLOW: &str = r#"{
   "mesoflow": 1,
   "nodes": {
-    "surface": { "kind": "heightfield.procedural", "params": { "pattern": "bumps", "size": 384, "count": 8, "depth": 16.0 } },
+    "surface": { "kind": "heightfield.procedural", "params": { "pattern": "bumps", "size": 256, "count": 8, "depth": 16.0 } },
     "mdf": { "kind": "mdf.tabulate", "inputs": { "height": "surface.height" },
              "params": { "views": { "thetas": [0, 10, 20, 30, 40, 50, 60, 70, 80, 85], "phis": [0, 20, 40, 60, 80, 100, 120, 140, 160, 180, 200, 220, 240, 260, 280, 300, 320, 340] } } },
     "save": { "kind": "npy.write", "inputs": { "value": "mdf.mdf" }, "params": { "path": "mdf.npy" } }
@@ -299,6 +299,30 @@ fn files_outside_the_graph_output_and_cache_folders_are_refused() {
         let q = p.replace('/', "%2F");
         assert_eq!(s.get(&format!("/api/file?path={q}")).0, 403, "{p}");
     }
+    // Nor can a node be made to read one: the edit is refused, and nothing runs.
+    assert_eq!(
+        s.post("/api/add", json!({ "kind": "image.read", "id": "peek" }))
+            .0,
+        200
+    );
+    let (code, body) = s.post(
+        "/api/set",
+        json!({ "node": "peek", "param": "path", "value": secret.display().to_string() }),
+    );
+    assert_eq!(code, 422, "{body}");
+    assert!(
+        body["error"]
+            .as_str()
+            .unwrap()
+            .contains("outside the studio's folders"),
+        "{body}"
+    );
+    let (code, body) = s.post(
+        "/api/set",
+        json!({ "node": "peek", "param": "path", "value": "../secret.txt" }),
+    );
+    assert_eq!(code, 422, "{body}");
+    assert_eq!(s.post("/api/remove", json!({ "id": "peek" })).0, 200);
     let (code, report) = s.get("/api/file?path=report.json");
     assert_eq!(code, 200);
     assert_eq!(report["ok"], true);
@@ -749,4 +773,29 @@ fn a_sweep_from_the_studio_writes_what_the_command_line_writes() {
         json!({ "vary": [{ "param": "surface.nope", "values": [1] }], "measure": ["normals.rms_slope"] }),
     );
     assert_eq!(code, 422);
+}
+
+#[test]
+fn a_graph_that_reads_outside_the_studios_folders_is_shown_but_not_run() {
+    let outside = Scratch::new();
+    let png = outside.path("x.png");
+    // Any file will do: the studio refuses before reading it.
+    std::fs::write(&png, b"not read").unwrap();
+    let text = format!(
+        r#"{{ "mesoflow": 1, "nodes": {{ "img": {{ "kind": "image.read", "params": {{ "path": {} }} }} }} }}"#,
+        json!(png.display().to_string())
+    );
+    let s = start(&text);
+    let t = Instant::now();
+    let st = loop {
+        let st = s.state();
+        if st["running"] == false {
+            break st;
+        }
+        assert!(t.elapsed() < Duration::from_secs(30));
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(st["report"].is_null(), "it ran: {}", st["report"]);
+    let errors = st["errors"].to_string();
+    assert!(errors.contains("outside the studio's folders"), "{errors}");
 }

@@ -403,6 +403,11 @@ fn state(studio: &Studio) -> Value {
             field: e.field().map(str::to_string),
             message: e.to_string(),
         })
+        .chain(doc.blocked.iter().map(|p| Problem {
+            node: p.node.clone(),
+            field: p.field.clone(),
+            message: p.message.clone(),
+        }))
         .collect();
     json!({
         "graph": studio.graph_path.display().to_string(),
@@ -487,6 +492,12 @@ pub fn allowed(roots: &[PathBuf], out_dir: &Path, path: &str) -> Result<PathBuf,
     } else {
         out_dir.join(p)
     };
+    if !super::session::inside(roots, &full) {
+        return Err((
+            403,
+            format!("{path}: outside the graph's folder, the output folder and the cache"),
+        ));
+    }
     let real = full
         .canonicalize()
         .map_err(|_| (404, format!("{path}: no such file")))?;

@@ -55,6 +55,8 @@ pub struct Doc {
     pub file: GraphFile,
     /// The check's errors; empty when the graph can run.
     pub errors: Vec<GraphError>,
+    /// Files the graph would read outside the studio's folders: it is not run while any remain.
+    pub blocked: Vec<Problem>,
     pub checked: Option<CheckedGraph>,
     /// Bumped by every change, so a client knows its view is stale.
     pub revision: u64,
@@ -94,6 +96,20 @@ fn tolerated(e: &GraphError) -> bool {
     )
 }
 
+/// Whether `path` lies inside one of `roots` (canonical folders), links and `..` followed. A
+/// path that does not exist yet is judged by its nearest existing ancestor.
+pub fn inside(roots: &[PathBuf], path: &Path) -> bool {
+    let mut p = path.to_path_buf();
+    loop {
+        if let Ok(real) = p.canonicalize() {
+            return roots.iter().any(|r| real.starts_with(r));
+        }
+        if !p.pop() {
+            return false;
+        }
+    }
+}
+
 impl Studio {
     pub fn new(
         graph_path: PathBuf,
@@ -129,6 +145,7 @@ impl Studio {
                     nodes: Vec::new(),
                 },
                 errors: Vec::new(),
+                blocked: Vec::new(),
                 checked: None,
                 revision: 0,
                 report: None,
@@ -152,6 +169,38 @@ impl Studio {
             self.engine.registry(),
         )
         .map_err(|e| e.errors)
+    }
+
+    /// The files the graph's nodes would read that lie outside the studio's folders: the
+    /// studio reads nothing there, whoever asks.
+    fn reads_outside(&self, graph: &CheckedGraph) -> Vec<Problem> {
+        let reg = self.engine.registry();
+        let mut out = Vec::new();
+        for n in &graph.nodes {
+            let Some(kind) = reg.node(&n.kind) else {
+                continue;
+            };
+            let Ok(files) = kind
+                .prepare(&n.params)
+                .and_then(|p| kind.files(&p, &self.base_dir))
+            else {
+                continue; // the run reports the node's own error
+            };
+            for f in files.iter().filter(|f| !inside(&self.roots, f)) {
+                out.push(Problem {
+                    node: Some(n.id.clone()),
+                    field: None,
+                    message: format!(
+                        "node `{}` would read {}, outside the studio's folders (the graph's \
+                         folder, the output folder, the cache); move the file there, or use \
+                         `mesoflow run`",
+                        n.id,
+                        f.display()
+                    ),
+                });
+            }
+        }
+        out
     }
 
     /// Takes the file's text as the graph (at start, and when an editor changed the file).
@@ -184,10 +233,12 @@ impl Studio {
     }
 
     fn set_file(&self, doc: &mut Doc, file: GraphFile) {
+        doc.blocked.clear();
         match self.check(&file) {
             Ok(g) => {
                 doc.errors.clear();
-                doc.checked = Some(g);
+                doc.blocked = self.reads_outside(&g);
+                doc.checked = doc.blocked.is_empty().then_some(g);
             }
             Err(errors) => {
                 doc.errors = errors;
@@ -211,15 +262,23 @@ impl Studio {
             errors: vec![Problem::plain(m)],
         })?;
         let before: BTreeSet<String> = doc.errors.iter().map(|e| e.to_string()).collect();
-        if let Err(errors) = self.check(&file) {
-            let new: Vec<Problem> = errors
-                .iter()
-                .filter(|e| !before.contains(&e.to_string()))
-                .filter(|e| !(structural && tolerated(e)))
-                .map(Problem::of)
-                .collect();
-            if !new.is_empty() {
-                return Err(Refused { errors: new });
+        match self.check(&file) {
+            Ok(g) => {
+                let outside = self.reads_outside(&g);
+                if !outside.is_empty() {
+                    return Err(Refused { errors: outside });
+                }
+            }
+            Err(errors) => {
+                let new: Vec<Problem> = errors
+                    .iter()
+                    .filter(|e| !before.contains(&e.to_string()))
+                    .filter(|e| !(structural && tolerated(e)))
+                    .map(Problem::of)
+                    .collect();
+                if !new.is_empty() {
+                    return Err(Refused { errors: new });
+                }
             }
         }
         self.set_file(&mut doc, file);
