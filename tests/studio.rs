@@ -799,3 +799,39 @@ fn a_graph_that_reads_outside_the_studios_folders_is_shown_but_not_run() {
     let errors = st["errors"].to_string();
     assert!(errors.contains("outside the studio's folders"), "{errors}");
 }
+
+#[test]
+fn a_missing_graph_or_a_taken_port_is_a_clear_error() {
+    let scratch = Scratch::new();
+    let run = mesoflow(&["serve", "nope.json", "--port", "0"], scratch.dir.path());
+    assert_eq!(run.code, 2, "{}", run.stderr);
+    assert!(run.stderr.contains("nope.json"), "{}", run.stderr);
+    let s = start(QUICKSTART);
+    let port = s.addr.rsplit(':').next().unwrap();
+    let graph = scratch.write("g.json", QUICKSTART);
+    let run = mesoflow(
+        &["serve", graph.to_str().unwrap(), "--port", port],
+        scratch.dir.path(),
+    );
+    assert_eq!(run.code, 2, "{}", run.stderr);
+    assert!(run.stderr.contains("cannot listen"), "{}", run.stderr);
+}
+
+#[test]
+fn a_file_that_does_not_parse_is_shown_and_never_overwritten() {
+    let broken = "{ \"mesoflow\": 1, \"nodes\": { \"a\": ";
+    let s = start(broken);
+    let t = Instant::now();
+    while s.state()["load_error"].is_null() {
+        assert!(t.elapsed() < Duration::from_secs(10));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let (code, body) = s.post("/api/save", json!({}));
+    assert_eq!(code, 409, "{body}");
+    assert_eq!(std::fs::read_to_string(&s.graph).unwrap(), broken);
+    // Fixed in an editor, it is picked up and run.
+    std::fs::write(&s.graph, QUICKSTART).unwrap();
+    let st = s.settle();
+    assert!(st["load_error"].is_null());
+    assert_eq!(st["report"]["ok"], true);
+}

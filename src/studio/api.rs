@@ -232,10 +232,7 @@ pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
         (Method::Post, "/api/connect") => edit_response(connect(studio, &mut req)),
         (Method::Post, "/api/save") => match studio.save() {
             Ok(changed) => json_response(200, &json!({ "saved": true, "changed": changed })),
-            Err(e) => error(
-                500,
-                &format!("cannot write {}: {e}", studio.graph_path.display()),
-            ),
+            Err(e) => error(409, &e),
         },
         (Method::Post, "/api/run") => {
             studio.request_run();

@@ -45,13 +45,15 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(graph_name(&args.graph)));
     let cache = (!args.cache.no_cache).then(|| cache_dir(&args.cache, &args.graph));
-    let studio = Arc::new(Studio::new(
+    let mut studio = Studio::new(
         args.graph.clone(),
         out_dir,
         cache,
         engine,
         device_mode(args.device),
-    )?);
+    )?;
+    studio.verify_cache = args.cache.verify_cache;
+    let studio = Arc::new(studio);
     let server = tiny_http::Server::http((args.host.as_str(), args.port)).map_err(|e| {
         crate::exit::invalid(format!("cannot listen on {}:{}: {e}", args.host, args.port))
     })?;

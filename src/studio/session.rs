@@ -80,6 +80,8 @@ pub struct Studio {
     pub engine: Engine,
     pub device: DeviceMode,
     pub require_gpu: bool,
+    /// `--verify-cache`: every cache hit is recomputed and compared.
+    pub verify_cache: bool,
     pub hub: Arc<Hub>,
     pub doc: Mutex<Doc>,
     runs: Mutex<RunState>,
@@ -135,6 +137,7 @@ impl Studio {
             engine,
             device,
             require_gpu: crate::commands::run::require_gpu(),
+            verify_cache: false,
             hub: Arc::new(Hub::default()),
             doc: Mutex::new(Doc {
                 disk_text: String::new(),
@@ -309,18 +312,23 @@ impl Studio {
         })
     }
 
-    /// Writes the edited graph to its file, changing only what was edited.
-    pub fn save(&self) -> std::io::Result<bool> {
+    /// Writes the edited graph to its file, changing only what was edited. A file that does not
+    /// parse is left for its editor to fix: the studio never had its graph, so it cannot save it.
+    pub fn save(&self) -> Result<bool, String> {
         let mut doc = self.doc();
-        let text = match &doc.disk {
-            Some(disk) => mesoflow_graph::source_edit::rewrite(&doc.disk_text, disk, &doc.file),
-            None => doc.file.to_json() + "\n",
+        let Some(disk) = &doc.disk else {
+            return Err(format!(
+                "{} does not parse; fix it in an editor (the studio reloads it)",
+                self.graph_path.display()
+            ));
         };
+        let text = mesoflow_graph::source_edit::rewrite(&doc.disk_text, disk, &doc.file);
         let changed = text != doc.disk_text;
         if changed {
             let tmp = self.graph_path.with_extension("json.studio-tmp");
-            std::fs::write(&tmp, &text)?;
-            std::fs::rename(&tmp, &self.graph_path)?;
+            std::fs::write(&tmp, &text)
+                .and_then(|()| std::fs::rename(&tmp, &self.graph_path))
+                .map_err(|e| format!("cannot write {}: {e}", self.graph_path.display()))?;
         }
         doc.disk = Some(doc.file.clone());
         doc.disk_text = text;
@@ -361,6 +369,7 @@ impl Studio {
         );
         opts.device = self.device;
         opts.require_gpu = self.require_gpu;
+        opts.verify_cache = self.verify_cache;
         opts.cancel = cancel;
         opts
     }
