@@ -19,7 +19,7 @@ pub struct Refused {
     pub errors: Vec<Problem>,
 }
 
-#[derive(Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize)]
 pub struct Problem {
     pub node: Option<String>,
     pub field: Option<String>,
@@ -27,7 +27,7 @@ pub struct Problem {
 }
 
 impl Problem {
-    fn of(e: &GraphError) -> Problem {
+    pub fn of(e: &GraphError) -> Problem {
         Problem {
             node: e.node().map(str::to_string),
             field: e.field().map(str::to_string),

@@ -111,15 +111,7 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
             studio.engine.registry(),
         )
         .map_err(|e| Refused {
-            errors: e
-                .errors
-                .iter()
-                .map(|x| Problem {
-                    node: x.node().map(str::to_string),
-                    field: x.field().map(str::to_string),
-                    message: x.to_string(),
-                })
-                .collect(),
+            errors: e.errors.iter().map(Problem::of).collect(),
         })?;
         graphs.push(g);
     }
