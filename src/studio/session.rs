@@ -236,8 +236,19 @@ impl Studio {
     }
 
     fn set_file(&self, doc: &mut Doc, file: GraphFile) {
-        doc.blocked.clear();
-        match self.check(&file) {
+        let checked = self.check(&file);
+        self.install(doc, file, checked);
+    }
+
+    /// Makes `file` the graph, with its check's result; a graph that would read outside the
+    /// studio's folders is kept but not runnable.
+    fn install(
+        &self,
+        doc: &mut Doc,
+        file: GraphFile,
+        checked: Result<CheckedGraph, Vec<GraphError>>,
+    ) {
+        match checked {
             Ok(g) => {
                 doc.errors.clear();
                 doc.blocked = self.reads_outside(&g);
@@ -245,6 +256,7 @@ impl Studio {
             }
             Err(errors) => {
                 doc.errors = errors;
+                doc.blocked.clear();
                 doc.checked = None;
             }
         }
@@ -265,9 +277,10 @@ impl Studio {
             errors: vec![Problem::plain(m)],
         })?;
         let before: BTreeSet<String> = doc.errors.iter().map(|e| e.to_string()).collect();
-        match self.check(&file) {
+        let checked = self.check(&file);
+        match &checked {
             Ok(g) => {
-                let outside = self.reads_outside(&g);
+                let outside = self.reads_outside(g);
                 if !outside.is_empty() {
                     return Err(Refused { errors: outside });
                 }
@@ -284,7 +297,7 @@ impl Studio {
                 }
             }
         }
-        self.set_file(&mut doc, file);
+        self.install(&mut doc, file, checked);
         let revision = doc.revision;
         drop(doc);
         self.hub

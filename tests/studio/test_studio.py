@@ -350,3 +350,29 @@ def test_acceptance_mdf_render_rank_change_reruns_only_what_it_affects(studio_of
         return d && d !== {json.dumps(before)} ? d : null;""", 60, "the new render")
     assert after != before
     shot(browser, "studio-mdf-render.png")
+
+
+@needs_browser
+def test_a_sweep_started_in_the_studio_fills_its_table_and_charts(studio_of, browser):
+    from selenium.webdriver.support.ui import Select
+
+    s = studio_of(ROOT / "graphs" / "quickstart.json")
+    browser.get(s.url)
+    wait_loaded(browser)
+    click(browser, '#tabs button[data-tab="sweep"]')
+    Select(browser.find_element("css selector", "#sweep-param")).select_by_value("surface.depth")
+    browser.find_element("css selector", "#sweep-values").send_keys("2, 4, 8")
+    click(browser, '#sweep-measures input[value="normals.rms_slope"]')
+    click(browser, "#sweep-start")
+    wait(browser, """const t = document.querySelector('#sweep-table');
+        const imgs = document.querySelectorAll('#sweep-results img.chart');
+        return t && t.querySelectorAll('tr').length === 4 && imgs.length > 0 &&
+               [...imgs].every(i => i.complete && i.naturalWidth > 0);""", 120, "the sweep's table and charts")
+    cells = browser.execute_script("""return [...document.querySelectorAll('#sweep-table tr')].slice(1)
+        .map(r => [...r.querySelectorAll('td')].map(td => td.textContent));""")
+    assert [c[0] for c in cells] == ["2", "4", "8"]
+    # Deeper weave, steeper normals: the measure grows with the depth.
+    slopes = [float(c[1]) for c in cells]
+    assert slopes[0] < slopes[1] < slopes[2], slopes
+    assert (s.dir / "out" / "sweep" / "sweep.csv").exists()
+    shot(browser, "studio-sweep.png")

@@ -691,7 +691,7 @@ async function viewBrdfMap(body, n, meta) {
 }
 
 // A plot frame with axes; `lx`/`ly` choose log scales. Returns the SVG and a point mapper.
-function plotFrame(xs, ys, { lx, ly, xlabel, ylabel, w = 440, h = 300 }) {
+function plotFrame(xs, ys, { lx, ly, xlabel, ylabel, w = 420, h = 300 }) {
   const f = (v, log) => log ? Math.log10(v) : v;
   const fx = xs.map(v => f(v, lx)).filter(Number.isFinite), fy = ys.map(v => f(v, ly)).filter(Number.isFinite);
   let [x0, x1] = [Math.min(...fx), Math.max(...fx)], [y0, y1] = [Math.min(...fy), Math.max(...fy)];
@@ -880,7 +880,6 @@ function renderSweepResults() {
       sw.rows.map(r => el("tr", {}, r.cells.map(c => el("td", { class: "num" }, fmt(c))))));
     const parts = [el("h3", {}, `${sw.rows.length} of ${sw.total} runs` + (sw.running ? " — running" : " — done")), table];
     // Each measure against the varied value, drawn as the rows arrive.
-    const nv = cols.length - (sw.rows[0] ? sw.rows[0].cells.length - 1 : cols.length - 1);
     for (let m = 1; m < cols.length && sw.rows.length; m++) {
       const xs = sw.rows.map((r, i) => typeof r.cells[0] === "number" ? r.cells[0] : i), ys = sw.rows.map(r => r.cells[m]);
       if (!ys.some(v => typeof v === "number")) continue;
@@ -890,7 +889,6 @@ function renderSweepResults() {
       ok.forEach(([x, y]) => svg.append(sv("circle", { cx: X(x), cy: Y(y), r: 3, fill: "#6aa9ff" })));
       parts.push(svg);
     }
-    void nv;
     if (!sw.running) {
       if (sw.error) parts.push(el("div", { class: "error-box" }, sw.error));
       if (sw.csv) parts.push(el("div", {}, el("a", { href: url(`/api/file?path=${encodeURIComponent(sw.csv)}`), target: "_blank" }, "sweep.csv")));
