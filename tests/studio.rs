@@ -14,6 +14,18 @@ use std::path::PathBuf;
 use std::process::{Child, Stdio};
 use std::time::{Duration, Instant};
 
+/// Calls `f` every 50 ms until it gives a value; fails after `limit_s` seconds, saying `what`.
+fn poll<T>(what: &str, limit_s: u64, mut f: impl FnMut() -> Option<T>) -> T {
+    let t = Instant::now();
+    loop {
+        if let Some(v) = f() {
+            return v;
+        }
+        assert!(t.elapsed() < Duration::from_secs(limit_s), "{what}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
 struct Studio {
     child: Child,
     addr: String,
@@ -162,15 +174,10 @@ impl Studio {
     }
     /// Waits until no run is pending or running and a report exists.
     fn settle(&self) -> Value {
-        let t = Instant::now();
-        loop {
+        poll("never settled", 300, || {
             let s = self.state();
-            if s["running"] == false && !s["report"].is_null() {
-                return s;
-            }
-            assert!(t.elapsed() < Duration::from_secs(300), "never settled");
-            std::thread::sleep(Duration::from_millis(50));
-        }
+            (s["running"] == false && !s["report"].is_null()).then_some(s)
+        })
     }
     fn events(&self) -> Events {
         let mut s = TcpStream::connect(&self.addr).expect("connect");
@@ -554,14 +561,9 @@ fn a_client_that_disconnects_mid_run_leaves_the_run_and_the_others_alone() {
     r.sort();
     assert_eq!(r, vec!["mdf", "save", "surface"]);
     // The client that left is forgotten (at the next event or keep-alive, every 2 s).
-    let t = Instant::now();
-    while s.state()["clients"] != 1 {
-        assert!(
-            t.elapsed() < Duration::from_secs(10),
-            "the gone client is still counted"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    poll("the gone client is still counted", 10, || {
+        (s.state()["clients"] == 1).then_some(())
+    });
 }
 
 #[test]
@@ -590,27 +592,16 @@ fn saving_changes_only_the_edited_value_and_an_editor_change_is_picked_up() {
     // An editor changes the file: the studio reloads it and re-runs.
     s.settle();
     std::fs::write(&s.graph, text.replace("\"count\": 8", "\"count\": 4")).unwrap();
-    let t = Instant::now();
-    loop {
+    poll("the edit was not picked up", 30, || {
         let st = s.state();
-        if st["nodes"][0]["params"]["count"] == 4 && st["running"] == false {
-            let report = &st["report"];
-            let surface = report["nodes"]
-                .as_array()
-                .unwrap()
-                .iter()
-                .find(|n| n["id"] == "surface")
-                .unwrap();
-            if surface["status"] == "computed" {
-                break;
-            }
-        }
-        assert!(
-            t.elapsed() < Duration::from_secs(30),
-            "the edit was not picked up"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+        let surface_computed = st["report"]["nodes"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .any(|n| n["id"] == "surface" && n["status"] == "computed");
+        (st["nodes"][0]["params"]["count"] == 4 && st["running"] == false && surface_computed)
+            .then_some(())
+    });
 }
 
 #[test]
@@ -667,14 +658,9 @@ fn nodes_are_added_connected_with_the_type_check_and_removed() {
         "{}",
         st["errors"]
     );
-    let t = Instant::now();
-    while !s.scratch.path("out/extra.png").exists() {
-        assert!(
-            t.elapsed() < Duration::from_secs(30),
-            "extra.png never written"
-        );
-        std::thread::sleep(Duration::from_millis(100));
-    }
+    poll("extra.png never written", 30, || {
+        s.scratch.path("out/extra.png").exists().then_some(())
+    });
     // Removing a node also removes the connections from it.
     assert_eq!(s.post("/api/remove", json!({ "id": "normals" })).0, 200);
     let st = s.state();
@@ -789,15 +775,10 @@ fn a_graph_that_reads_outside_the_studios_folders_is_shown_but_not_run() {
         json!(png.display().to_string())
     );
     let s = start(&text);
-    let t = Instant::now();
-    let st = loop {
+    let st = poll("the studio never settled", 30, || {
         let st = s.state();
-        if st["running"] == false {
-            break st;
-        }
-        assert!(t.elapsed() < Duration::from_secs(30));
-        std::thread::sleep(Duration::from_millis(50));
-    };
+        (st["running"] == false).then_some(st)
+    });
     assert!(st["report"].is_null(), "it ran: {}", st["report"]);
     let errors = st["errors"].to_string();
     assert!(errors.contains("outside the studio's folders"), "{errors}");
@@ -824,11 +805,9 @@ fn a_missing_graph_or_a_taken_port_is_a_clear_error() {
 fn a_file_that_does_not_parse_is_shown_and_never_overwritten() {
     let broken = "{ \"mesoflow\": 1, \"nodes\": { \"a\": ";
     let s = start(broken);
-    let t = Instant::now();
-    while s.state()["load_error"].is_null() {
-        assert!(t.elapsed() < Duration::from_secs(10));
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    poll("the parse error is not shown", 10, || {
+        (!s.state()["load_error"].is_null()).then_some(())
+    });
     let (code, body) = s.post("/api/save", json!({}));
     assert_eq!(code, 409, "{body}");
     assert_eq!(std::fs::read_to_string(&s.graph).unwrap(), broken);
