@@ -237,29 +237,33 @@ impl Studio {
 
     fn set_file(&self, doc: &mut Doc, file: GraphFile) {
         let checked = self.check(&file);
-        self.install(doc, file, checked);
+        let blocked = checked
+            .as_ref()
+            .map(|g| self.reads_outside(g))
+            .unwrap_or_default();
+        self.install(doc, file, checked, blocked);
     }
 
-    /// Makes `file` the graph, with its check's result; a graph that would read outside the
-    /// studio's folders is kept but not runnable.
+    /// Makes `file` the graph, with its check's result and the reads it would make outside the
+    /// studio's folders (`blocked`): a graph with any is kept but not runnable.
     fn install(
         &self,
         doc: &mut Doc,
         file: GraphFile,
         checked: Result<CheckedGraph, Vec<GraphError>>,
+        blocked: Vec<Problem>,
     ) {
         match checked {
             Ok(g) => {
                 doc.errors.clear();
-                doc.blocked = self.reads_outside(&g);
-                doc.checked = doc.blocked.is_empty().then_some(g);
+                doc.checked = blocked.is_empty().then_some(g);
             }
             Err(errors) => {
                 doc.errors = errors;
-                doc.blocked.clear();
                 doc.checked = None;
             }
         }
+        doc.blocked = blocked;
         doc.file = file;
         doc.revision += 1;
     }
@@ -297,7 +301,8 @@ impl Studio {
                 }
             }
         }
-        self.install(&mut doc, file, checked);
+        // The edit was refused above had it read outside: nothing is blocked.
+        self.install(&mut doc, file, checked, Vec::new());
         let revision = doc.revision;
         drop(doc);
         self.hub
