@@ -3,9 +3,15 @@ camera (vertical fov), one directional light, a diffuse BSDF, direct illuminatio
 pixel filter; writes the RGBA image (alpha: the fraction of each pixel's samples that hit) as a
 float32 .npy of shape (height, width, 4).
 
+With a "medium" ({"sigma_t": [r, g, b], "albedo": [r, g, b], "g": g}, world units) the mesh is
+instead the index-matched boundary (a `null` BSDF) of that homogeneous medium with a
+Henyey-Greenstein phase function, rendered by `volpath` (or the medium's "integrator", e.g.
+`volpathmis`: spectral MIS, far less colour noise) with no depth limit: mesoflow's
+volumetric reference.
+
     python mitsuba_reference.py SCENE.json OUT.npy
 
-SCENE.json: {"mesh": PLY path, "camera": {eye, target, up, fov, resolution: [w, h]},
+SCENE.json: {"mesh": PLY path, "camera": {eye, target, up, fov, resolution: [w, h]}, "seed" (7),
 "light": {direction (towards the light), intensity}, "albedo": [r, g, b], "samples": N}.
 """
 import json
@@ -20,7 +26,7 @@ def main(scene_path, out_path):
     cfg = json.load(open(scene_path))
     cam, light = cfg["camera"], cfg["light"]
     width, height = cam["resolution"]
-    scene = mi.load_dict({
+    scene_dict = {
         "type": "scene",
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
         "sensor": {
@@ -33,7 +39,7 @@ def main(scene_path, out_path):
                 "type": "hdrfilm", "width": width, "height": height,
                 "pixel_format": "rgba", "rfilter": {"type": "box"},
             },
-            "sampler": {"type": "independent", "sample_count": cfg["samples"], "seed": 7},
+            "sampler": {"type": "independent", "sample_count": cfg["samples"], "seed": cfg.get("seed", 7)},
         },
         # Mitsuba's direction is the one the light travels in.
         "light": {
@@ -45,7 +51,26 @@ def main(scene_path, out_path):
             "type": "ply", "filename": cfg["mesh"],
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": cfg["albedo"]}},
         },
-    })
+    }
+    medium = cfg.get("medium")
+    if medium is not None:
+        # Russian roulette past the fifth event, volpath's default, stops a path with
+        # probability 5% per event even where nothing is absorbed (its survival probability is
+        # capped at 0.95): paths of hundreds of events through marble then carry weights of 10⁹,
+        # the image is fireflies. Without it, paths end when they leave or are absorbed.
+        scene_dict["integrator"] = {"type": medium.get("integrator", "volpath"), "max_depth": -1,
+                                    "rr_depth": 1 << 30}
+        scene_dict["shape"]["bsdf"] = {"type": "null"}
+        # An RGB value must lie in [0, 1]: the extinction is given as a colour times a scale.
+        scale = max(medium["sigma_t"])
+        scene_dict["shape"]["interior"] = {
+            "type": "homogeneous",
+            "scale": scale,
+            "sigma_t": {"type": "rgb", "value": [s / scale for s in medium["sigma_t"]]},
+            "albedo": {"type": "rgb", "value": medium["albedo"]},
+            "phase": {"type": "hg", "g": medium["g"]},
+        }
+    scene = mi.load_dict(scene_dict)
     image = np.array(mi.render(scene), dtype=np.float32)
     np.save(out_path, image)
 

@@ -13,3 +13,4 @@ pub mod render_mesh;
 pub mod rings;
 pub mod scene_footprint;
 pub mod shade;
+pub mod volume;

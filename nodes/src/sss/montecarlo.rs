@@ -95,10 +95,10 @@ impl Tally {
 }
 
 /// SplitMix64 (Steele, Lea & Flood 2014) as a stream.
-struct Stream(u64);
+pub(crate) struct Stream(pub(crate) u64);
 
 impl Stream {
-    fn unit(&mut self) -> f64 {
+    pub(crate) fn unit(&mut self) -> f64 {
         let v = rng::mix(self.0);
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         rng::unit(v)
@@ -106,7 +106,7 @@ impl Stream {
 }
 
 /// Cosine of the scattering angle drawn from Henyey–Greenstein by inverting its CDF.
-fn sample_hg(g: f64, u: f64) -> f64 {
+pub(crate) fn sample_hg(g: f64, u: f64) -> f64 {
     if g.abs() < 1e-6 {
         return 2.0 * u - 1.0;
     }
@@ -115,7 +115,7 @@ fn sample_hg(g: f64, u: f64) -> f64 {
 }
 
 /// Turns `d` by the polar angle with cosine `cos` and azimuth `phi`.
-fn rotate(d: [f64; 3], cos: f64, phi: f64) -> [f64; 3] {
+pub(crate) fn rotate(d: [f64; 3], cos: f64, phi: f64) -> [f64; 3] {
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
     // An orthonormal frame around d (Duff et al. 2017's branchless construction).
     let sign = 1f64.copysign(d[2]);
