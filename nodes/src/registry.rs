@@ -26,6 +26,7 @@ pub fn registry() -> Registry {
     r.register(crate::image::flip::Flip);
     r.register(crate::render::scene_footprint::SceneFootprint);
     r.register(crate::image::row::Row);
+    r.register(crate::image::difference::Difference);
     r.register(crate::image::blur::Blur);
     r.register(crate::image::ramp::Ramp);
     r.register(crate::image::colorize::Colorize);

@@ -3,6 +3,7 @@
 pub mod blur;
 pub mod colorize;
 pub mod compare;
+pub mod difference;
 pub mod flip;
 pub mod ramp;
 pub mod row;
