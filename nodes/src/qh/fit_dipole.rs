@@ -313,6 +313,7 @@ impl Forward<'_> {
                     Model::Dipole | Model::Montecarlo => Dipole::new(s, a, eta).rd(r),
                     Model::BetterDipole => Medium::new(s, a, 0.0, eta).better_dipole(r),
                     Model::Pbd => Medium::new(s, a, 0.0, eta).pbd(r),
+                    Model::PbdMultiple => Medium::new(s, a, 0.0, eta).pbd_multiple(r),
                 })
                 .collect(),
             Forward::Table(t) => {

@@ -104,6 +104,8 @@ impl Params {
             shadow_resolution: self.shadow_resolution,
             background: self.background,
             seed: self.seed,
+            geometry: sss_render::Geometry::Planar,
+            bounces: 0,
             mode: self.mode,
         }
     }

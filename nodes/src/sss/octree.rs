@@ -4,18 +4,20 @@
 //! threshold — is evaluated as one point source; nearer nodes are opened down to single points.
 //! Threshold 0 opens everything (brute force).
 
-/// One irradiance sample: position (mm) and E·ΔA per channel.
+/// One irradiance sample: position (mm), unit surface normal and E·ΔA per channel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Source {
     pub p: [f64; 3],
+    pub n: [f64; 3],
     pub power: [f64; 3],
 }
 
 struct Node {
     lo: [f64; 3],
     hi: [f64; 3],
-    /// Weighted mean position and summed power.
+    /// Weighted mean position and normal (unit, or zero where the normals cancel), summed power.
     centre: [f64; 3],
+    normal: [f64; 3],
     power: [f64; 3],
     area: f64,
     /// Children (indices into `nodes`), or for a leaf the range of `order`.
@@ -59,6 +61,7 @@ impl Octree {
         let mut hi = [f64::NEG_INFINITY; 3];
         let mut power = [0.0; 3];
         let mut centre = [0.0; 3];
+        let mut normal = [0.0; 3];
         let mut weight = 0.0;
         for &i in &self.order[first..first + count] {
             let s = &self.sources[i];
@@ -69,6 +72,7 @@ impl Octree {
                 hi[k] = hi[k].max(s.p[k]);
                 power[k] += s.power[k];
                 centre[k] += w * s.p[k];
+                normal[k] += w * s.n[k];
             }
             weight += w;
         }
@@ -77,6 +81,7 @@ impl Octree {
             lo,
             hi,
             centre: centre.map(|c| c / weight),
+            normal: crate::geometry::normalize(normal).unwrap_or([0.0; 3]),
             power,
             area: count as f64 * self.area_each,
             children: Vec::new(),
@@ -113,15 +118,16 @@ impl Octree {
         id
     }
 
-    /// Σ Rd(‖x − p‖)·power over sources at least `near` away from x, with far nodes lumped
-    /// where ΔA/d² < `threshold`. `rd(r)` returns Rd per channel. Returns the sum and how many
-    /// terms were evaluated.
+    /// Σ Rd·power over sources at least `near` away from x, with far nodes lumped where
+    /// ΔA/d² < `threshold`. `rd(p, n, d²)` returns Rd per channel for a source at p with normal n
+    /// (a lumped node's mean) at squared distance d² from x. Returns the sum and how many terms
+    /// were evaluated.
     pub fn gather(
         &self,
         x: [f64; 3],
         near: f64,
         threshold: f64,
-        rd: &dyn Fn(f64) -> [f64; 3],
+        rd: &dyn Fn([f64; 3], [f64; 3], f64) -> [f64; 3],
     ) -> ([f64; 3], usize) {
         let mut sum = [0.0; 3];
         let mut evaluated = 0;
@@ -130,10 +136,10 @@ impl Octree {
         }
         let near2 = near * near;
         let mut stack = vec![0usize];
-        let add = |p: [f64; 3], power: [f64; 3], sum: &mut [f64; 3]| {
+        let add = |p: [f64; 3], n: [f64; 3], power: [f64; 3], sum: &mut [f64; 3]| {
             let d2 = dist2(x, p);
             if d2 >= near2 {
-                let r = rd(d2.sqrt());
+                let r = rd(p, n, d2);
                 for k in 0..3 {
                     sum[k] += r[k] * power[k];
                 }
@@ -146,12 +152,12 @@ impl Octree {
             // A node whose centre lies inside the near disc is opened, so that only its points
             // inside the disc are left out, as brute force does.
             if !inside && threshold > 0.0 && node.area < threshold * d2 && d2 >= near2 {
-                add(node.centre, node.power, &mut sum);
+                add(node.centre, node.normal, node.power, &mut sum);
                 evaluated += 1;
             } else if node.children.is_empty() {
                 for &i in &self.order[node.first..node.first + node.count] {
                     let s = &self.sources[i];
-                    add(s.p, s.power, &mut sum);
+                    add(s.p, s.n, s.power, &mut sum);
                     evaluated += 1;
                 }
             } else {
@@ -170,6 +176,7 @@ mod tests {
         (0..n * n)
             .map(|i| Source {
                 p: [(i % n) as f64, (i / n) as f64, 0.0],
+                n: [0.0, 0.0, 1.0],
                 power: [1.0, 0.5, 0.25],
             })
             .collect()
@@ -194,7 +201,8 @@ mod tests {
                 brute[k] += r[k] * s.power[k];
             }
         }
-        let (exact, n) = tree.gather(x, 0.0, 0.0, &rd);
+        let rd3 = |_: [f64; 3], _: [f64; 3], d2: f64| rd(d2.sqrt());
+        let (exact, n) = tree.gather(x, 0.0, 0.0, &rd3);
         assert_eq!(n, 1600);
         for k in 0..3 {
             assert!((exact[k] - brute[k]).abs() < 1e-9 * brute[k]);
@@ -202,7 +210,7 @@ mod tests {
         // Lumped: fewer terms, and the error shrinks with the threshold.
         let mut last = f64::INFINITY;
         for t in [0.5, 0.1, 0.02] {
-            let (s, m) = tree.gather(x, 0.0, t, &rd);
+            let (s, m) = tree.gather(x, 0.0, t, &rd3);
             let err = (0..3)
                 .map(|k| ((s[k] - brute[k]) / brute[k]).abs())
                 .fold(0.0, f64::max);
@@ -214,7 +222,7 @@ mod tests {
         }
         assert!(last < 1e-3, "{last}");
         // Points closer than `near` are left out.
-        let (s, _) = tree.gather([0.0, 0.0, 0.0], 0.5, 0.0, &|_| [1.0; 3]);
+        let (s, _) = tree.gather([0.0, 0.0, 0.0], 0.5, 0.0, &|_, _, _| [1.0; 3]);
         assert!((s[0] - 1599.0).abs() < 1e-9);
     }
 }

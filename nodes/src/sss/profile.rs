@@ -30,6 +30,9 @@ pub enum Model {
     BetterDipole,
     /// Photon beam diffusion (Habel et al. 2013), multiple plus single scattering.
     Pbd,
+    /// Photon beam diffusion's multiple scattering alone: for a render that adds single
+    /// scattering itself (`sss.render`'s `single_scattering`), which `pbd` would count twice.
+    PbdMultiple,
     /// Photon tracing in a semi-infinite medium: the reference.
     Montecarlo,
 }
@@ -40,6 +43,7 @@ impl Model {
             Model::Dipole => "dipole",
             Model::BetterDipole => "better_dipole",
             Model::Pbd => "pbd",
+            Model::PbdMultiple => "pbd_multiple",
             Model::Montecarlo => "montecarlo",
         }
     }
@@ -48,7 +52,7 @@ impl Model {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// `dipole`, `better_dipole`, `pbd` (photon beam diffusion) or `montecarlo` (the photon-tracing reference).
+    /// `dipole`, `better_dipole`, `pbd` (photon beam diffusion), `pbd_multiple` (its multiple scattering alone) or `montecarlo` (the photon-tracing reference).
     pub model: Model,
     /// Radius samples.
     #[schemars(range(min = 8, max = 1000000))]
@@ -184,6 +188,10 @@ fn analytic(
             let md = Medium::new(m.sigma_s_prime[c], m.sigma_a[c], m.g, m.eta);
             Box::new(move |r| md.pbd(r))
         }
+        Model::PbdMultiple => {
+            let md = Medium::new(m.sigma_s_prime[c], m.sigma_a[c], m.g, m.eta);
+            Box::new(move |r| md.pbd_multiple(r))
+        }
     }
 }
 
@@ -266,7 +274,7 @@ pub fn tabulate(m: &ScatteringMaterial, p: &Params, watch: &Counter) -> Tabulate
     let cdf = [0, 1, 2].map(|c| cumulative(&radii, &rd[c]));
     let mfp = [0, 1, 2].map(|c| {
         let sigma_tr = match p.model {
-            Model::BetterDipole | Model::Pbd => {
+            Model::BetterDipole | Model::Pbd | Model::PbdMultiple => {
                 Medium::new(m.sigma_s_prime[c], m.sigma_a[c], m.g, m.eta).sigma_tr()
             }
             _ => Dipole::new(m.sigma_s_prime[c], m.sigma_a[c], m.eta).sigma_tr,

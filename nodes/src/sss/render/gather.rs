@@ -62,12 +62,10 @@ pub(super) fn gather_cpu(
             let sums: Vec<([f64; 3], usize)> = block
                 .iter()
                 .map(|h| match h {
-                    Some((p, ..)) if !stopped => {
-                        setup
-                            .octree
-                            .gather(p.map(|v| v * unit), setup.near, threshold, &|r| {
-                                setup.table.at(r)
-                            })
+                    Some((p, n, ..)) if !stopped => {
+                        let xo = p.map(|v| v * unit);
+                        let rd = |q: V3, nq: V3, d2: f64| setup.rd(xo, *n, q, nq, d2);
+                        setup.octree.gather(xo, setup.near, threshold, &rd)
                     }
                     _ => ([0.0; 3], 0),
                 })

@@ -30,13 +30,16 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
+mod bounce;
 mod gather;
+mod geometry;
 mod setup;
 mod shading;
 #[cfg(test)]
 mod tests;
 
 use gather::{gather_cpu, gather_gpu, View};
+pub use geometry::Geometry;
 pub use setup::shadow_map;
 use setup::Setup;
 use shading::finish;
@@ -71,6 +74,14 @@ pub struct Params {
     pub background: [f64; 3],
     /// Seed of the sample points.
     pub seed: u64,
+    /// Bounces of light leaving one part of the object and entering another (0 to 8): what a
+    /// concave object's inner sides send each other.
+    #[schemars(range(min = 0, max = 8))]
+    pub bounces: u32,
+    /// `planar` (default): the profile at the straight distance, as on a flat half-space.
+    /// `exit_normal`: scaled by the dipole's flux through the shaded point's own normal, so that
+    /// light passes through thin and curved parts (the gather then runs on the CPU).
+    pub geometry: Geometry,
     /// `diffusion` (default): the profile gathered over irradiance samples. `brdf`: the
     /// profile's total reflectance as a diffuse lobe with the Fresnel transmittances in and out,
     /// no samples and no gather: right where light scatters less far than a pixel covers.
@@ -102,6 +113,8 @@ impl Default for Params {
             shadow_resolution: 1024,
             background: [0.0; 3],
             seed: 1,
+            geometry: Geometry::Planar,
+            bounces: 0,
             mode: Mode::Diffusion,
         }
     }
@@ -118,7 +131,8 @@ impl Node for Render {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.render",
-            version: 3,
+            // 4: the `geometry` parameter.
+            version: 4,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -255,10 +269,11 @@ pub fn render_with(
     let gather_start = Instant::now();
     let (sums, terms) = match (p.mode, gpu) {
         (Mode::Brdf, _) => (vec![[0.0; 3]; view.hits.len()], 0.0),
-        (Mode::Diffusion, Some(gpu)) => {
+        // The GPU gather knows the planar profile only.
+        (Mode::Diffusion, Some(gpu)) if p.geometry == Geometry::Planar => {
             (gather_gpu(gpu, &setup, &view)?, setup.sources.len() as f64)
         }
-        (Mode::Diffusion, None) => gather_cpu(&setup, &view, p.threshold, watch),
+        (Mode::Diffusion, _) => gather_cpu(&setup, &view, p.threshold, watch),
     };
     if watch.stopped() {
         return Err(NodeError::Cancelled);
@@ -298,6 +313,9 @@ pub fn check_params(p: &Params) -> Result<(), NodeError> {
             "threshold",
             "must be finite and not negative",
         ));
+    }
+    if p.bounces > 8 {
+        return Err(NodeError::param("bounces", "must be in [0, 8]"));
     }
     Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     Light::new(&p.light).map(drop)

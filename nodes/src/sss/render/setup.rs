@@ -1,6 +1,8 @@
 //! What every pixel shares: the Rd table, the near-disc energy, the irradiance samples as
 //! octree sources (with the shadow map that decides which are lit).
 
+use super::bounce;
+use super::geometry::{ExitNormal, Geometry};
 use super::{Params, Weights, MIN_POINTS};
 use crate::geometry::{bounding_sphere, dot, normalize, sub, V3};
 use crate::progress::Counter;
@@ -10,7 +12,7 @@ use crate::render::light::Light;
 use crate::render::shade::{shadow_bias, ShadowMap};
 use crate::sss::fresnel;
 use crate::sss::octree::{Octree, Source};
-use crate::sss::points;
+use crate::sss::points::{self, SamplePoint};
 use crate::types::{DiffusionProfile, Mesh, ScatteringMaterial};
 use mesoflow_runtime::NodeError;
 use rayon::prelude::*;
@@ -87,6 +89,10 @@ pub(super) struct Setup {
     pub(super) eta: f64,
     /// mm per world unit.
     pub(super) unit: f64,
+    /// The shape's term, with `exit_normal` geometry.
+    pub(super) exit_normal: Option<ExitNormal>,
+    /// With `bounces`, the light between parts.
+    pub(super) bounced: Option<Bounced>,
 }
 
 /// Transmittance into the medium from outside at cosine `cos` (1 − Fr seen from outside).
@@ -172,6 +178,7 @@ impl Setup {
                 };
                 Source {
                     p: s.p.map(|v| v * unit),
+                    n: s.n,
                     power: f.map(|f| f * e * area_each),
                 }
             })
@@ -188,8 +195,100 @@ impl Setup {
             shadow,
             eta: material.eta,
             unit,
+            exit_normal: (p.geometry == Geometry::ExitNormal).then(|| ExitNormal::new(material)),
+            bounced: None,
+        })
+        .map(|mut setup| {
+            if p.bounces > 0 {
+                setup.bounce(mesh, &samples.points, p, area_each);
+            }
+            setup
         })
     }
+
+    /// Rd per channel between the shaded point `xo` (mm, normal `no`) and a source at `q` with
+    /// normal `nq`, d² apart.
+    pub(super) fn rd(&self, xo: V3, no: V3, q: V3, nq: V3, d2: f64) -> [f64; 3] {
+        let r = self.table.at(d2.sqrt());
+        match &self.exit_normal {
+            Some(en) => {
+                let f = en.factor(xo, no, q, nq);
+                [0, 1, 2].map(|c| r[c] * f[c])
+            }
+            None => r,
+        }
+    }
+
+    /// `bounces` rounds of light between parts (`bounce.rs`): each gathers the samples' own
+    /// exitance from the light so far, sends it to the samples that see it, and rebuilds the
+    /// sources from their direct and arriving light.
+    fn bounce(&mut self, mesh: &Mesh, points: &[SamplePoint], p: &Params, area_each: f64) {
+        let direct: Vec<[f64; 3]> = self
+            .sources
+            .iter()
+            .map(|s| s.power.map(|v| v / area_each))
+            .collect();
+        // The light between parts varies on the scale of the parts, not of the profile's peak:
+        // it is computed on a uniform subset (a prefix of the dart-throwing order) and each
+        // sample takes its nearest member's.
+        let count = points.len().min(bounce::MOST_POINTS);
+        let subset = &points[..count];
+        let spacing = self.spacing_mm / self.unit * (points.len() as f64 / count as f64).sqrt();
+        let nearest = bounce::Nearest::new(subset, spacing);
+        let member: Vec<usize> = points
+            .par_iter()
+            .enumerate()
+            .map(|(i, s)| {
+                if i < count {
+                    i
+                } else {
+                    nearest.find(s.p).unwrap_or(0)
+                }
+            })
+            .collect();
+        let into = 1.0 - 2.0 * fresnel::moment(1, 1.0 / self.eta);
+        let mut arriving = vec![[0.0; 3]; count];
+        for round in 0..p.bounces {
+            let exitance: Vec<[f64; 3]> = self.sources[..count]
+                .par_iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    let (sum, _) = self
+                        .octree
+                        .gather(s.p, self.near, p.threshold, &|q, nq, d2| {
+                            self.rd(s.p, s.n, q, nq, d2)
+                        });
+                    let e = [0, 1, 2].map(|c| direct[i][c] + into * arriving[i][c]);
+                    [0, 1, 2].map(|c| sum[c] + e[c] * self.near_energy[c])
+                })
+                .collect();
+            arriving = bounce::arriving(mesh, subset, &nearest, &exitance, p.seed ^ round as u64);
+            for (i, s) in self.sources.iter_mut().enumerate() {
+                let a = arriving[member[i]];
+                s.power = [0, 1, 2].map(|c| (direct[i][c] + into * a[c]) * area_each);
+            }
+            self.octree = Octree::build(self.sources.clone(), area_each);
+        }
+        self.bounced = Some(Bounced {
+            nearest,
+            arriving: arriving.into_iter().map(|a| a.map(|v| v * into)).collect(),
+        });
+    }
+
+    /// The light from other parts transmitted in at the sample nearest to `x` (world units).
+    pub(super) fn bounced_at(&self, x: V3) -> [f64; 3] {
+        self.bounced
+            .as_ref()
+            .and_then(|b| b.nearest.find(x).map(|i| b.arriving[i]))
+            .unwrap_or([0.0; 3])
+    }
+}
+
+/// What the bounces leave for the pixels' near discs.
+pub(super) struct Bounced {
+    nearest: bounce::Nearest,
+    /// Per sample the transmitted irradiance arriving from other parts.
+    arriving: Vec<[f64; 3]>,
 }
 
 impl Setup {
@@ -217,6 +316,8 @@ impl Setup {
             shadow,
             eta: material.eta,
             unit: p.mm_per_unit,
+            exit_normal: None,
+            bounced: None,
         })
     }
 }

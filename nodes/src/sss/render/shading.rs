@@ -40,7 +40,8 @@ pub(super) fn finish(
         } else {
             [0.0; 3]
         };
-        let m = [0, 1, 2].map(|c| s[c] + e0 * f0[c] * setup.near_energy[c]);
+        let bounced = setup.bounced_at(*x);
+        let m = [0, 1, 2].map(|c| s[c] + (e0 * f0[c] + bounced[c]) * setup.near_energy[c]);
         let v = d.map(|c| -c);
         let cos_o = dot(*n, v).clamp(0.0, 1.0);
         let ft_o = transmit_in(cos_o, eta);

@@ -1,0 +1,156 @@
+//! Light that leaves one part of the object and enters another (a concave object's inner sides
+//! see each other): the exitance M of every irradiance sample is gathered as for a pixel, leaves
+//! as a diffuse radiance M/π, and lands on the samples that see it, found by casting cosine-
+//! distributed rays from each sample into the hemisphere above it (the radiance at a ray's hit is
+//! its nearest sample's). Their diffuse transmittance 1 − Fdr lets it in, where it adds to the
+//! sample's own transmitted irradiance. Each bounce repeats this from the last one's light.
+
+use crate::geometry::{add, dot, mul, V3};
+use crate::render::reference::Tracer;
+use crate::sss::montecarlo::{rotate, Stream};
+use crate::sss::points::SamplePoint;
+use crate::types::Mesh;
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// Rays per sample and bounce.
+pub(super) const RAYS: u64 = 256;
+/// Samples the bounces are computed on, at most.
+pub(super) const MOST_POINTS: usize = 8192;
+
+/// The samples on a hash grid, for the nearest one to a point (world units).
+pub(super) struct Nearest {
+    points: Vec<V3>,
+    cell: f64,
+    grid: HashMap<[i64; 3], Vec<usize>>,
+}
+
+impl Nearest {
+    pub(super) fn new(points: &[SamplePoint], spacing: f64) -> Nearest {
+        let cell = spacing.max(1e-300);
+        let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
+        for (i, s) in points.iter().enumerate() {
+            grid.entry(Self::key(s.p, cell)).or_default().push(i);
+        }
+        Nearest {
+            points: points.iter().map(|s| s.p).collect(),
+            cell,
+            grid,
+        }
+    }
+
+    fn key(p: V3, cell: f64) -> [i64; 3] {
+        p.map(|v| (v / cell).floor() as i64)
+    }
+
+    /// The samples within `radius` of `p` (at most two cells away).
+    fn within(&self, p: V3, radius: f64) -> Vec<usize> {
+        let c = Self::key(p, self.cell);
+        let reach = (radius / self.cell).ceil().clamp(1.0, 2.0) as i64;
+        let mut found = Vec::new();
+        for dx in -reach..=reach {
+            for dy in -reach..=reach {
+                for dz in -reach..=reach {
+                    if let Some(list) = self.grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) {
+                        for &i in list {
+                            let q = self.points[i];
+                            let d2: f64 = (0..3).map(|k| (q[k] - p[k]).powi(2)).sum();
+                            if d2 <= radius * radius {
+                                found.push(i);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        found.sort_unstable();
+        found
+    }
+
+    /// `values` averaged over each sample's neighbours within two cells: the ray estimates'
+    /// noise, not their signal (which varies on the parts' scale).
+    pub(super) fn smooth(&self, values: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        (0..self.points.len())
+            .into_par_iter()
+            .map(|i| {
+                let near = self.within(self.points[i], 2.0 * self.cell);
+                let mut sum = [0.0; 3];
+                for &j in &near {
+                    for c in 0..3 {
+                        sum[c] += values[j][c];
+                    }
+                }
+                sum.map(|v| v / near.len().max(1) as f64)
+            })
+            .collect()
+    }
+
+    /// The nearest sample within a few cells of `p` (ties to the lower index), if any.
+    pub(super) fn find(&self, p: V3) -> Option<usize> {
+        let c = Self::key(p, self.cell);
+        for reach in 1..=3i64 {
+            let mut best: Option<(f64, usize)> = None;
+            for dx in -reach..=reach {
+                for dy in -reach..=reach {
+                    for dz in -reach..=reach {
+                        let Some(list) = self.grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]) else {
+                            continue;
+                        };
+                        for &i in list {
+                            let q = self.points[i];
+                            let d2: f64 = (0..3).map(|k| (q[k] - p[k]).powi(2)).sum();
+                            if best.is_none_or(|(b, j)| d2 < b || (d2 == b && i < j)) {
+                                best = Some((d2, i));
+                            }
+                        }
+                    }
+                }
+            }
+            if let Some((_, i)) = best {
+                return Some(i);
+            }
+        }
+        None
+    }
+}
+
+/// Per sample the irradiance (per channel, outside the surface) arriving from the other samples'
+/// exitance `m` (flux per area leaving, diffuse).
+pub(super) fn arriving(
+    mesh: &Mesh,
+    points: &[SamplePoint],
+    nearest: &Nearest,
+    m: &[[f64; 3]],
+    seed: u64,
+) -> Vec<[f64; 3]> {
+    let tracer = Tracer::new(mesh);
+    let raw: Vec<[f64; 3]> = points
+        .par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let mut sum = [0.0; 3];
+            let from = add(s.p, mul(s.n, tracer.epsilon));
+            for k in 0..RAYS {
+                let mut rng = Stream(crate::rng::hash(seed, &[i as u64, k]));
+                // Cosine-distributed about the normal: cos θ = √u.
+                let cos = rng.unit().sqrt();
+                let d = rotate(s.n, cos, 2.0 * std::f64::consts::PI * rng.unit());
+                let Some(hit) = tracer.closest(from, d) else {
+                    continue;
+                };
+                let (_, ng) = tracer.triangle(hit.tri);
+                if dot(ng, d) >= 0.0 {
+                    continue; // the inside of a surface: no exitance leaves that way
+                }
+                if let Some(j) = nearest.find(add(from, mul(d, hit.t))) {
+                    // E = π · mean L over cosine-distributed rays, with L = M/π.
+                    for c in 0..3 {
+                        sum[c] += m[j][c];
+                    }
+                }
+            }
+            sum.map(|v| v / RAYS as f64)
+        })
+        .collect();
+    nearest.smooth(&raw)
+}
