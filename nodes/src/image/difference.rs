@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 pub struct Params {
     /// The difference shown at full red or blue; default half the reference's 99th-percentile
     /// channel value.
-    #[schemars(range(min = 0.0))]
+    #[schemars(range(min = 1e-12))]
     pub scale: Option<f64>,
 }
 
@@ -39,9 +39,10 @@ impl Node for Difference {
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
         match p.scale {
-            Some(s) if !(s > 0.0 && s.is_finite()) => {
-                Err(NodeError::param("scale", "must be positive and finite"))
-            }
+            Some(s) if !(s >= 1e-12 && s.is_finite()) => Err(NodeError::param(
+                "scale",
+                "must be finite and at least 1e-12",
+            )),
             _ => Ok(()),
         }
     }

@@ -159,6 +159,20 @@ impl Node for Reference {
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let mesh = inputs.get::<Mesh>("mesh")?;
         mesh.check().map_err(|e| NodeError::input("mesh", e))?;
+        let medium = match inputs.opt::<ScatteringMaterial>("medium")? {
+            Some(m) => {
+                if inputs.opt::<Image>("albedo")?.is_some()
+                    || inputs.opt::<NormalMap>("normals")?.is_some()
+                {
+                    return Err(NodeError::input(
+                        "medium",
+                        "a medium's boundary is index-matched, with no surface reflectance: connect `albedo` and `normals` to a surface render instead",
+                    ));
+                }
+                Some(Medium::new(m, p.mm_per_unit).map_err(|e| NodeError::input("medium", e))?)
+            }
+            None => None,
+        };
         let albedo = inputs.opt::<Image>("albedo")?;
         if let Some(a) = albedo {
             if a.channels < 3 || a.width == 0 || a.height == 0 {
@@ -180,18 +194,6 @@ impl Node for Reference {
                 ));
             }
         }
-        let medium = match inputs.opt::<ScatteringMaterial>("medium")? {
-            Some(m) => {
-                if albedo.is_some() || normals.is_some() {
-                    return Err(NodeError::input(
-                        "medium",
-                        "a medium's boundary is index-matched, with no surface reflectance: connect `albedo` and `normals` to a surface render instead",
-                    ));
-                }
-                Some(Medium::new(m, p.mm_per_unit).map_err(|e| NodeError::input("medium", e))?)
-            }
-            None => None,
-        };
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let light = Light::new(&p.light)?;
         let start = Instant::now();

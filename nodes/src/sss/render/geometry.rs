@@ -59,7 +59,7 @@ impl ExitNormal {
             // above the exit plane.
             let kernel = |d: f64| (1.0 + s * d) * (-s * d).exp() / (d * d * d);
             let flat = zr * kernel((r2 + zr * zr).sqrt()) + zv * kernel((r2 + zv * zv).sqrt());
-            if !(flat > 0.0) {
+            if flat.is_nan() || flat <= 0.0 {
                 return 1.0;
             }
             let through = |z: f64| {
