@@ -109,6 +109,17 @@ fn small(graph: &str) -> Vec<String> {
             v.extend(sss(&["marble", "skin", "marble_reference"]));
             v
         }
+        "sss_truth" => {
+            let mut v: Vec<String> = vec![
+                "torus.segments=[32,16]".into(),
+                "marble_truth.samples=4".into(),
+                "skin1_truth.samples=4".into(),
+                "marble_truth.camera.resolution=[32,24]".into(),
+                "skin1_truth.camera.resolution=[32,24]".into(),
+            ];
+            v.extend(sss(&["marble", "skin1", "marble_brute"]));
+            v
+        }
         "truth" => vec![
             "surface.size=16".into(),
             format!("capture.views={DIRS}"),
