@@ -9,6 +9,7 @@ const S = {
   view: { x: 20, y: 20, k: 1 }, preview: { port: null, exposure: 0, srgb: true, zoom: 0,
   against: "", pair: null, viewDir: null, lightDir: null, mdfView: 0, param: 0, xdim: 0,
   ydim: 1, cdim: -1, yaw: 30 }, draws: 0, errorsByField: {}, sweep: null, tab: "node",
+  finishedRuns: 0,
 };
 window.studio = S;
 
@@ -84,7 +85,14 @@ function reportOf(id) {
 
 // ---- state and events -------------------------------------------------------------------
 async function loadState() {
-  S.state = await getJson("/api/state");
+  // A run that finishes while /api/state is in flight must not be undone by the older answer
+  // (it said `running`, and no later event would say otherwise): ask again until no run
+  // finished meanwhile.
+  for (;;) {
+    const finished = S.finishedRuns;
+    const state = await getJson("/api/state");
+    if (S.finishedRuns === finished) { S.state = state; break; }
+  }
   const r = S.state.report;
   if (r && !$("#status-line").textContent) {
     const computed = r.nodes.filter(n => n.status === "computed").map(n => n.id);
@@ -118,6 +126,7 @@ function connect() {
   });
   on("run_skipped", e => setRunState(`run ${e.run} not started: ${e.reason}`, "invalid"));
   on("run_finished", e => {
+    S.finishedRuns += 1;
     if (e.error) { setRunState(`run ${e.run}: ${e.error}`, "failed"); return; }
     S.lastRun = { run: e.run, revision: e.revision, ok: e.ok, cancelled: e.cancelled, reran: e.reran };
     S.live = {}; S.progress = {};
