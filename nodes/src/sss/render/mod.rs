@@ -15,6 +15,11 @@
 //!    locally flat semi-infinite medium (Hanrahan & Krueger 1993): α·Ft(θi)·Ft(θo)/η²·
 //!    p(ωi′·ωo′)·I cos θi/(cos θi′ + cos θo′), with the refracted directions.
 //!
+//! Two options measured against the volumetric truth (`render.reference` with a medium): light
+//! that leaves one part of the object and enters another (`bounces`, `bounce.rs`), and the
+//! entry dipole's flux through the exit point's own normal (`geometry: exit_normal`,
+//! `geometry.rs`).
+//!
 //! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
 
 use crate::geometry::V3;
