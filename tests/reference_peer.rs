@@ -34,16 +34,8 @@ fn graph(camera: &serde_json::Value, light: &serde_json::Value) -> String {
     .to_string()
 }
 
-#[test]
-fn the_reference_renderer_agrees_with_mitsuba() {
-    let Some(python) = peer_python("mitsuba, numpy") else {
-        return;
-    };
-    let s = Scratch::new();
-    let camera = json!({ "eye": [0.0, 1.6, 2.9], "target": [0.0, -0.1, 0.0], "up": [0.0, 1.0, 0.0], "fov": 40.0, "resolution": [96, 72] });
-    // Low and to the side, so that bumps shadow bumps and the ring shadows itself.
-    let light = json!({ "direction": [-0.7, 0.45, 0.35], "intensity": 3.0 });
-    let file = s.write("truth.json", &graph(&camera, &light));
+/// Runs a graph file into `out/` beside it; the folder and its report.
+fn run_graph(s: &Scratch, file: &Path) -> (std::path::PathBuf, serde_json::Value) {
     let out = s.path("out");
     let r = mesoflow(
         &[
@@ -57,6 +49,20 @@ fn the_reference_renderer_agrees_with_mitsuba() {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     let rep = report(&out);
+    (out, rep)
+}
+
+#[test]
+fn the_reference_renderer_agrees_with_mitsuba() {
+    let Some(python) = peer_python("mitsuba, numpy") else {
+        return;
+    };
+    let s = Scratch::new();
+    let camera = json!({ "eye": [0.0, 1.6, 2.9], "target": [0.0, -0.1, 0.0], "up": [0.0, 1.0, 0.0], "fov": 40.0, "resolution": [96, 72] });
+    // Low and to the side, so that bumps shadow bumps and the ring shadows itself.
+    let light = json!({ "direction": [-0.7, 0.45, 0.35], "intensity": 3.0 });
+    let file = s.write("truth.json", &graph(&camera, &light));
+    let (out, rep) = run_graph(&s, &file);
     let n = rep["nodes"]
         .as_array()
         .unwrap()
@@ -166,19 +172,7 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
         "volume.json",
         &json!({ "mesoflow": 1, "nodes": nodes }).to_string(),
     );
-    let out = s.path("out");
-    let r = mesoflow(
-        &[
-            "run",
-            file.to_str().unwrap(),
-            "--quiet",
-            "--out-dir",
-            out.to_str().unwrap(),
-        ],
-        s.dir.path(),
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let rep = report(&out);
+    let (out, rep) = run_graph(&s, &file);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/mitsuba_reference.py");
     for (name, g, sigma_s_prime, sigma_a) in cases {
         let node = rep["nodes"]
