@@ -323,7 +323,6 @@ fn translucent(
     y: usize,
 ) -> Pixel {
     let mut halves = [[0.0; 3]; 2];
-    let mut hits = 0usize;
     let mut tally = volume::Tally::default();
     let pixel_id = (y * camera.width as usize + x) as u64;
     for s in 0..p.samples as usize {
@@ -333,9 +332,6 @@ fn translucent(
             p.seed ^ 0x9a7e_5eed,
             &[pixel_id, s as u64],
         ));
-        if scene.closest(ray.0, ray.1).is_some() {
-            hits += 1;
-        }
         let l = volume::radiance(
             scene,
             medium,
@@ -351,7 +347,7 @@ fn translucent(
     }
     Pixel {
         halves,
-        coverage: hits as f64 / p.samples as f64,
+        coverage: tally.hits as f64 / p.samples as f64,
         tally,
     }
 }

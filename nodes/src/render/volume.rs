@@ -78,6 +78,8 @@ pub struct Tally {
     pub events: u64,
     /// Paths given up after [`MAX_EVENTS`].
     pub lost: u64,
+    /// Paths whose first ray met the mesh (the pixel's coverage).
+    pub hits: u64,
 }
 
 impl Tally {
@@ -85,6 +87,7 @@ impl Tally {
         self.rays += o.rays;
         self.events += o.events;
         self.lost += o.lost;
+        self.hits += o.hits;
     }
 }
 
@@ -148,6 +151,7 @@ pub(crate) fn radiance(
     let mut inside = false;
     let mut sum = [0.0; 3];
     let mut events = 0u64;
+    let mut first = true;
     loop {
         if !inside {
             tally.rays += 1;
@@ -155,6 +159,10 @@ pub(crate) fn radiance(
                 let w = path.weight();
                 return [0, 1, 2].map(|c| sum[c] + w[c] * background[c]);
             };
+            if first {
+                tally.hits += 1;
+                first = false;
+            }
             let (_, ng) = scene.triangle(hit.tri);
             inside = dot(ng, d) < 0.0;
             x = leave(scene, add(x, mul(d, hit.t)), ng, d);
