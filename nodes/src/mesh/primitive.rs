@@ -175,6 +175,25 @@ pub fn build(p: &Params) -> Result<Mesh, NodeError> {
     Ok(mesh)
 }
 
+/// A closed box [−h, h] per axis with outward winding: the tests' slab and cube.
+#[cfg(test)]
+pub(crate) fn closed_box(half: [f32; 3]) -> Mesh {
+    let c = |i: usize| [0, 1, 2].map(|k| if i >> k & 1 == 0 { -half[k] } else { half[k] });
+    let mut m = Mesh {
+        positions: (0..8).map(c).collect(),
+        uvs: vec![[0.0, 0.0]; 8],
+        tangents: vec![[1.0, 0.0, 0.0, 1.0]; 8],
+        // Faces −x, +x, −y, +y, −z, +z, each as two triangles wound outwards.
+        indices: vec![
+            0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5, 0, 1, 5, 0, 5, 4, 2, 6, 7, 2, 7, 3, 0, 2, 3, 0, 3,
+            1, 4, 5, 7, 4, 7, 6,
+        ],
+        ..Default::default()
+    };
+    m.compute_normals();
+    m
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -100,6 +100,7 @@ impl Params {
             max_points: self.max_points,
             threshold: self.threshold,
             single_scattering: false,
+            single_scattering_shape: sss_render::SingleShape::HalfSpace,
             shadows: self.shadows,
             shadow_resolution: self.shadow_resolution,
             background: self.background,
@@ -119,8 +120,9 @@ impl Node for QhRender {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "qh.render",
-            // 4: lights beyond the sampled cone extrapolated in the local term.
-            version: 4,
+            // 4: lights beyond the sampled cone extrapolated in the local term. 5: sss.render's
+            // silhouette pixels covered in proportion.
+            version: 5,
             doc: "Quasi-homogeneous material on a mesh (thesis eq. 5.60): local reflectance (BTF) plus the homogeneous diffusion gather scaled by mesostructure entrance and exiting functions (images, or from a height field).",
             device: DevicePreference::Gpu,
             inputs: vec![

@@ -276,32 +276,7 @@ fn transmittance(
 mod tests {
     use super::*;
     use crate::render::light::LightParams;
-    use crate::types::Mesh;
     use rayon::prelude::*;
-
-    /// A closed cube [−h, h]³, outward winding.
-    fn cube(h: f32) -> Mesh {
-        let c = |i: usize| {
-            [
-                if i & 1 == 0 { -h } else { h },
-                if i & 2 == 0 { -h } else { h },
-                if i & 4 == 0 { -h } else { h },
-            ]
-        };
-        let mut m = Mesh {
-            positions: (0..8).map(c).collect(),
-            uvs: vec![[0.0, 0.0]; 8],
-            tangents: vec![[1.0, 0.0, 0.0, 1.0]; 8],
-            // Faces −x, +x, −y, +y, −z, +z, each as two triangles wound outwards.
-            indices: vec![
-                0, 4, 6, 0, 6, 2, 1, 3, 7, 1, 7, 5, 0, 1, 5, 0, 5, 4, 2, 6, 7, 2, 7, 3, 0, 2, 3, 0,
-                3, 1, 4, 5, 7, 4, 7, 6,
-            ],
-            ..Default::default()
-        };
-        m.compute_normals();
-        m
-    }
 
     /// Chandrasekhar's H function of isotropic scattering with albedo ω, by iterating
     /// H(μ) = 1 / (1 − (ω/2) μ ∫₀¹ H(μ′)/(μ + μ′) dμ′) on a midpoint grid.
@@ -341,7 +316,7 @@ mod tests {
         // reflected radiance is E·ω/(4π)·μ₀/(μ + μ₀)·H(μ)H(μ₀) (Chandrasekhar 1960, §27: the
         // same multiple scattering, independent of any code here). Each channel has its own
         // extinction and albedo, so the spectral MIS's weights are exercised.
-        let mesh = cube(1.0);
+        let mesh = crate::mesh::primitive::closed_box([1.0; 3]);
         let scene = Tracer::new(&mesh);
         let material = ScatteringMaterial {
             sigma_s_prime: [0.999 * 200.0, 0.9 * 100.0, 0.6 * 300.0],

@@ -6,16 +6,26 @@ use crate::geometry::{normalize, V3};
 use crate::progress::Counter;
 use crate::render::camera::Camera;
 use crate::render::layers::{self, Frag};
+use crate::render::reference::Tracer;
 use crate::types::Mesh;
 use mesoflow_runtime::NodeError;
 use rayon::prelude::*;
 
-/// The shading point of each pixel: position (world), normal, view direction.
+/// The shading point of each pixel: position (world), normal, view direction; and the share of
+/// the pixel the object covers.
 pub(super) struct View {
     pub(super) width: usize,
     pub(super) height: usize,
-    pub(super) hits: Vec<Option<(V3, V3, V3, Frag)>>,
+    pub(super) hits: Vec<Option<Shading>>,
+    /// 1 inside the object, 0 outside, the covered share on its silhouette.
+    pub(super) coverage: Vec<f64>,
 }
+
+/// A pixel's shading point: position (world), normal, view direction, fragment.
+pub(super) type Shading = (V3, V3, V3, Frag);
+
+/// Sub-pixel rays per side on a silhouette.
+const EDGE_SIDE: usize = 4;
 
 pub(super) fn surface(mesh: &Mesh, f: &Frag) -> (V3, V3) {
     let (p, n) = mesh.interpolate(f.tri as usize, f.b1, f.b2);
@@ -23,10 +33,14 @@ pub(super) fn surface(mesh: &Mesh, f: &Frag) -> (V3, V3) {
 }
 
 impl View {
-    pub(super) fn new(mesh: &Mesh, camera: &Camera) -> View {
+    /// One ray through each pixel's centre; on the silhouette (a pixel whose centre and a
+    /// neighbour's disagree on hitting the object) [`EDGE_SIDE`]² sub-pixel rays measure the
+    /// covered share, as the reference's samples spread over the pixel do, and a pixel whose
+    /// centre misses is shaded at its covered sample nearest the centre.
+    pub(super) fn new(mesh: &Mesh, camera: &Camera, tracer: &Tracer) -> View {
         let l = layers::trace(mesh, camera, 1, &Counter::none());
         let (w, h) = (camera.width as usize, camera.height as usize);
-        let hits = (0..w * h)
+        let mut hits: Vec<_> = (0..w * h)
             .map(|px| {
                 l.front[px].map(|f| {
                     let (p, n) = surface(mesh, &f);
@@ -35,10 +49,66 @@ impl View {
                 })
             })
             .collect();
+        let centre: Vec<bool> = hits.iter().map(Option::is_some).collect();
+        let mut coverage: Vec<f64> = centre.iter().map(|&c| f64::from(u8::from(c))).collect();
+        let edge = |px: usize| {
+            let (x, y) = ((px % w) as i64, (px / w) as i64);
+            (-1..=1i64).any(|dy| {
+                (-1..=1i64).any(|dx| {
+                    let (nx, ny) = (x + dx, y + dy);
+                    nx >= 0
+                        && ny >= 0
+                        && (nx as usize) < w
+                        && (ny as usize) < h
+                        && centre[ny as usize * w + nx as usize] != centre[px]
+                })
+            })
+        };
+        let edges: Vec<usize> = (0..w * h).filter(|&px| edge(px)).collect();
+        if !edges.is_empty() {
+            let shares: Vec<(usize, f64, Option<Shading>)> = edges
+                .par_iter()
+                .map(|&px| {
+                    let (x, y) = ((px % w) as f64, (px / w) as f64);
+                    let mut covered = 0usize;
+                    // The covered sample nearest the centre, for a centre that misses.
+                    let mut nearest: Option<(f64, Shading)> = None;
+                    for s in 0..EDGE_SIDE * EDGE_SIDE {
+                        let u = ((s % EDGE_SIDE) as f64 + 0.5) / EDGE_SIDE as f64;
+                        let v = ((s / EDGE_SIDE) as f64 + 0.5) / EDGE_SIDE as f64;
+                        let (o, d) = camera.ray_at(x + u, y + v);
+                        let Some(hit) = tracer.closest(o, d) else {
+                            continue;
+                        };
+                        covered += 1;
+                        let off = (u - 0.5).powi(2) + (v - 0.5).powi(2);
+                        if hits[px].is_none() && nearest.as_ref().is_none_or(|(b, _)| off < *b) {
+                            let f = Frag {
+                                t: hit.t,
+                                tri: hit.tri as u32,
+                                b1: hit.b1,
+                                b2: hit.b2,
+                            };
+                            let (p, n) = surface(mesh, &f);
+                            nearest = Some((off, (p, n, d, f)));
+                        }
+                    }
+                    let share = covered as f64 / (EDGE_SIDE * EDGE_SIDE) as f64;
+                    (px, share, nearest.map(|(_, h)| h))
+                })
+                .collect();
+            for (px, share, nearest) in shares {
+                coverage[px] = share;
+                if let Some(h) = nearest {
+                    hits[px] = Some(h);
+                }
+            }
+        }
         View {
             width: w,
             height: h,
             hits,
+            coverage,
         }
     }
 }

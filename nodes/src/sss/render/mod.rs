@@ -28,6 +28,7 @@ use crate::render::camera::{Camera, CameraParams};
 use crate::render::footprint::{self, Footprint};
 use crate::render::layers::Frag;
 use crate::render::light::{Light, LightParams};
+use crate::render::reference::Tracer;
 use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -40,6 +41,7 @@ mod gather;
 mod geometry;
 mod setup;
 mod shading;
+mod single;
 #[cfg(test)]
 mod tests;
 
@@ -70,6 +72,11 @@ pub struct Params {
     pub threshold: f64,
     /// Add single scattering (needs the material's σs, g).
     pub single_scattering: bool,
+    /// Where single scattering happens: `half_space` (default; Hanrahan & Krueger's flat
+    /// semi-infinite medium under each point) or `traced` (along the camera ray inside the mesh
+    /// itself, the light attenuated by the real distance it travels inside: exact at η = 1; at
+    /// η ≠ 1 directions are not bent inside).
+    pub single_scattering_shape: SingleShape,
     /// Shadow-map the light, so that surface not lit directly receives only light transmitted through the material.
     pub shadows: bool,
     /// Shadow map size in texels (square).
@@ -93,6 +100,17 @@ pub struct Params {
     pub mode: Mode,
 }
 
+/// Where single scattering is evaluated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum SingleShape {
+    /// A flat semi-infinite medium under each point (Hanrahan & Krueger 1993).
+    #[default]
+    HalfSpace,
+    /// The mesh itself, by ray tracing (`single.rs`).
+    Traced,
+}
+
 /// How subsurface transport is rendered.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
@@ -114,6 +132,7 @@ impl Default for Params {
             max_points: 200_000,
             threshold: 0.05,
             single_scattering: false,
+            single_scattering_shape: SingleShape::HalfSpace,
             shadows: true,
             shadow_resolution: 1024,
             background: [0.0; 3],
@@ -136,8 +155,9 @@ impl Node for Render {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.render",
-            // 4: the `geometry` parameter.
-            version: 4,
+            // 4: the `geometry` parameter. 5: silhouette pixels covered in proportion;
+            // `single_scattering_shape`.
+            version: 5,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -270,7 +290,8 @@ pub fn render_with(
         Mode::Diffusion => Setup::new(mesh, material, profile, p, &light, weights, &mut warnings)?,
         Mode::Brdf => Setup::local(mesh, material, profile, p, &light)?,
     };
-    let view = View::new(mesh, &camera);
+    let tracer = Tracer::new(mesh);
+    let view = View::new(mesh, &camera, &tracer);
     let gather_start = Instant::now();
     let (sums, terms) = match (p.mode, gpu) {
         (Mode::Brdf, _) => (vec![[0.0; 3]; view.hits.len()], 0.0),
@@ -284,7 +305,20 @@ pub fn render_with(
         return Err(NodeError::Cancelled);
     }
     let gather_seconds = gather_start.elapsed().as_secs_f64();
-    let (image, exitance) = finish(&setup, &view, &sums, p, material, &light, weights);
+    let traced = (p.single_scattering && p.single_scattering_shape == SingleShape::Traced)
+        .then_some(single::Traced {
+            tracer: &tracer,
+            unit: p.mm_per_unit,
+        });
+    let (image, exitance) = finish(
+        &setup,
+        &view,
+        &sums,
+        p,
+        (material, &light),
+        weights,
+        traced.as_ref(),
+    );
     if image
         .data
         .iter()

@@ -3,6 +3,7 @@
 
 use super::gather::View;
 use super::setup::{irradiance, transmit_in, Setup};
+use super::single::Traced;
 use super::{Params, Weights};
 use crate::geometry::{dot, sub, V3};
 use crate::render::light::Light;
@@ -18,9 +19,9 @@ pub(super) fn finish(
     view: &View,
     sums: &[[f64; 3]],
     p: &Params,
-    material: &ScatteringMaterial,
-    light: &Light,
+    (material, light): (&ScatteringMaterial, &Light),
     weights: &dyn Weights,
+    traced: Option<&Traced>,
 ) -> (Image, Image) {
     let eta = setup.eta;
     let fdr_out = 2.0 * fresnel::moment(1, 1.0 / eta);
@@ -45,15 +46,21 @@ pub(super) fn finish(
         let v = d.map(|c| -c);
         let cos_o = dot(*n, v).clamp(0.0, 1.0);
         let ft_o = transmit_in(cos_o, eta);
-        let single = if p.single_scattering {
-            single_scattering(material, light, setup.shadow.as_ref(), *x, *n, v)
-        } else {
-            [0.0; 3]
+        let single = match (p.single_scattering, traced) {
+            (false, _) => [0.0; 3],
+            (true, Some(t)) => {
+                let (_, ng) = t.tracer.triangle(frag.tri as usize);
+                t.radiance(material, light, *x, ng, *d, cos_o)
+            }
+            (true, None) => single_scattering(material, light, setup.shadow.as_ref(), *x, *n, v),
         };
         let (exit, local) = weights.pixel(px, frag, v);
-        radiance.extend(
-            [0, 1, 2].map(|c| (c_norm * ft_o * m[c] * exit[c] + single[c] + local[c]) as f32),
-        );
+        // A silhouette pixel shows the object over its covered share, the background elsewhere.
+        let cover = view.coverage[px];
+        radiance.extend([0, 1, 2].map(|c| {
+            let object = c_norm * ft_o * m[c] * exit[c] + single[c] + local[c];
+            (cover * object + (1.0 - cover) * p.background[c]) as f32
+        }));
         exitance.extend(m.map(|v| v as f32));
     }
     let image = |data| Image {
