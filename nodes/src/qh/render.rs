@@ -108,6 +108,7 @@ impl Params {
             geometry: sss_render::Geometry::Planar,
             bounces: 0,
             mode: self.mode,
+            energy: sss_render::Energy::Profile,
         }
     }
 }

@@ -278,36 +278,6 @@ mod tests {
     use crate::render::light::LightParams;
     use rayon::prelude::*;
 
-    /// Chandrasekhar's H function of isotropic scattering with albedo ω, by iterating
-    /// H(μ) = 1 / (1 − (ω/2) μ ∫₀¹ H(μ′)/(μ + μ′) dμ′) on a midpoint grid.
-    fn chandrasekhar_h(omega: f64) -> impl Fn(f64) -> f64 {
-        const N: usize = 1000;
-        let grid: Vec<f64> = (0..N).map(|i| (i as f64 + 0.5) / N as f64).collect();
-        let at = move |grid: &[f64], h: &[f64], m: f64| {
-            let s: f64 = grid.iter().zip(h).map(|(g, v)| v / (m + g)).sum::<f64>() / N as f64;
-            1.0 / (1.0 - 0.5 * omega * m * s)
-        };
-        let mut h = vec![1.0; N];
-        for _ in 0..1000 {
-            h = grid.iter().map(|&m| at(&grid, &h, m)).collect();
-        }
-        move |m| at(&grid, &h, m)
-    }
-
-    #[test]
-    fn chandrasekhar_h_integrates_to_its_closed_form() {
-        // ∫₀¹ H(μ) dμ = (2/ω)(1 − √(1 − ω)) (Chandrasekhar 1960, §39, the zeroth moment).
-        for omega in [0.999, 0.9, 0.6] {
-            let (n, h) = (400, chandrasekhar_h(omega));
-            let mean = (0..n).map(|i| h((i as f64 + 0.5) / n as f64)).sum::<f64>() / n as f64;
-            let want = 2.0 / omega * (1.0 - (1.0 - omega).sqrt());
-            assert!(
-                (mean - want).abs() < 1e-3 * want,
-                "ω {omega}: {mean} vs {want}"
-            );
-        }
-    }
-
     #[test]
     fn a_semi_infinite_medium_reflects_chandrasekhars_radiance() {
         // A cube 200 to 600 mean free paths deep, seen at 10° from its top face's normal in the
@@ -370,7 +340,7 @@ mod tests {
                 let mean = sums.iter().map(|s| s.0[k]).sum::<f64>() / n;
                 let sq = sums.iter().map(|s| s.1[k]).sum::<f64>() / n;
                 let se = ((sq - mean * mean) / (n - 1.0)).sqrt();
-                let h = chandrasekhar_h(omega);
+                let h = crate::sss::chandrasekhar::h_function(omega);
                 let want = 2.0 * omega / (4.0 * PI) * mu0 / (mu + mu0) * h(mu) * h(mu0);
                 // Five standard errors, plus 0.5% for the H function's grid and the cube's
                 // finite size.

@@ -1,5 +1,6 @@
 //! Subsurface scattering (seed 004, thesis ch. 5): materials, diffusion profiles.
 
+pub mod chandrasekhar;
 pub mod compare;
 pub mod diffusion;
 pub mod dipole;

@@ -29,6 +29,10 @@ pub enum Geometry {
     /// The profile scaled by the entry point's dipole's flux through the exit point's normal:
     /// light through thin and curved parts (CPU gather only).
     ExitNormal,
+    /// The profile scaled by the directional dipole (Frisvad et al. 2014) over its value on a
+    /// plane lit straight down: the light's incident direction and the exit point's normal
+    /// (`directional.rs`; CPU gather only).
+    Directional,
 }
 
 /// Per channel: σtr, zr and zv (mm).

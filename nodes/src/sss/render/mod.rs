@@ -37,6 +37,8 @@ use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 mod bounce;
+mod directional;
+mod energy;
 mod gather;
 mod geometry;
 mod setup;
@@ -45,6 +47,7 @@ mod single;
 #[cfg(test)]
 mod tests;
 
+pub use energy::Energy;
 use gather::{gather_cpu, gather_gpu, View};
 pub use geometry::Geometry;
 pub use setup::shadow_map;
@@ -92,12 +95,20 @@ pub struct Params {
     pub bounces: u32,
     /// `planar` (default): the profile at the straight distance, as on a flat half-space.
     /// `exit_normal`: scaled by the dipole's flux through the shaded point's own normal, so that
-    /// light passes through thin and curved parts (the gather then runs on the CPU).
+    /// light passes through thin and curved parts. `directional`: scaled by the directional
+    /// dipole (Frisvad et al. 2014) over its value on a plane lit straight down, for the
+    /// light's incident direction and the shape. Both run the gather on the CPU.
     pub geometry: Geometry,
     /// `diffusion` (default): the profile gathered over irradiance samples. `brdf`: the
     /// profile's total reflectance as a diffuse lobe with the Fresnel transmittances in and out,
     /// no samples and no gather: right where light scatters less far than a pixel covers.
     pub mode: Mode,
+    /// `profile` (default): the profile's own total reflectance at every angle. `half_space`:
+    /// each sample's light scaled so that the profile returns what a semi-infinite medium of
+    /// the material reflects at that angle of incidence (Chandrasekhar's H function: exact for
+    /// isotropic scattering behind an index-matched boundary, so η = 1 only; g ≠ 0 through the
+    /// reduced albedo); the multiple scattering alone when `single_scattering` adds the first.
+    pub energy: Energy,
 }
 
 /// Where single scattering is evaluated.
@@ -140,6 +151,7 @@ impl Default for Params {
             geometry: Geometry::Planar,
             bounces: 0,
             mode: Mode::Diffusion,
+            energy: Energy::Profile,
         }
     }
 }
@@ -156,7 +168,7 @@ impl Node for Render {
         NodeSpec {
             kind: "sss.render",
             // 4: the `geometry` parameter. 5: silhouette pixels covered in proportion;
-            // `single_scattering_shape`.
+            // `single_scattering_shape`, `geometry: directional`, `energy`.
             version: 5,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,

@@ -2,6 +2,8 @@
 //! octree sources (with the shadow map that decides which are lit).
 
 use super::bounce;
+use super::directional::Directional;
+use super::energy::{Energy, Scale};
 use super::geometry::{ExitNormal, Geometry};
 use super::{Params, Weights, MIN_POINTS};
 use crate::geometry::{bounding_sphere, dot, normalize, sub, V3};
@@ -91,6 +93,10 @@ pub(super) struct Setup {
     pub(super) unit: f64,
     /// The shape's term, with `exit_normal` geometry.
     pub(super) exit_normal: Option<ExitNormal>,
+    /// With `directional` geometry, the directional dipole's factor.
+    pub(super) directional: Option<Directional>,
+    /// With `energy: half_space`, the factor on the light entering.
+    pub(super) energy: Option<Scale>,
     /// With `bounces`, the light between parts.
     pub(super) bounced: Option<Bounced>,
 }
@@ -160,6 +166,7 @@ impl Setup {
         } else {
             None
         };
+        let energy = energy_scale(material, profile, p)?;
         let sources: Vec<Source> = samples
             .points
             .par_iter()
@@ -172,7 +179,12 @@ impl Setup {
                         b1: s.b1,
                         b2: s.b2,
                     };
-                    weights.entrance(&at, light.at(s.p).0)
+                    let to_light = light.at(s.p).0;
+                    let k = energy
+                        .as_ref()
+                        .map_or([1.0; 3], |k| k.at(dot(s.n, to_light)));
+                    let f = weights.entrance(&at, to_light);
+                    [0, 1, 2].map(|c| f[c] * k[c])
                 } else {
                     [0.0; 3]
                 };
@@ -196,6 +208,9 @@ impl Setup {
             eta: material.eta,
             unit,
             exit_normal: (p.geometry == Geometry::ExitNormal).then(|| ExitNormal::new(material)),
+            directional: (p.geometry == Geometry::Directional)
+                .then(|| Directional::new(material, light, unit)),
+            energy,
             bounced: None,
         })
         .map(|mut setup| {
@@ -210,13 +225,16 @@ impl Setup {
     /// normal `nq`, d² apart.
     pub(super) fn rd(&self, xo: V3, no: V3, q: V3, nq: V3, d2: f64) -> [f64; 3] {
         let r = self.table.at(d2.sqrt());
-        match &self.exit_normal {
-            Some(en) => {
-                let f = en.factor(xo, no, q, nq);
-                [0, 1, 2].map(|c| r[c] * f[c])
+        let f = match (&self.exit_normal, &self.directional) {
+            (Some(en), Some(dd)) => {
+                let (a, b) = (en.factor(xo, no, q, nq), dd.factor(xo, no, q, nq));
+                [0, 1, 2].map(|c| a[c] * b[c])
             }
-            None => r,
-        }
+            (Some(en), None) => en.factor(xo, no, q, nq),
+            (None, Some(dd)) => dd.factor(xo, no, q, nq),
+            (None, None) => return r,
+        };
+        [0, 1, 2].map(|c| r[c] * f[c])
     }
 
     /// `bounces` rounds of light between parts (`bounce.rs`): each gathers the samples' own
@@ -246,7 +264,9 @@ impl Setup {
                 }
             })
             .collect();
-        let into = 1.0 - 2.0 * fresnel::moment(1, 1.0 / self.eta);
+        // Light from other parts arrives from every side: the energy's hemispherical factor.
+        let k = self.energy.as_ref().map_or([1.0; 3], Scale::diffuse);
+        let into = [0, 1, 2].map(|c| (1.0 - 2.0 * fresnel::moment(1, 1.0 / self.eta)) * k[c]);
         let mut arriving = vec![[0.0; 3]; count];
         for round in 0..p.bounces {
             let exitance: Vec<[f64; 3]> = self.sources[..count]
@@ -258,20 +278,23 @@ impl Setup {
                         .gather(s.p, self.near, p.threshold, &|q, nq, d2| {
                             self.rd(s.p, s.n, q, nq, d2)
                         });
-                    let e = [0, 1, 2].map(|c| direct[i][c] + into * arriving[i][c]);
+                    let e = [0, 1, 2].map(|c| direct[i][c] + into[c] * arriving[i][c]);
                     [0, 1, 2].map(|c| sum[c] + e[c] * self.near_energy[c])
                 })
                 .collect();
             arriving = bounce::arriving(mesh, subset, &nearest, &exitance, p.seed ^ round as u64);
             for (i, s) in self.sources.iter_mut().enumerate() {
                 let a = arriving[member[i]];
-                s.power = [0, 1, 2].map(|c| (direct[i][c] + into * a[c]) * area_each);
+                s.power = [0, 1, 2].map(|c| (direct[i][c] + into[c] * a[c]) * area_each);
             }
             self.octree = Octree::build(self.sources.clone(), area_each);
         }
         self.bounced = Some(Bounced {
             nearest,
-            arriving: arriving.into_iter().map(|a| a.map(|v| v * into)).collect(),
+            arriving: arriving
+                .into_iter()
+                .map(|a| [0, 1, 2].map(|c| a[c] * into[c]))
+                .collect(),
         });
     }
 
@@ -317,8 +340,29 @@ impl Setup {
             eta: material.eta,
             unit: p.mm_per_unit,
             exit_normal: None,
+            directional: None,
+            energy: energy_scale(material, profile, p)?,
             bounced: None,
         })
+    }
+}
+
+/// The `energy` parameter's factor, when it is `half_space`.
+fn energy_scale(
+    m: &ScatteringMaterial,
+    profile: &DiffusionProfile,
+    p: &Params,
+) -> Result<Option<Scale>, NodeError> {
+    match p.energy {
+        Energy::Profile => Ok(None),
+        Energy::HalfSpace => Scale::new(m, profile, p.single_scattering).map(Some),
+    }
+}
+
+impl Setup {
+    /// The energy factor for light arriving at incidence cosine `mu0` (1 with the profile's).
+    pub(super) fn energy_at(&self, mu0: f64) -> [f64; 3] {
+        self.energy.as_ref().map_or([1.0; 3], |k| k.at(mu0))
     }
 }
 

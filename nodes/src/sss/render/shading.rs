@@ -37,7 +37,12 @@ pub(super) fn finish(
         let e0 = irradiance(light, setup.shadow.as_ref(), *x, *n, eta);
         // The near disc's light enters through the same entrance function as the samples'.
         let f0 = if e0 > 0.0 {
-            weights.entrance(frag, light.at(*x).0)
+            let to_light = light.at(*x).0;
+            let (f, k) = (
+                weights.entrance(frag, to_light),
+                setup.energy_at(dot(*n, to_light)),
+            );
+            [0, 1, 2].map(|c| f[c] * k[c])
         } else {
             [0.0; 3]
         };

@@ -279,6 +279,15 @@ fn tiny_meshes_huge_and_tiny_mean_free_paths_stay_finite() {
         let r = render(None, &mesh, &m, &profile, &p).unwrap();
         assert!(r.image.data.iter().all(|v| v.is_finite() && *v >= 0.0));
         assert!(r.points >= 10 && r.points <= 2000, "{}", r.points);
+        // The same through the options that trace the mesh and tilt the profile.
+        let traced = Params {
+            single_scattering: true,
+            single_scattering_shape: SingleShape::Traced,
+            geometry: Geometry::Directional,
+            ..p.clone()
+        };
+        let t = render(None, &mesh, &m, &profile, &traced).unwrap();
+        assert!(t.image.data.iter().all(|v| v.is_finite() && *v >= 0.0));
         if !warning.is_empty() {
             assert!(
                 r.warnings.iter().any(|w| w.contains(warning)),
@@ -527,4 +536,60 @@ fn traced_single_scattering_is_the_slab_closed_form_thin_or_deep() {
             );
         }
     }
+}
+
+#[test]
+fn half_space_energy_returns_what_a_white_half_space_reflects() {
+    // Without absorption a semi-infinite medium behind an index-matched boundary returns all
+    // the light at any incidence; after its first scattering, 1 − (1/2)(1 − μ₀ ln(1 + 1/μ₀))
+    // (the single-scattering albedo's closed form at ω = 1). In `brdf` mode the exitance is the
+    // transmitted irradiance times the profile's total, so with `energy: half_space` it is
+    // I·μ₀ times those, whatever the profile (the dipole's total here is 0.89, not 1). Lit at
+    // 60° from the normal, a deep slab seen from above. At η ≠ 1 the option is refused.
+    let white = ScatteringMaterial {
+        sigma_s_prime: [1.0, 1.5, 2.0],
+        sigma_a: [0.0; 3],
+        eta: 1.0,
+        g: 0.0,
+    };
+    let profile = profile_of(&white);
+    let mu0 = 0.5;
+    let p = Params {
+        light: LightParams {
+            direction: [(1.0f64 - mu0 * mu0).sqrt(), 0.0, mu0],
+            position: None,
+            intensity: 2.0,
+        },
+        mode: Mode::Brdf,
+        energy: Energy::HalfSpace,
+        ..slab_view()
+    };
+    let slab = mesh(Shape::Plane, 12.0);
+    let single = 0.5 * (1.0 - mu0 * (1.0 + 1.0 / mu0).ln());
+    for (with_single, want) in [(false, 1.0), (true, 1.0 - single)] {
+        let q = Params {
+            single_scattering: with_single,
+            ..p.clone()
+        };
+        let r = render(None, &slab, &white, &profile, &q).unwrap();
+        for c in 0..3 {
+            let got = r.exitance.data[3 * (6 * 12 + 6) + c] as f64 / (2.0 * mu0);
+            // The H function's 400-point grid and the 129-entry table: 1e-3.
+            assert!(
+                (got - want).abs() < 1e-3,
+                "{with_single} {c}: {got} vs {want}"
+            );
+        }
+    }
+    let refused = render(
+        None,
+        &slab,
+        &medium(),
+        &profile_of(&medium()),
+        &Params {
+            energy: Energy::HalfSpace,
+            ..slab_view()
+        },
+    );
+    assert!(refused.is_err_and(|e| e.to_string().contains("index-matched")));
 }
