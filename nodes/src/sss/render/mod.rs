@@ -15,10 +15,13 @@
 //!    locally flat semi-infinite medium (Hanrahan & Krueger 1993): α·Ft(θi)·Ft(θo)/η²·
 //!    p(ωi′·ωo′)·I cos θi/(cos θi′ + cos θo′), with the refracted directions.
 //!
-//! Two options measured against the volumetric truth (`render.reference` with a medium): light
-//! that leaves one part of the object and enters another (`bounces`, `bounce.rs`), and the
-//! entry dipole's flux through the exit point's own normal (`geometry: exit_normal`,
-//! `geometry.rs`).
+//! Options measured against the volumetric truth (`render.reference` with a medium): light
+//! that leaves one part of the object and enters another (`bounces`, `bounce.rs`), the entry
+//! dipole's flux through the exit point's own normal (`geometry: exit_normal`, `geometry.rs`),
+//! the directional dipole (`geometry: directional`, `directional.rs`), single scattering
+//! traced through the mesh (`single_scattering_shape: traced`, `single.rs`) and the exact
+//! half-space's energy (`energy: half_space`, `energy.rs`). Silhouette pixels show the object
+//! over the share of the pixel it covers (`gather.rs`), as the truth's samples do.
 //!
 //! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
 

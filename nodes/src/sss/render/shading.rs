@@ -1,5 +1,5 @@
 //! From gathered sums to pixels: the near disc, Fresnel transmittance out and normalisation, the
-//! caller's exiting and local terms, and single scattering.
+//! caller's exiting and local terms, single scattering, and the silhouette's coverage.
 
 use super::gather::View;
 use super::setup::{irradiance, transmit_in, Setup};
