@@ -145,8 +145,8 @@ mod tests {
             HalfSpace::new(sp / (sp + sa))
         };
         let pbd = total(&marble, Model::Pbd);
-        for c in 0..3 {
-            let over = pbd[c] / half(&marble, c).total(1.0);
+        for (c, p) in pbd.iter().enumerate() {
+            let over = p / half(&marble, c).total(1.0);
             assert!((1.08..1.13).contains(&over), "marble {c}: {over}");
         }
         let dipole = total(&skin1, Model::BetterDipole);
