@@ -40,11 +40,9 @@ impl Directional {
         let per =
             |f: &dyn Fn(f64, f64) -> f64| [0, 1, 2].map(|c| f(m.sigma_s_prime[c], m.sigma_a[c]));
         let d = per(&|sp, sa| (2.0 * sa + sp) / (3.0 * (sp + sa) * (sp + sa)));
-        let sigma_tr = per(&|sp, sa| (sa * 3.0 * (sp + sa) * (sp + sa) / (2.0 * sa + sp)).sqrt());
-        let de = per(&|sp, sa| {
-            let d = (2.0 * sa + sp) / (3.0 * (sp + sa) * (sp + sa));
-            2.131 * d / (sp / (sp + sa)).sqrt()
-        });
+        let sigma_tr = [0, 1, 2].map(|c| (m.sigma_a[c] / d[c]).sqrt());
+        let albedo = per(&|sp, sa| sp / (sp + sa));
+        let de = [0, 1, 2].map(|c| 2.131 * d[c] / albedo[c].sqrt());
         let reach = per(&|sp, sa| 1.0 / (3.0 * (sp + sa)));
         let c1 = 2.0 * fresnel::moment(1, m.eta);
         let c2 = 3.0 * fresnel::moment(2, m.eta);

@@ -14,11 +14,11 @@
 //! distributed as e^(−σt,min t) on [0, T]: deterministic, and no channel's weight exceeds
 //! σs/σt,min.
 
+use super::setup::transmit_in;
 use crate::geometry::{add, dot, mul, V3};
 use crate::render::light::Light;
 use crate::render::reference::Tracer;
 use crate::sss::diffusion::henyey_greenstein;
-use crate::sss::fresnel;
 use crate::types::ScatteringMaterial;
 
 /// Points along the camera ray inside the object.
@@ -31,11 +31,6 @@ pub(super) struct Traced<'a> {
     pub(super) tracer: &'a Tracer<'a>,
     /// mm per world unit.
     pub(super) unit: f64,
-}
-
-/// Transmittance into the medium at cosine `cos` from outside.
-fn transmit(cos: f64, eta: f64) -> f64 {
-    1.0 - fresnel::reflectance_inside(cos.clamp(0.0, 1.0), 1.0 / eta)
 }
 
 impl Traced<'_> {
@@ -107,7 +102,7 @@ impl Traced<'_> {
         if !(least > 0.0 && depth > 0.0) {
             return [0.0; 3];
         }
-        let ft_o = transmit(cos_o, m.eta);
+        let ft_o = transmit_in(cos_o, m.eta);
         // The share of the exponential e^(−σt,min t) inside [0, depth].
         let mass = -(-least * depth).exp_m1();
         let mut sum = [0.0; 3];
@@ -120,7 +115,7 @@ impl Traced<'_> {
                 .position
                 .map_or(f64::INFINITY, |q| dot(add(q, mul(y, -1.0)), l));
             let (s, cos_in) = self.inside_towards(y, l, reach);
-            let ft_i = transmit(cos_in, m.eta);
+            let ft_i = transmit_in(cos_in, m.eta);
             let phase = henyey_greenstein(dot(l, d), m.g);
             // f(t)/q(t) with q(t) = σt,min e^(−σt,min t)/mass.
             for c in 0..3 {
