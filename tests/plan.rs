@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{mesoflow, report, Run, Scratch};
+use common::{mesoflow, metric, report, Run, Scratch};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -120,17 +120,6 @@ fn run_planned(s: &Scratch, p: &Planned) -> Value {
     );
     assert_eq!(r.code, 0, "{}", r.stderr);
     report(&out)
-}
-
-fn metric(rep: &Value, id: &str, m: &str) -> f64 {
-    rep["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|n| n["id"] == id)
-        .unwrap_or_else(|| panic!("no node {id}"))["metrics"][m]
-        .as_f64()
-        .unwrap_or_else(|| panic!("{id} has no {m}"))
 }
 
 fn decision<'a>(plan: &'a Value, stage: &str) -> &'a Value {

@@ -84,18 +84,6 @@ fn ids<'a>(st: &'a std::collections::BTreeMap<String, String>, status: &str) -> 
         .collect()
 }
 
-/// A node's metric from a run report.
-fn metric(rep: &serde_json::Value, id: &str, m: &str) -> f64 {
-    rep["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|n| n["id"] == id)
-        .unwrap()["metrics"][m]
-        .as_f64()
-        .unwrap()
-}
-
 #[test]
 fn incremental_reexecution_recomputes_exactly_what_changed() {
     let s = Scratch::new();

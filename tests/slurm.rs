@@ -575,15 +575,5 @@ fn a_detached_driver_runs_as_a_job() {
     });
     let rep = report(&s.path("o"));
     assert_eq!(rep["ok"], true);
-    assert_eq!(metric_y(&rep, "b"), 6.0);
-}
-
-fn metric_y(report: &Value, id: &str) -> f64 {
-    report["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|n| n["id"] == id)
-        .and_then(|n| n["metrics"]["y"].as_f64())
-        .unwrap()
+    assert_eq!(metric(&rep, "b", "y"), 6.0);
 }

@@ -13,7 +13,7 @@
 
 mod common;
 
-use common::{mesoflow, read_npy, report, Scratch};
+use common::{mesoflow, metric, read_npy, report, Scratch};
 use std::path::Path;
 
 struct Measured {
@@ -25,17 +25,7 @@ struct Measured {
 }
 
 fn measure(out: &Path, material: &str) -> Measured {
-    let rep = report(out);
-    let metric = |id: &str, m: &str| -> f64 {
-        rep["nodes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|n| n["id"] == id)
-            .and_then(|n| n["metrics"][m].as_f64())
-            .unwrap_or_else(|| panic!("{id}.{m}"))
-    };
-    let noise = metric(&format!("{material}_truth"), "noise");
+    let noise = metric(&report(out), &format!("{material}_truth"), "noise");
     let (_, truth) = read_npy(&out.join(format!("{material}_truth.npy")));
     let (_, ours) = read_npy(&out.join(format!("{material}.npy")));
     let lum = |v: &[f32], i: usize| (v[3 * i] + v[3 * i + 1] + v[3 * i + 2]) as f64;
@@ -141,15 +131,7 @@ fn translucent_renders_against_the_volumetric_truth() {
     // The octree (threshold 0.1) at brute force's error: the README's speed-up is at equal
     // error (measured 0.1297 and 0.1293 with the truth's noise in; the noise is common to both).
     let rep = report(&ours);
-    let rel = |id: &str| {
-        rep["nodes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|n| n["id"] == id)
-            .and_then(|n| n["metrics"]["relative_rmse"].as_f64())
-            .unwrap_or_else(|| panic!("{id}"))
-    };
+    let rel = |id: &str| metric(&rep, id, "relative_rmse");
     let (octree, brute) = (rel("marble_error"), rel("marble_brute_error"));
     assert!(
         (octree - brute).abs() < 0.002,

@@ -65,6 +65,18 @@ pub fn report(out_dir: &Path) -> Value {
     serde_json::from_str(&text).expect("report is JSON")
 }
 
+/// The metric `m` of node `id` in a report; panics naming what is missing.
+pub fn metric(report: &Value, id: &str, m: &str) -> f64 {
+    report["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == id)
+        .unwrap_or_else(|| panic!("no node {id}"))["metrics"][m]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{id} has no {m}"))
+}
+
 /// node id → the string `field` of that node, for the nodes in a report.
 pub fn per_node(report: &Value, field: &str) -> std::collections::BTreeMap<String, String> {
     report["nodes"]
