@@ -140,31 +140,68 @@ fn the_reference_renderer_agrees_with_mitsuba() {
 /// (skin1); channel sums within 1.4%.
 #[test]
 fn the_volumetric_reference_agrees_with_mitsuba() {
+    volumes_against_mitsuba(
+        &[
+            ("marble", 0.0, [2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071]),
+            ("skin1", 0.5, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48]),
+        ],
+        None,
+        1024,
+    );
+}
+
+/// The same at η = 1.3 behind a rough dielectric boundary (GGX, α = 0.3: Mitsuba's
+/// `roughdielectric`), skin1 only (marble's long paths would double the test's time): the
+/// refraction, the Fresnel split, the glossy reflection and next-event estimation through the
+/// boundary's BTDF, against Mitsuba's own, both on the triangles' own normals. Ours takes 8192
+/// samples a pixel (3.5 s per 1024 here; Mitsuba about 30 s per 2048): through the boundary
+/// its paths are heavy-tailed, at 1024 the channel sums of three seeds spread ±1.5% around a
+/// Mitsuba render of 8192. Measured: relative RMSE 0.105 against a combined noise of 0.107;
+/// channel sums within 0.7%.
+#[test]
+fn the_rough_dielectric_reference_agrees_with_mitsuba() {
+    volumes_against_mitsuba(
+        &[("skin1", 0.5, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48])],
+        Some((1.3, 0.3)),
+        8192,
+    );
+}
+
+/// Jensen et al. 2001's coefficients (mm⁻¹), typed in each case rather than read from
+/// sss.material: (preset, g, σs′, σa).
+type Case = (&'static str, f64, [f64; 3], [f64; 3]);
+
+/// Renders each case with both renderers and holds their difference to their noise; the
+/// boundary is index-matched, or `(η, GGX α)`.
+fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples: u32) {
     let Some(python) = peer_python("mitsuba, numpy") else {
         return;
     };
     let s = Scratch::new();
     let camera = json!({ "eye": [0.0, 1.6, 2.9], "target": [0.0, -0.1, 0.0], "up": [0.0, 1.0, 0.0], "fov": 40.0, "resolution": [48, 36] });
     let light = json!({ "direction": [0.5, 0.5, -1.0], "intensity": 5.0 });
-    // Jensen et al. 2001's coefficients (mm⁻¹), typed here rather than read from sss.material:
-    // (preset, g, σs′, σa).
-    let cases = [
-        ("marble", 0.0, [2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071]),
-        ("skin1", 0.5, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48]),
-    ];
+    let (eta, roughness) = match boundary {
+        Some((eta, alpha)) => (eta, Some(alpha)),
+        None => (1.0, None),
+    };
     let mut nodes = serde_json::Map::new();
     nodes.insert("torus".into(), json!({ "kind": "mesh.primitive", "params": { "shape": "torus", "size": 0.9, "minor": 0.38, "segments": [64, 32] } }));
     nodes.insert("ply".into(), json!({ "kind": "mesh.write", "inputs": { "mesh": "torus.mesh" }, "params": { "path": "torus.ply" } }));
-    for (name, g, ..) in &cases {
+    for (name, g, ..) in cases {
         nodes.insert(
             format!("{name}_material"),
-            json!({ "kind": "sss.material", "params": { "preset": name, "eta": 1.0, "g": g } }),
+            json!({ "kind": "sss.material", "params": { "preset": name, "eta": eta, "g": g } }),
         );
+        let mut params =
+            json!({ "camera": camera, "light": light, "mm_per_unit": 20.0, "samples": samples });
+        if let Some(alpha) = roughness {
+            params["boundary_roughness"] = json!(alpha);
+        }
         nodes.insert(
             name.to_string(),
             json!({ "kind": "render.reference",
             "inputs": { "mesh": "torus.mesh", "medium": format!("{name}_material.material") },
-            "params": { "camera": camera, "light": light, "mm_per_unit": 20.0, "samples": 1024 } }),
+            "params": params }),
         );
         nodes.insert(format!("{name}_npy"), json!({ "kind": "npy.write", "inputs": { "value": format!("{name}.image") }, "params": { "path": format!("{name}.npy") } }));
     }
@@ -174,7 +211,7 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
     );
     let (out, rep) = run_graph(&s, &file);
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/mitsuba_reference.py");
-    for (name, g, sigma_s_prime, sigma_a) in cases {
+    for &(name, g, sigma_s_prime, sigma_a) in cases {
         let node = rep["nodes"]
             .as_array()
             .unwrap()
@@ -187,6 +224,12 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
         let sigma_s = sigma_s_prime.map(|s| s / (1.0 - g) * 20.0);
         let sigma_t: Vec<f64> = (0..3).map(|c| sigma_s[c] + sigma_a[c] * 20.0).collect();
         let albedo: Vec<f64> = (0..3).map(|c| sigma_s[c] / sigma_t[c]).collect();
+        let mut medium =
+            json!({ "sigma_t": sigma_t, "albedo": albedo, "g": g, "integrator": "volpathmis" });
+        if let Some((eta, alpha)) = boundary {
+            medium["eta"] = json!(eta);
+            medium["alpha"] = json!(alpha);
+        }
         let theirs: Vec<Vec<f32>> = [7, 8]
             .iter()
             .map(|seed| {
@@ -194,12 +237,21 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
                     &format!("{name}_{seed}.json"),
                     &json!({ "mesh": out.join("torus.ply"), "camera": camera, "light": light,
                              "albedo": [0.0, 0.0, 0.0], "samples": 2048, "seed": seed,
-                             "medium": { "sigma_t": sigma_t, "albedo": albedo, "g": g, "integrator": "volpathmis" } })
+                             "medium": medium })
                     .to_string(),
                 );
                 let npy = s.path(&format!("{name}_{seed}.npy"));
-                let py = Command::new(&python).arg(&script).arg(&scene).arg(&npy).output().unwrap();
-                assert!(py.status.success(), "{}", String::from_utf8_lossy(&py.stderr));
+                let py = Command::new(&python)
+                    .arg(&script)
+                    .arg(&scene)
+                    .arg(&npy)
+                    .output()
+                    .unwrap();
+                assert!(
+                    py.status.success(),
+                    "{}",
+                    String::from_utf8_lossy(&py.stderr)
+                );
                 let (shape, v) = read_npy(&npy);
                 assert_eq!(shape, [36, 48, 4]);
                 v

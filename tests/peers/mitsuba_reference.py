@@ -7,7 +7,9 @@ With a "medium" ({"sigma_t": [r, g, b], "albedo": [r, g, b], "g": g}, world unit
 instead the index-matched boundary (a `null` BSDF) of that homogeneous medium with a
 Henyey-Greenstein phase function, rendered by `volpath` (or the medium's "integrator", e.g.
 `volpathmis`: spectral MIS, far less colour noise) with no depth limit: mesoflow's
-volumetric reference.
+volumetric reference. With "eta" and "alpha" in the medium the boundary is instead a rough
+dielectric (`roughdielectric`, GGX, interior index eta, exterior 1) on the triangles' own
+normals (`face_normals`), as mesoflow's reference refracts.
 
     python mitsuba_reference.py SCENE.json OUT.npy
 
@@ -60,7 +62,13 @@ def main(scene_path, out_path):
         # the image is fireflies. Without it, paths end when they leave or are absorbed.
         scene_dict["integrator"] = {"type": medium.get("integrator", "volpath"), "max_depth": -1,
                                     "rr_depth": 1 << 30}
-        scene_dict["shape"]["bsdf"] = {"type": "null"}
+        if "eta" in medium:
+            scene_dict["shape"]["bsdf"] = {"type": "roughdielectric", "distribution": "ggx",
+                                           "alpha": medium["alpha"], "int_ior": medium["eta"],
+                                           "ext_ior": 1.0}
+            scene_dict["shape"]["face_normals"] = True
+        else:
+            scene_dict["shape"]["bsdf"] = {"type": "null"}
         # An RGB value must lie in [0, 1]: the extinction is given as a colour times a scale.
         scale = max(medium["sigma_t"])
         scene_dict["shape"]["interior"] = {

@@ -66,6 +66,15 @@ pub struct Params {
     /// Millimetres per world unit of the mesh: the scale of the `medium`'s coefficients (mm⁻¹).
     #[schemars(range(min = 1e-9, max = 1e9))]
     pub mm_per_unit: f64,
+    /// GGX roughness α (0.01 to 1) of the `medium`'s boundary where its η ≠ 1 (required there,
+    /// ignored at η = 1): a rough dielectric, because light through a smooth one from a
+    /// directional light cannot be sampled.
+    #[schemars(range(min = 0.01, max = 1.0))]
+    pub boundary_roughness: Option<f64>,
+    /// With a medium at η ≠ 1: keep the light the boundary reflects where the camera first meets
+    /// it (a glossy highlight). False keeps only what crossed into the medium, the part
+    /// `sss.render` draws.
+    pub surface_reflection: bool,
 }
 
 impl Default for Params {
@@ -82,6 +91,8 @@ impl Default for Params {
             background: [0.0; 3],
             seed: 1,
             mm_per_unit: 10.0,
+            boundary_roughness: None,
+            surface_reflection: true,
         }
     }
 }
@@ -96,14 +107,15 @@ impl Node for Reference {
             kind: "render.reference",
             // 2: Ward's half vector is normalised before its cosine (btf::brdf; other rounding).
             // 3: a `medium` input (volumetric path tracing) and the `noise` estimate.
-            version: 3,
-            doc: "Ground truth (or, with a normal map, normal mapping): direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance; or, with a medium, volumetric path tracing of a translucent object (index-matched boundary). N samples per pixel, box filter, on the CPU, with its own noise estimate.",
+            // 4: a rough dielectric boundary for media at η ≠ 1 (the same image at η = 1).
+            version: 4,
+            doc: "Ground truth (or, with a normal map, normal mapping): direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance; or, with a medium, volumetric path tracing of a translucent object (index-matched boundary at η = 1, rough dielectric otherwise). N samples per pixel, box filter, on the CPU, with its own noise estimate.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("mesh", Mesh::TYPE, "the geometry, its normals the shading normals"),
                 Port::optional("albedo", Image::TYPE, "diffuse albedo over the tile (RGB), instead of `albedo`"),
                 Port::optional("normals", NormalMap::TYPE, "tangent-space normals over the tile: normal mapping"),
-                Port::optional("medium", ScatteringMaterial::TYPE, "a homogeneous medium filling the closed mesh (η = 1): volumetric path tracing instead of the surface reflectance"),
+                Port::optional("medium", ScatteringMaterial::TYPE, "a homogeneous medium filling the closed mesh (η = 1, or η ≠ 1 with `boundary_roughness`): volumetric path tracing instead of the surface reflectance"),
             ],
             outputs: vec![
                 Port::output("image", Image::TYPE, "linear HDR radiance, RGB"),
@@ -131,6 +143,14 @@ impl Node for Reference {
         Light::new(&p.light)?;
         if !(0.0..=1.0).contains(&p.specular) {
             return Err(NodeError::param("specular", "must be in [0, 1]"));
+        }
+        if let Some(a) = p.boundary_roughness {
+            if !(super::dielectric::MIN_ROUGHNESS..=1.0).contains(&a) {
+                return Err(NodeError::param(
+                    "boundary_roughness",
+                    "must be in [0.01, 1]: a narrower lobe makes next-event estimation through it noise",
+                ));
+            }
         }
         if !(0.001..=1.0).contains(&p.roughness) {
             return Err(NodeError::param("roughness", "must be in [0.001, 1]"));
@@ -166,10 +186,13 @@ impl Node for Reference {
                 {
                     return Err(NodeError::input(
                         "medium",
-                        "a medium's boundary is index-matched, with no surface reflectance: connect `albedo` and `normals` to a surface render instead",
+                        "a medium's boundary is index-matched or a rough dielectric, with no albedo or normal map: connect `albedo` and `normals` to a surface render instead",
                     ));
                 }
-                Some(Medium::new(m, p.mm_per_unit).map_err(|e| NodeError::input("medium", e))?)
+                Some(
+                    Medium::new(m, p.mm_per_unit, p.boundary_roughness, p.surface_reflection)
+                        .map_err(|e| NodeError::input("medium", e))?,
+                )
             }
             None => None,
         };

@@ -2,12 +2,17 @@
 //! translucent renders (`sss.render`) are judged against.
 //!
 //! Volumetric path tracing with next-event estimation, as Mitsuba's `volpath` does it:
-//! free-flight distances are drawn from the extinction, every scattering event connects to the
-//! light through the medium, and the new direction is drawn from the Henyey–Greenstein phase
-//! function. The boundary is index-matched (η = 1): light crosses it without refraction or
-//! reflection, so a path that leaves may enter another part of the mesh, and a directional light
-//! can be reached by a shadow ray. A smooth dielectric boundary (η ≠ 1) is refused: with a delta
-//! light behind a delta interface no path can be sampled (see the README's volumetric truth).
+//! free-flight distances are drawn from the extinction, and the new direction is drawn from the
+//! Henyey–Greenstein phase function. Two boundaries:
+//!
+//! - index-matched (η = 1): light crosses it without refraction or reflection, so a path that
+//!   leaves may enter another part of the mesh, and every scattering event connects to a
+//!   directional light by a shadow ray through the medium;
+//! - a rough dielectric (η ≠ 1, `dielectric.rs`): a smooth one cannot be sampled, a delta light
+//!   behind a delta interface. Every vertex on the boundary connects to the light through the
+//!   BSDF (reflection outside, transmission inside), and the path goes on by sampling it;
+//!   scattering events inside cannot see the light past the interface, and a shadow ray that
+//!   meets the mesh is blocked (as Mitsuba's, whose non-null surfaces stop shadow rays).
 //!
 //! Colour without fireflies: each path draws its distances with one channel's extinction (the
 //! "hero", uniformly chosen), and every channel's estimate is weighted by the balance heuristic
@@ -16,6 +21,7 @@
 //! rays estimate the medium's transmittance by tracking with the smallest extinction, each
 //! channel weighted by the rest (≤ 1), so they stop as soon as the light is out of reach.
 
+use super::dielectric::Boundary;
 use super::light::Light;
 use super::reference::Tracer;
 use crate::geometry::{add, dot, mul, V3};
@@ -24,7 +30,7 @@ use crate::sss::montecarlo::{rotate, sample_hg, Stream};
 use crate::types::ScatteringMaterial;
 use std::f64::consts::PI;
 
-/// Scattering events after which a path is given up (counted as `lost`).
+/// Scattering events (and boundary vertices) after which a path is given up (counted as `lost`).
 pub const MAX_EVENTS: u64 = 1_000_000;
 /// Estimates below this share of the path's start are played off by Russian roulette.
 const ROULETTE: f64 = 0.25;
@@ -36,17 +42,35 @@ pub struct Medium {
     pub sigma_t: [f64; 3],
     pub g: f64,
     sigma_t_min: f64,
+    /// None: index-matched.
+    pub boundary: Option<Boundary>,
+    /// Whether the camera's first vertex on the boundary reflects as well as transmits.
+    pub surface_reflection: bool,
 }
 
 impl Medium {
-    /// From an `sss.material` (mm⁻¹) and the mesh's scale; the reason when it cannot be traced.
-    pub fn new(m: &ScatteringMaterial, mm_per_unit: f64) -> Result<Medium, String> {
-        if (m.eta - 1.0).abs() > 1e-9 {
-            return Err(format!(
-                "η = {} but the volumetric reference traces an index-matched boundary only (η = 1): a smooth dielectric lit by a directional light cannot be sampled by a path tracer; give sss.material `eta: 1`",
-                m.eta
-            ));
-        }
+    /// From an `sss.material` (mm⁻¹), the mesh's scale and, where η ≠ 1, the boundary's GGX
+    /// roughness; the reason when it cannot be traced.
+    pub fn new(
+        m: &ScatteringMaterial,
+        mm_per_unit: f64,
+        roughness: Option<f64>,
+        surface_reflection: bool,
+    ) -> Result<Medium, String> {
+        let boundary = if (m.eta - 1.0).abs() <= 1e-9 {
+            None
+        } else {
+            if !(m.eta.is_finite() && m.eta > 0.0) {
+                return Err(format!("η = {} must be finite and positive", m.eta));
+            }
+            let Some(alpha) = roughness else {
+                return Err(format!(
+                    "η = {} needs `boundary_roughness` (a GGX α, e.g. 0.2): a smooth dielectric lit by a directional light cannot be sampled by a path tracer, a rough one can; or give sss.material `eta: 1` for an index-matched boundary",
+                    m.eta
+                ));
+            };
+            Some(Boundary { eta: m.eta, alpha })
+        };
         if !(m.g > -1.0 && m.g < 1.0) {
             return Err(format!("g = {} is outside (−1, 1)", m.g));
         }
@@ -67,6 +91,8 @@ impl Medium {
             sigma_t,
             g: m.g,
             sigma_t_min: sigma_t.iter().copied().fold(f64::INFINITY, f64::min),
+            boundary,
+            surface_reflection,
         })
     }
 }
@@ -153,52 +179,71 @@ pub(crate) fn radiance(
     let mut events = 0u64;
     let mut first = true;
     loop {
-        if !inside {
+        // The next vertex: a point on the boundary (the flight ended there) or a scattering
+        // event inside.
+        let crossing = if !inside {
             tally.rays += 1;
             let Some(hit) = scene.closest(x, d) else {
                 let w = path.weight();
                 return [0, 1, 2].map(|c| sum[c] + w[c] * background[c]);
             };
+            Some(hit)
+        } else {
+            let t = -(1.0 - rng.unit()).ln() / medium.sigma_t[path.hero];
+            tally.rays += 1;
+            let mut crossing = None;
+            if scene.occluded(x, d, t) {
+                tally.rays += 1;
+                // The any-hit and the closest query disagree only on a rounding at a vertex:
+                // then the flight ends inside.
+                if let Some(hit) = scene.closest(x, d) {
+                    path.fly(medium, hit.t, false);
+                    crossing = Some(hit);
+                }
+            }
+            if crossing.is_none() {
+                x = add(x, mul(d, t));
+                path.fly(medium, t, true);
+                if medium.boundary.is_none() {
+                    next_event(scene, medium, light, x, d, &path, &mut sum, rng, tally);
+                }
+            }
+            crossing
+        };
+        let scattered = crossing.is_none();
+        let camera_vertex = first && !scattered;
+        if let Some(hit) = crossing {
             if first {
                 tally.hits += 1;
                 first = false;
             }
             let (_, ng) = scene.triangle(hit.tri);
-            inside = dot(ng, d) < 0.0;
-            x = leave(scene, add(x, mul(d, hit.t)), ng, d);
-            continue;
-        }
-        let t = -(1.0 - rng.unit()).ln() / medium.sigma_t[path.hero];
-        tally.rays += 1;
-        if scene.occluded(x, d, t) {
-            tally.rays += 1;
-            // The any-hit and the closest query disagree only on a rounding at a vertex: then
-            // the flight ends inside.
-            if let Some(hit) = scene.closest(x, d) {
-                path.fly(medium, hit.t, false);
-                let (_, ng) = scene.triangle(hit.tri);
-                inside = dot(ng, d) < 0.0;
-                x = leave(scene, add(x, mul(d, hit.t)), ng, d);
-                continue;
+            let p = add(x, mul(d, hit.t));
+            match &medium.boundary {
+                None => {
+                    inside = dot(ng, d) < 0.0;
+                    x = leave(scene, p, ng, d);
+                    continue;
+                }
+                Some(b) => {
+                    let wo = mul(d, -1.0);
+                    let transmit_only = camera_vertex && !medium.surface_reflection;
+                    if !(transmit_only && dot(wo, ng) > 0.0) {
+                        through_boundary(scene, b, light, (p, ng), wo, &path, &mut sum, tally);
+                    }
+                    let u = [rng.unit(), rng.unit(), rng.unit()];
+                    let Some((wi, weight, _)) = b.sample(ng, wo, u, transmit_only) else {
+                        return sum;
+                    };
+                    path.beta = path.beta.map(|v| v * weight);
+                    d = wi;
+                    inside = dot(ng, d) < 0.0;
+                    x = leave(scene, p, ng, d);
+                }
             }
         }
-        x = add(x, mul(d, t));
-        path.fly(medium, t, true);
         events += 1;
         tally.events += 1;
-        // Next-event estimation: the light through the medium, scattered towards d's reverse.
-        let (l, irradiance) = light.at(x);
-        let reach = light
-            .position
-            .map_or(f64::INFINITY, |q| dot(add(q, mul(x, -1.0)), l));
-        let tr = transmittance(scene, medium, x, l, reach, rng, tally);
-        if tr.iter().any(|v| *v > 0.0) {
-            let phase = henyey_greenstein(dot(d, l), medium.g);
-            let w = path.weight();
-            for c in 0..3 {
-                sum[c] += w[c] * phase * irradiance * tr[c];
-            }
-        }
         if events >= MAX_EVENTS {
             tally.lost += 1;
             return sum;
@@ -212,8 +257,73 @@ pub(crate) fn radiance(
             }
             path.beta = path.beta.map(|b| b / survive);
         }
-        let cos = sample_hg(medium.g, rng.unit());
-        d = rotate(d, cos, 2.0 * PI * rng.unit());
+        if scattered {
+            let cos = sample_hg(medium.g, rng.unit());
+            d = rotate(d, cos, 2.0 * PI * rng.unit());
+        }
+    }
+}
+
+/// Next-event estimation at a scattering event at `x` (index-matched boundary): the light
+/// through the medium, scattered towards `d`'s reverse.
+#[allow(clippy::too_many_arguments)]
+fn next_event(
+    scene: &Tracer,
+    medium: &Medium,
+    light: &Light,
+    x: V3,
+    d: V3,
+    path: &Path,
+    sum: &mut [f64; 3],
+    rng: &mut Stream,
+    tally: &mut Tally,
+) {
+    let (l, irradiance) = light.at(x);
+    let reach = light
+        .position
+        .map_or(f64::INFINITY, |q| dot(add(q, mul(x, -1.0)), l));
+    let tr = transmittance(scene, medium, x, l, reach, rng, tally);
+    if tr.iter().any(|v| *v > 0.0) {
+        let phase = henyey_greenstein(dot(d, l), medium.g);
+        let w = path.weight();
+        for c in 0..3 {
+            sum[c] += w[c] * phase * irradiance * tr[c];
+        }
+    }
+}
+
+/// Next-event estimation at a vertex `p` (normal `ng`) on a dielectric boundary: the light
+/// reflected (`wo` outside) or transmitted (`wo` inside) towards `wo`, if nothing of the mesh
+/// stands between `p` and the light.
+#[allow(clippy::too_many_arguments)]
+fn through_boundary(
+    scene: &Tracer,
+    boundary: &Boundary,
+    light: &Light,
+    (p, ng): (V3, V3),
+    wo: V3,
+    path: &Path,
+    sum: &mut [f64; 3],
+    tally: &mut Tally,
+) {
+    let (l, irradiance) = light.at(p);
+    if dot(l, ng) <= 0.0 {
+        return;
+    }
+    let f = boundary.eval(ng, wo, l);
+    if f <= 0.0 {
+        return;
+    }
+    let reach = light
+        .position
+        .map_or(f64::INFINITY, |q| dot(add(q, mul(p, -1.0)), l));
+    tally.rays += 1;
+    if scene.occluded(leave(scene, p, ng, l), l, reach) {
+        return;
+    }
+    let w = path.weight();
+    for c in 0..3 {
+        sum[c] += w[c] * f * irradiance;
     }
 }
 
@@ -294,7 +404,7 @@ mod tests {
             eta: 1.0,
             g: 0.0,
         };
-        let medium = Medium::new(&material, 1.0).unwrap();
+        let medium = Medium::new(&material, 1.0, None, true).unwrap();
         let omega = [0.999, 0.9, 0.6];
         // Neither direction along an axis: a BVH's slab test meets 0 × ∞ there.
         let mu = 10f64.to_radians().cos();
