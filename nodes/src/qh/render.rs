@@ -109,6 +109,7 @@ impl Params {
             bounces: 0,
             mode: self.mode,
             energy: sss_render::Energy::Profile,
+            emission: sss_render::Emission::Diffuse,
         }
     }
 }

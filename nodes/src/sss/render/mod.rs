@@ -41,6 +41,7 @@ use std::time::Instant;
 
 mod bounce;
 mod directional;
+mod emission;
 mod energy;
 mod gather;
 mod geometry;
@@ -50,6 +51,7 @@ mod single;
 #[cfg(test)]
 mod tests;
 
+pub use emission::Emission;
 pub use energy::Energy;
 use gather::{gather_cpu, gather_gpu, View};
 pub use geometry::Geometry;
@@ -112,6 +114,11 @@ pub struct Params {
     /// isotropic scattering behind an index-matched boundary, so η = 1 only; g ≠ 0 through the
     /// reduced albedo); the multiple scattering alone when `single_scattering` adds the first.
     pub energy: Energy,
+    /// How the diffuse exitance leaves in angle: `diffuse` (default; Jensen & Buhler's
+    /// Ft(θo)·M/(π(1 − Fdr))) or `p1` (diffusion theory's own radiance at the boundary,
+    /// 1 + 3μ′/(2A) inside, refracted out, the same exitance: at η = 1, 1.25× face-on and 0.5×
+    /// at grazing, as the exact half-space's 1.26× and 0.43×).
+    pub emission: Emission,
 }
 
 /// Where single scattering is evaluated.
@@ -155,6 +162,7 @@ impl Default for Params {
             bounces: 0,
             mode: Mode::Diffusion,
             energy: Energy::Profile,
+            emission: Emission::Diffuse,
         }
     }
 }
@@ -171,8 +179,8 @@ impl Node for Render {
         NodeSpec {
             kind: "sss.render",
             // 4: the `geometry` parameter. 5: silhouette pixels covered in proportion;
-            // `single_scattering_shape`, `geometry: directional`, `energy`.
-            version: 5,
+            // `single_scattering_shape`, `geometry: directional`, `energy`. 6: `emission`.
+            version: 6,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![

@@ -1,6 +1,7 @@
-//! From gathered sums to pixels: the near disc, Fresnel transmittance out and normalisation, the
+//! From gathered sums to pixels: the near disc, the exitance's way out in angle (`emission.rs`), the
 //! caller's exiting and local terms, single scattering, and the silhouette's coverage.
 
+use super::emission::Exit;
 use super::gather::View;
 use super::setup::{irradiance, transmit_in, Setup};
 use super::single::Traced;
@@ -9,9 +10,7 @@ use crate::geometry::{dot, sub, V3};
 use crate::render::light::Light;
 use crate::render::shade::ShadowMap;
 use crate::sss::diffusion::henyey_greenstein;
-use crate::sss::fresnel;
 use crate::types::{Image, ScatteringMaterial};
-use std::f64::consts::PI;
 
 /// Radiance and exitance images from the gathered sums.
 pub(super) fn finish(
@@ -24,8 +23,7 @@ pub(super) fn finish(
     traced: Option<&Traced>,
 ) -> (Image, Image) {
     let eta = setup.eta;
-    let fdr_out = 2.0 * fresnel::moment(1, 1.0 / eta);
-    let c_norm = 1.0 / (PI * (1.0 - fdr_out));
+    let exit_angle = Exit::new(p.emission, eta);
     let mut radiance = Vec::with_capacity(3 * sums.len());
     let mut exitance = Vec::with_capacity(3 * sums.len());
     for (px, (h, s)) in view.hits.iter().zip(sums).enumerate() {
@@ -50,7 +48,7 @@ pub(super) fn finish(
         let m = [0, 1, 2].map(|c| s[c] + (e0 * f0[c] + bounced[c]) * setup.near_energy[c]);
         let v = d.map(|c| -c);
         let cos_o = dot(*n, v).clamp(0.0, 1.0);
-        let ft_o = transmit_in(cos_o, eta);
+        let leaving = exit_angle.radiance(cos_o);
         let single = match (p.single_scattering, traced) {
             (false, _) => [0.0; 3],
             (true, Some(t)) => {
@@ -63,7 +61,7 @@ pub(super) fn finish(
         // A silhouette pixel shows the object over its covered share, the background elsewhere.
         let cover = view.coverage[px];
         radiance.extend([0, 1, 2].map(|c| {
-            let object = c_norm * ft_o * m[c] * exit[c] + single[c] + local[c];
+            let object = leaving * m[c] * exit[c] + single[c] + local[c];
             (cover * object + (1.0 - cover) * p.background[c]) as f32
         }));
         exitance.extend(m.map(|v| v as f32));
