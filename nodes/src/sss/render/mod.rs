@@ -19,8 +19,9 @@
 //! that leaves one part of the object and enters another (`bounces`, `bounce.rs`), the entry
 //! dipole's flux through the exit point's own normal (`geometry: exit_normal`, `geometry.rs`),
 //! the directional dipole (`geometry: directional`, `directional.rs`), single scattering
-//! traced through the mesh (`single_scattering_shape: traced`, `single.rs`) and the exact
-//! half-space's energy (`energy: half_space`, `energy.rs`). Silhouette pixels show the object
+//! traced through the mesh (`single_scattering_shape: traced`, `single.rs`), the exact
+//! half-space's energy (`energy: half_space`, `energy.rs`) and the exitance's angular shape
+//! (`emission`, `emission.rs`). Silhouette pixels show the object
 //! over the share of the pixel it covers (`gather.rs`), as the truth's samples do.
 //!
 //! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
@@ -115,9 +116,12 @@ pub struct Params {
     /// reduced albedo); the multiple scattering alone when `single_scattering` adds the first.
     pub energy: Energy,
     /// How the diffuse exitance leaves in angle: `diffuse` (default; Jensen & Buhler's
-    /// Ft(θo)·M/(π(1 − Fdr))) or `p1` (diffusion theory's own radiance at the boundary,
+    /// Ft(θo)·M/(π(1 − Fdr))), `p1` (diffusion theory's own radiance at the boundary,
     /// 1 + 3μ′/(2A) inside, refracted out, the same exitance: at η = 1, 1.25× face-on and 0.5×
-    /// at grazing, as the exact half-space's 1.26× and 0.43×).
+    /// at grazing, as the exact half-space's 1.26× and 0.43×) or `half_space` (η = 1 only:
+    /// Chandrasekhar's exact shapes, the pixel's own light as a half-space lit at its incidence,
+    /// the rest as the deep field; the multiple scattering's when `single_scattering` adds the
+    /// first).
     pub emission: Emission,
 }
 

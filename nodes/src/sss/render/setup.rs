@@ -3,6 +3,7 @@
 
 use super::bounce;
 use super::directional::Directional;
+use super::emission::Exit;
 use super::energy::{Energy, Scale};
 use super::geometry::{ExitNormal, Geometry};
 use super::{Params, Weights, MIN_POINTS};
@@ -97,6 +98,10 @@ pub(super) struct Setup {
     pub(super) directional: Option<Directional>,
     /// With `energy: half_space`, the factor on the light entering.
     pub(super) energy: Option<Scale>,
+    /// The profile's total diffuse reflectance per channel.
+    pub(super) total: [f64; 3],
+    /// How the exitance leaves in angle (`emission`).
+    pub(super) exit: Exit,
     /// With `bounces`, the light between parts.
     pub(super) bounced: Option<Bounced>,
 }
@@ -211,6 +216,8 @@ impl Setup {
             directional: (p.geometry == Geometry::Directional)
                 .then(|| Directional::new(material, light, unit)),
             energy,
+            total: profile.total,
+            exit: Exit::for_material(p.emission, material, p.single_scattering)?,
             bounced: None,
         })
         .map(|mut setup| {
@@ -342,6 +349,8 @@ impl Setup {
             exit_normal: None,
             directional: None,
             energy: energy_scale(material, profile, p)?,
+            total: profile.total,
+            exit: Exit::for_material(p.emission, material, p.single_scattering)?,
             bounced: None,
         })
     }

@@ -1,7 +1,7 @@
 //! From gathered sums to pixels: the near disc, the exitance's way out in angle (`emission.rs`), the
 //! caller's exiting and local terms, single scattering, and the silhouette's coverage.
 
-use super::emission::Exit;
+use super::emission::Local;
 use super::gather::View;
 use super::setup::{irradiance, transmit_in, Setup};
 use super::single::Traced;
@@ -23,7 +23,6 @@ pub(super) fn finish(
     traced: Option<&Traced>,
 ) -> (Image, Image) {
     let eta = setup.eta;
-    let exit_angle = Exit::new(p.emission, eta);
     let mut radiance = Vec::with_capacity(3 * sums.len());
     let mut exitance = Vec::with_capacity(3 * sums.len());
     for (px, (h, s)) in view.hits.iter().zip(sums).enumerate() {
@@ -48,7 +47,6 @@ pub(super) fn finish(
         let m = [0, 1, 2].map(|c| s[c] + (e0 * f0[c] + bounced[c]) * setup.near_energy[c]);
         let v = d.map(|c| -c);
         let cos_o = dot(*n, v).clamp(0.0, 1.0);
-        let leaving = exit_angle.radiance(cos_o);
         let single = match (p.single_scattering, traced) {
             (false, _) => [0.0; 3],
             (true, Some(t)) => {
@@ -60,8 +58,17 @@ pub(super) fn finish(
         let (exit, local) = weights.pixel(px, frag, v);
         // A silhouette pixel shows the object over its covered share, the background elsewhere.
         let cover = view.coverage[px];
+        // What the pixel's own irradiance would return from a plane: the light that leaves
+        // with the local shape under `emission: half_space`.
+        let own = (e0 > 0.0).then(|| Local {
+            mu0: dot(*n, light.at(*x).0).clamp(0.0, 1.0),
+            exitance: [0, 1, 2].map(|c| e0 * f0[c] * setup.total[c] * exit[c]),
+        });
+        let leaving = setup
+            .exit
+            .leaving(cos_o, [0, 1, 2].map(|c| m[c] * exit[c]), own.as_ref());
         radiance.extend([0, 1, 2].map(|c| {
-            let object = leaving * m[c] * exit[c] + single[c] + local[c];
+            let object = leaving[c] + single[c] + local[c];
             (cover * object + (1.0 - cover) * p.background[c]) as f32
         }));
         exitance.extend(m.map(|v| v as f32));
