@@ -7,9 +7,10 @@
 //! the numbers do not move between runs.
 //!
 //! The issue asks for a relative RMSE of at most 0.12 (marble) and 0.15 (skin1) and the dimmer
-//! half's bias within ±15%; we come within 0.003 of the first and meet the second (the README's
-//! translucency section). The bounds here are what is reached, with a margin, so that a change
-//! that loses accuracy fails, and the gain over Jensen & Buhler's render is held too.
+//! half's bias within ±15%: marble meets both, skin1 the second and misses the first by 0.002
+//! (the README's translucency section). The bounds here are what is reached, with a margin
+//! (marble's is the issue's own), so that a change that loses accuracy fails, and the gain over
+//! Jensen & Buhler's render is held too.
 
 mod common;
 
@@ -94,14 +95,17 @@ fn translucent_renders_against_the_volumetric_truth() {
             "marble.bounces=0",
             "skin1.bounces=0",
             "marble.geometry=planar",
+            "marble.emission=diffuse",
             "skin1.geometry=planar",
             "skin1.single_scattering_shape=half_space",
+            "marble.single_scattering_shape=half_space",
         ],
     );
     for (material, rel, bias, dim) in [
-        // Measured 0.123 (the truth's noise 0.045 taken out), bias −4.3%, dimmer half −8.3%
-        // (Jensen & Buhler: 0.235, −1.9%, −38%); the issue's 0.12 is not reached, its ±15% is.
-        ("marble", 0.13, 0.06, 0.12),
+        // Measured 0.108 (the truth's noise 0.045 taken out), bias +4.0%, dimmer half −6.3%
+        // (Jensen & Buhler: 0.235, −1.9%, −38%): the issue's 0.12 and ±15% are both met, and
+        // the bound is the issue's own.
+        ("marble", 0.12, 0.06, 0.10),
         // Measured 0.152 (noise 0.033 taken out), bias +0.7%, dimmer half −9.6% (Jensen &
         // Buhler: 0.232, −14%, −67%); the issue's 0.15 is not reached, its ±15% is.
         ("skin1", 0.16, 0.03, 0.13),
