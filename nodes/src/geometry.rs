@@ -32,6 +32,18 @@ pub fn length(a: V3) -> f64 {
     dot(a, a).sqrt()
 }
 
+/// Two unit tangents completing the unit vector `z` to an orthonormal frame, without a branch
+/// on z's direction (Duff et al. 2017, "Building an orthonormal basis, revisited").
+pub fn frame(z: V3) -> (V3, V3) {
+    let sign = 1f64.copysign(z[2]);
+    let a = -1.0 / (sign + z[2]);
+    let b = z[0] * z[1] * a;
+    (
+        [1.0 + sign * z[0] * z[0] * a, sign * b, -sign * z[0]],
+        [b, sign + z[1] * z[1] * a, -z[1]],
+    )
+}
+
 /// The mesh's bounding sphere (centre, radius): centred on its bounding box, radius at least
 /// 10⁻⁹ so that a single point still has a scale.
 pub fn bounding_sphere(mesh: &Mesh) -> (V3, f64) {

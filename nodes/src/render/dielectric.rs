@@ -13,7 +13,7 @@
 //! η_o² in its numerator, o the camera's side), so a path that enters and leaves again carries
 //! no net factor of η².
 
-use crate::geometry::{add, cross, dot, mul, normalize, V3};
+use crate::geometry::{add, cross, dot, frame, mul, normalize, V3};
 use crate::sss::fresnel::reflectance_inside;
 use std::f64::consts::PI;
 
@@ -195,17 +195,6 @@ impl Boundary {
         let nh = add(add(mul(t1, p1), mul(t2, p2)), mul(vh, p3));
         normalize([a * nh[0], a * nh[1], nh[2].max(1e-12)]).unwrap_or([0.0, 0.0, 1.0])
     }
-}
-
-/// Two unit tangents completing `z` to an orthonormal frame (Duff et al. 2017).
-fn frame(z: V3) -> (V3, V3) {
-    let sign = 1f64.copysign(z[2]);
-    let a = -1.0 / (sign + z[2]);
-    let b = z[0] * z[1] * a;
-    (
-        [1.0 + sign * z[0] * z[0] * a, sign * b, -sign * z[0]],
-        [b, sign + z[1] * z[1] * a, -z[1]],
-    )
 }
 
 #[cfg(test)]

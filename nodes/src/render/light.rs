@@ -71,6 +71,12 @@ impl Light {
             }
         }
     }
+
+    /// How far along `l` (the direction `at` gave at `x`) the light lies: the length a shadow
+    /// ray must clear; infinite for a directional light.
+    pub fn reach(&self, x: V3, l: V3) -> f64 {
+        self.position.map_or(f64::INFINITY, |q| dot(sub(q, x), l))
+    }
 }
 
 #[cfg(test)]

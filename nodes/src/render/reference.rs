@@ -413,9 +413,7 @@ fn pixel(
             continue;
         }
         rays += 1;
-        let reach = light
-            .position
-            .map_or(f64::INFINITY, |q| dot(sub(q, pos), wi));
+        let reach = light.reach(pos, wi);
         if scene.occluded(add(pos, mul(ng, scene.epsilon)), wi, reach) {
             continue;
         }

@@ -279,9 +279,7 @@ fn next_event(
     tally: &mut Tally,
 ) {
     let (l, irradiance) = light.at(x);
-    let reach = light
-        .position
-        .map_or(f64::INFINITY, |q| dot(add(q, mul(x, -1.0)), l));
+    let reach = light.reach(x, l);
     let tr = transmittance(scene, medium, x, l, reach, rng, tally);
     if tr.iter().any(|v| *v > 0.0) {
         let phase = henyey_greenstein(dot(d, l), medium.g);
@@ -314,9 +312,7 @@ fn through_boundary(
     if f <= 0.0 {
         return;
     }
-    let reach = light
-        .position
-        .map_or(f64::INFINITY, |q| dot(add(q, mul(p, -1.0)), l));
+    let reach = light.reach(p, l);
     tally.rays += 1;
     if scene.occluded(leave(scene, p, ng, l), l, reach) {
         return;

@@ -117,12 +117,7 @@ pub(crate) fn sample_hg(g: f64, u: f64) -> f64 {
 /// Turns `d` by the polar angle with cosine `cos` and azimuth `phi`.
 pub(crate) fn rotate(d: [f64; 3], cos: f64, phi: f64) -> [f64; 3] {
     let sin = (1.0 - cos * cos).max(0.0).sqrt();
-    // An orthonormal frame around d (Duff et al. 2017's branchless construction).
-    let sign = 1f64.copysign(d[2]);
-    let a = -1.0 / (sign + d[2]);
-    let b = d[0] * d[1] * a;
-    let t = [1.0 + sign * d[0] * d[0] * a, sign * b, -sign * d[0]];
-    let s = [b, sign + d[1] * d[1] * a, -d[1]];
+    let (t, s) = crate::geometry::frame(d);
     let (c, si) = (phi.cos() * sin, phi.sin() * sin);
     [
         c * t[0] + si * s[0] + cos * d[0],

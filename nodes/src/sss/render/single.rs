@@ -111,9 +111,7 @@ impl Traced<'_> {
             let t = -(-u * mass).ln_1p() / least;
             let y = add(start, mul(d, t / self.unit));
             let (l, e) = light.at(y);
-            let reach = light
-                .position
-                .map_or(f64::INFINITY, |q| dot(add(q, mul(y, -1.0)), l));
+            let reach = light.reach(y, l);
             let (s, cos_in) = self.inside_towards(y, l, reach);
             let ft_i = transmit_in(cos_in, m.eta);
             let phase = henyey_greenstein(dot(l, d), m.g);
