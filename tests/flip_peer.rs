@@ -7,11 +7,10 @@
 
 mod common;
 
-use common::{mesoflow, peer_python, read_npy, report, Scratch};
+use common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
 use mesoflow_nodes::image::flip::{evaluate, Mode, Params};
 use mesoflow_nodes::types::{srgb_to_linear, Image};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn read_image(path: &Path) -> Image {
     let (shape, data) = read_npy(path);
@@ -82,22 +81,13 @@ fn flip_matches_nvidias_implementation() {
         .unwrap();
 
     let pairs = s.path("pairs");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/flip_pairs.py");
     let renders: Vec<PathBuf> = ["marble_reference", "marble", "skin"]
         .iter()
         .map(|n| out.join(format!("{n}.npy")))
         .collect();
-    let py = Command::new(&python)
-        .arg(&script)
-        .arg(&pairs)
-        .args(&renders)
-        .output()
-        .unwrap();
-    assert!(
-        py.status.success(),
-        "{}",
-        String::from_utf8_lossy(&py.stderr)
-    );
+    let mut args = vec![pairs.as_path()];
+    args.extend(renders.iter().map(|r| r.as_path()));
+    run_peer(&python, "flip_pairs.py", &args);
     let listing: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(pairs.join("pairs.json")).unwrap()).unwrap();
     let listing = listing.as_array().unwrap();

@@ -9,10 +9,9 @@
 
 mod common;
 
-use common::{mesoflow, peer_python, read_npy, report, Scratch};
+use common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
 use serde_json::json;
 use std::path::Path;
-use std::process::Command;
 
 const SAMPLES: u32 = 1024;
 
@@ -78,18 +77,7 @@ fn the_reference_renderer_agrees_with_mitsuba() {
         .to_string(),
     );
     let theirs_path = s.path("mitsuba.npy");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/mitsuba_reference.py");
-    let py = Command::new(&python)
-        .arg(&script)
-        .arg(&scene)
-        .arg(&theirs_path)
-        .output()
-        .unwrap();
-    assert!(
-        py.status.success(),
-        "{}",
-        String::from_utf8_lossy(&py.stderr)
-    );
+    run_peer(&python, "mitsuba_reference.py", &[&scene, &theirs_path]);
     let (shape, ours) = read_npy(&out.join("ours.npy"));
     let (_, coverage) = read_npy(&out.join("coverage.npy"));
     let (their_shape, theirs) = read_npy(&theirs_path);
@@ -210,7 +198,6 @@ fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples
         &json!({ "mesoflow": 1, "nodes": nodes }).to_string(),
     );
     let (out, rep) = run_graph(&s, &file);
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/mitsuba_reference.py");
     for &(name, g, sigma_s_prime, sigma_a) in cases {
         let node = rep["nodes"]
             .as_array()
@@ -241,17 +228,7 @@ fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples
                     .to_string(),
                 );
                 let npy = s.path(&format!("{name}_{seed}.npy"));
-                let py = Command::new(&python)
-                    .arg(&script)
-                    .arg(&scene)
-                    .arg(&npy)
-                    .output()
-                    .unwrap();
-                assert!(
-                    py.status.success(),
-                    "{}",
-                    String::from_utf8_lossy(&py.stderr)
-                );
+                run_peer(&python, "mitsuba_reference.py", &[&scene, &npy]);
                 let (shape, v) = read_npy(&npy);
                 assert_eq!(shape, [36, 48, 4]);
                 v

@@ -163,6 +163,24 @@ pub fn peer_python(imports: &str) -> Option<PathBuf> {
     None
 }
 
+/// Runs `tests/peers/<script>` with the peer Python and these arguments; fails with the
+/// script's own error output when it does.
+pub fn run_peer(python: &Path, script: &str, args: &[&Path]) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/peers")
+        .join(script);
+    let out = Command::new(python)
+        .arg(&path)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| panic!("{}: {e}", python.display()));
+    assert!(
+        out.status.success(),
+        "{script}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// An `.npy` of f32 as (shape, values).
 pub fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
     let bytes = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
