@@ -51,15 +51,7 @@ impl Node for Compare {
     fn run(&self, _ctx: &NodeContext, _p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let r = inputs.get::<Image>("reference")?;
         let a = inputs.get::<Image>("image")?;
-        if (r.width, r.height, r.channels) != (a.width, a.height, a.channels) {
-            return Err(NodeError::input(
-                "image",
-                format!(
-                    "{}×{}×{} does not match the reference's {}×{}×{}",
-                    a.width, a.height, a.channels, r.width, r.height, r.channels
-                ),
-            ));
-        }
+        same_size(r, a)?;
         let masks = [
             ("reference_mask", inputs.opt::<Image>("reference_mask")?),
             ("mask", inputs.opt::<Image>("mask")?),
@@ -109,6 +101,21 @@ pub struct AgainstTruth {
 }
 
 /// Sums in pixel order, so the result does not depend on threads.
+/// The `image` port's error when it is not the reference's size (width, height and channels).
+pub fn same_size(reference: &Image, image: &Image) -> Result<(), NodeError> {
+    let (r, i) = (reference, image);
+    if (r.width, r.height, r.channels) == (i.width, i.height, i.channels) {
+        return Ok(());
+    }
+    Err(NodeError::input(
+        "image",
+        format!(
+            "{}×{}×{} does not match the reference's {}×{}×{}",
+            i.width, i.height, i.channels, r.width, r.height, r.channels
+        ),
+    ))
+}
+
 pub fn against_truth(
     r: &Image,
     a: &Image,

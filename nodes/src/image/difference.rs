@@ -50,15 +50,7 @@ impl Node for Difference {
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let r = inputs.get::<Image>("reference")?;
         let i = inputs.get::<Image>("image")?;
-        if (r.width, r.height, r.channels) != (i.width, i.height, i.channels) {
-            return Err(NodeError::input(
-                "image",
-                format!(
-                    "{}×{}×{} against a {}×{}×{} reference",
-                    i.width, i.height, i.channels, r.width, r.height, r.channels
-                ),
-            ));
-        }
+        super::compare::same_size(r, i)?;
         if r.data.iter().chain(&i.data).any(|v| !v.is_finite()) {
             return Err(NodeError::input("image", "values must be finite"));
         }

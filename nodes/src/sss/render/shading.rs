@@ -32,9 +32,9 @@ pub(super) fn finish(
             continue;
         };
         let e0 = irradiance(light, setup.shadow.as_ref(), *x, *n, eta);
+        let to_light = light.at(*x).0;
         // The near disc's light enters through the same entrance function as the samples'.
         let f0 = if e0 > 0.0 {
-            let to_light = light.at(*x).0;
             let (f, k) = (
                 weights.entrance(frag, to_light),
                 setup.energy_at(dot(*n, to_light)),
@@ -61,7 +61,7 @@ pub(super) fn finish(
         // What the pixel's own irradiance would return from a plane: the light that leaves
         // with the local shape under `emission: half_space`.
         let own = (e0 > 0.0).then(|| Local {
-            mu0: dot(*n, light.at(*x).0).clamp(0.0, 1.0),
+            mu0: dot(*n, to_light).clamp(0.0, 1.0),
             exitance: [0, 1, 2].map(|c| e0 * f0[c] * setup.total[c] * exit[c]),
         });
         let leaving = setup
