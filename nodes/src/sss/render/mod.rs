@@ -22,7 +22,9 @@
 //! traced through the mesh (`single_scattering_shape: traced`, `single.rs`), the exact
 //! half-space's energy (`energy: half_space`, `energy.rs`) and the exitance's angular shape
 //! (`emission`, `emission.rs`). Silhouette pixels show the object
-//! over the share of the pixel it covers (`gather.rs`), as the truth's samples do.
+//! over the share of the pixel it covers (`gather.rs`), as the truth's samples do. An object
+//! fewer than six reduced mean free paths thick gets a warning (`thickness.rs`): there the
+//! truth showed diffusion's light through thin parts far too bright.
 //!
 //! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
 
@@ -51,6 +53,7 @@ mod shading;
 mod single;
 #[cfg(test)]
 mod tests;
+mod thickness;
 
 pub use emission::Emission;
 pub use energy::Energy;
@@ -183,8 +186,9 @@ impl Node for Render {
         NodeSpec {
             kind: "sss.render",
             // 4: the `geometry` parameter. 5: silhouette pixels covered in proportion;
-            // `single_scattering_shape`, `geometry: directional`, `energy`. 6: `emission`.
-            version: 6,
+            // `single_scattering_shape`, `geometry: directional`, `energy`. 6: `emission`. 7: the thin-object warning (results unchanged;
+            // a cache hit does not repeat a node's warnings, so earlier results rerun once).
+            version: 7,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -318,6 +322,10 @@ pub fn render_with(
         Mode::Brdf => Setup::local(mesh, material, profile, p, &light)?,
     };
     let tracer = Tracer::new(mesh);
+    if p.mode == Mode::Diffusion {
+        let thick = thickness::median_mm(&tracer, &setup.sources, p.mm_per_unit);
+        warnings.extend(thick.and_then(|t| thickness::warning(t, material)));
+    }
     let view = View::new(mesh, &camera, &tracer);
     let gather_start = Instant::now();
     let (sums, terms) = match (p.mode, gpu) {
