@@ -7,10 +7,10 @@
 //! the numbers do not move between runs.
 //!
 //! The issue asks for a relative RMSE of at most 0.12 (marble) and 0.15 (skin1) and the dimmer
-//! half's bias within ±15%: marble meets both, skin1 the second and misses the first by 0.002
-//! (the README's translucency section). The bounds here are what is reached, with a margin
-//! (marble's is the issue's own), so that a change that loses accuracy fails, and the gain over
-//! Jensen & Buhler's render is held too.
+//! half's bias within ±15%: both materials meet both with the graph's one configuration (the
+//! README's translucency section). The bounds here are what is reached, with a margin, tighter
+//! than the issue's, so that a change that loses accuracy fails, and the gain over Jensen &
+//! Buhler's render is held too.
 
 mod common;
 
@@ -96,19 +96,19 @@ fn translucent_renders_against_the_volumetric_truth() {
             "skin1.bounces=0",
             "marble.geometry=planar",
             "marble.emission=diffuse",
+            "skin1.emission=diffuse",
             "skin1.geometry=planar",
             "skin1.single_scattering_shape=half_space",
             "marble.single_scattering_shape=half_space",
         ],
     );
     for (material, rel, bias, dim) in [
-        // Measured 0.108 (the truth's noise 0.045 taken out), bias +4.0%, dimmer half −6.3%
-        // (Jensen & Buhler: 0.235, −1.9%, −38%): the issue's 0.12 and ±15% are both met, and
-        // the bound is the issue's own.
-        ("marble", 0.12, 0.06, 0.10),
-        // Measured 0.152 (noise 0.033 taken out), bias +0.7%, dimmer half −9.6% (Jensen &
-        // Buhler: 0.232, −14%, −67%); the issue's 0.15 is not reached, its ±15% is.
-        ("skin1", 0.16, 0.03, 0.13),
+        // Measured 0.084 (the truth's noise 0.044 taken out), bias −0.4%, dimmer half −2.4%
+        // (Jensen & Buhler: 0.235, −1.9%, −38%); the issue asks for 0.12 and ±15%.
+        ("marble", 0.10, 0.03, 0.06),
+        // Measured 0.125 (noise 0.033 taken out), bias −7.7%, dimmer half −6.1% (Jensen &
+        // Buhler: 0.232, −14%, −67%); the issue asks for 0.15 and ±15%.
+        ("skin1", 0.14, 0.10, 0.10),
     ] {
         let m = measure(&ours, material);
         let j = measure(&jensen, material);
@@ -133,7 +133,7 @@ fn translucent_renders_against_the_volumetric_truth() {
         );
     }
     // The octree (threshold 0.1) at brute force's error: the README's speed-up is at equal
-    // error (measured 0.1297 and 0.1293 with the truth's noise in; the noise is common to both).
+    // error (measured 0.0937 and 0.0938 with the truth's noise in; the noise is common to both).
     let rep = report(&ours);
     let rel = |id: &str| metric(&rep, id, "relative_rmse");
     let (octree, brute) = (rel("marble_error"), rel("marble_brute_error"));
@@ -141,4 +141,80 @@ fn translucent_renders_against_the_volumetric_truth() {
         (octree - brute).abs() < 0.002,
         "octree {octree} against brute force {brute}"
     );
+}
+
+/// The graph's one configuration on other materials, against 256-sample truths: a thick one
+/// (skin2, the tube 17 reduced mean free paths across) meets the issue's bounds as marble and
+/// skin1 do; a thin one (chicken1, 2.5 paths) does not, `exit_normal` sending far too much light
+/// through the tube, and `sss.render` says so with its thin-object warning, which points to
+/// `planar`; `planar` meets the bounds there, and so does the same chicken1 torus three times
+/// larger (7.5 paths) with the graph's configuration: the thickness is the cause, not the
+/// material's colour.
+#[test]
+fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
+    let s = Scratch::new();
+    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/sss_truth.json");
+    let cache = s.path("cache");
+    let run = |name: &str, preset: &str, mm: &str, geometry: &str| {
+        let out = s.path(name);
+        let sets = [
+            format!("marble_material.preset={preset}"),
+            "marble_truth.samples=256".into(),
+            format!("marble_truth.mm_per_unit={mm}"),
+            format!("marble.mm_per_unit={mm}"),
+            format!("marble.geometry={geometry}"),
+        ];
+        let mut args = vec!["run", graph.to_str().unwrap(), "--quiet", "--device", "cpu"];
+        args.extend(["--cache-dir", cache.to_str().unwrap()]);
+        args.extend(["--out-dir", out.to_str().unwrap()]);
+        for set in &sets {
+            args.extend(["--set", set]);
+        }
+        for output in [
+            "marble_truth_npy.files",
+            "marble_npy.files",
+            "marble_truth.noise",
+        ] {
+            args.extend(["--output", output]);
+        }
+        let r = mesoflow(&args, s.dir.path());
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let warned = report(&out)["warnings"].as_array().map(|w| {
+            w.iter()
+                .filter(|w| w.to_string().contains("mean free paths"))
+                .map(|w| w.to_string())
+                .collect::<Vec<_>>()
+        });
+        let m = measure(&out, "marble");
+        eprintln!(
+            "{name}: relative RMSE {:.3}, dimmer half {:+.3}, {warned:?}",
+            m.rel, m.dim
+        );
+        (m, warned.unwrap_or_default())
+    };
+    // Measured: skin2 0.112, dimmer half −2.9%; chicken1 planar 0.133, −9.1%; chicken1 at 60 mm
+    // a unit 0.117, +6.4%. The bounds are the issue's for skin1 (0.15, ±15%).
+    for (name, preset, mm, geometry, thin) in [
+        ("skin2", "skin2", "20", "exit_normal", false),
+        ("chicken1_planar", "chicken1", "20", "planar", true),
+        ("chicken1_60", "chicken1", "60", "exit_normal", false),
+    ] {
+        let (m, warned) = run(name, preset, mm, geometry);
+        assert!(
+            m.rel <= 0.15 && m.dim.abs() <= 0.15,
+            "{name}: {} {}",
+            m.rel,
+            m.dim
+        );
+        assert_eq!(!warned.is_empty(), thin, "{name}: {warned:?}");
+    }
+    // Measured 0.394, dimmer half +81%: the warning's "far too bright" holds.
+    let (m, warned) = run("chicken1", "chicken1", "20", "exit_normal");
+    assert!(
+        warned
+            .iter()
+            .any(|w| w.contains("red 2.5") && w.contains("planar")),
+        "chicken1's 15 mm tube is 2.5 reduced mean free paths in red: {warned:?}"
+    );
+    assert!(m.dim > 0.5, "chicken1's dimmer half {}", m.dim);
 }

@@ -24,7 +24,7 @@
 //! (`emission`, `emission.rs`). Silhouette pixels show the object
 //! over the share of the pixel it covers (`gather.rs`), as the truth's samples do. An object
 //! fewer than six reduced mean free paths thick gets a warning (`thickness.rs`): there the
-//! truth showed diffusion's light through thin parts far too bright.
+//! truth showed `exit_normal`'s light through thin parts far too bright.
 //!
 //! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
 
@@ -324,7 +324,7 @@ pub fn render_with(
     let tracer = Tracer::new(mesh);
     if p.mode == Mode::Diffusion {
         let thick = thickness::median_mm(&tracer, &setup.sources, p.mm_per_unit);
-        warnings.extend(thick.and_then(|t| thickness::warning(t, material)));
+        warnings.extend(thick.and_then(|t| thickness::warning(t, material, p.geometry)));
     }
     let view = View::new(mesh, &camera, &tracer);
     let gather_start = Instant::now();
