@@ -146,10 +146,10 @@ fn translucent_renders_against_the_volumetric_truth() {
 /// The graph's one configuration on other materials, against 256-sample truths: a thick one
 /// (skin2, the tube 17 reduced mean free paths across) meets the bounds as marble and
 /// skin1 do; a thin one (chicken1, 2.5 paths) does not, `exit_normal` sending far too much light
-/// through the tube, and `sss.render` says so with its thin-object warning, which points to
-/// `planar`; `planar` meets the bounds there, and so does the same chicken1 torus three times
-/// larger (7.5 paths) with the graph's configuration: the thickness is the cause, not the
-/// material's colour.
+/// through the tube, and `sss.render` says so with its thin-object warning, which gives
+/// `planar`'s error too; `planar` meets the bounds there, and so does the same chicken1 torus
+/// three times larger (7.5 paths) with the graph's configuration: the thickness is the cause,
+/// not the material's colour.
 #[test]
 fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
     let s = Scratch::new();
