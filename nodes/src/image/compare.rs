@@ -100,7 +100,6 @@ pub struct AgainstTruth {
     pub iou: Option<f64>,
 }
 
-/// Sums in pixel order, so the result does not depend on threads.
 /// The `image` port's error when it is not the reference's size (width, height and channels).
 pub fn same_size(reference: &Image, image: &Image) -> Result<(), NodeError> {
     let (r, i) = (reference, image);
@@ -116,6 +115,7 @@ pub fn same_size(reference: &Image, image: &Image) -> Result<(), NodeError> {
     ))
 }
 
+/// Sums in pixel order, so the result does not depend on threads.
 pub fn against_truth(
     r: &Image,
     a: &Image,

@@ -14,7 +14,7 @@ use crate::sss::octree::Source;
 use crate::types::ScatteringMaterial;
 
 /// Reduced mean free paths across the object under which `sss.render` warns: between the
-/// thickest failure measured (3.6) and the thinnest success (7.5).
+/// thickest failure measured (4.6, the chicken1 sphere) and the thinnest success (7.5).
 pub(super) const THIN: f64 = 6.0;
 
 /// Samples probed: evenly strided over the irradiance samples, enough for a stable median.
