@@ -15,7 +15,7 @@
 mod common;
 
 use common::{mesoflow, metric, read_npy, report, Scratch};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 struct Measured {
     /// Relative RMSE over the object's pixels, the truth's own noise taken out in quadrature.
@@ -59,31 +59,29 @@ fn measure(out: &Path, material: &str) -> Measured {
     }
 }
 
+/// `graphs/sss_truth.json` on the CPU with these `--set`s and `--output`s (all sinks when
+/// none), its cache in the scratch folder; the output folder `name`.
+fn run_truth_graph(s: &Scratch, name: &str, sets: &[&str], outputs: &[&str]) -> PathBuf {
+    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/sss_truth.json");
+    let (cache, out) = (s.path("cache"), s.path(name));
+    let mut args = vec!["run", graph.to_str().unwrap(), "--quiet", "--device", "cpu"];
+    args.extend(["--cache-dir", cache.to_str().unwrap()]);
+    args.extend(["--out-dir", out.to_str().unwrap()]);
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    for output in outputs {
+        args.extend(["--output", output]);
+    }
+    let r = mesoflow(&args, s.dir.path());
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    out
+}
+
 #[test]
 fn translucent_renders_against_the_volumetric_truth() {
     let s = Scratch::new();
-    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/sss_truth.json");
-    let cache = s.path("cache");
-    let run = |name: &str, sets: &[&str]| {
-        let out = s.path(name);
-        let mut args = vec![
-            "run",
-            graph.to_str().unwrap(),
-            "--quiet",
-            "--device",
-            "cpu",
-            "--cache-dir",
-            cache.to_str().unwrap(),
-            "--out-dir",
-            out.to_str().unwrap(),
-        ];
-        for set in sets {
-            args.extend(["--set", set]);
-        }
-        let r = mesoflow(&args, s.dir.path());
-        assert_eq!(r.code, 0, "{}", r.stderr);
-        out
-    };
+    let run = |name: &str, sets: &[&str]| run_truth_graph(&s, name, sets, &[]);
     let ours = run("ours", &[]);
     // Jensen & Buhler 2002 as graphs/sss_render.json renders it (the truth comes from the cache).
     let jensen = run(
@@ -153,10 +151,7 @@ fn translucent_renders_against_the_volumetric_truth() {
 #[test]
 fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
     let s = Scratch::new();
-    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/sss_truth.json");
-    let cache = s.path("cache");
     let run = |name: &str, preset: &str, mm: &str, geometry: &str| {
-        let out = s.path(name);
         let sets = [
             format!("marble_material.preset={preset}"),
             "marble_truth.samples=256".into(),
@@ -164,21 +159,13 @@ fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
             format!("marble.mm_per_unit={mm}"),
             format!("marble.geometry={geometry}"),
         ];
-        let mut args = vec!["run", graph.to_str().unwrap(), "--quiet", "--device", "cpu"];
-        args.extend(["--cache-dir", cache.to_str().unwrap()]);
-        args.extend(["--out-dir", out.to_str().unwrap()]);
-        for set in &sets {
-            args.extend(["--set", set]);
-        }
-        for output in [
+        let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+        let outputs = [
             "marble_truth_npy.files",
             "marble_npy.files",
             "marble_truth.noise",
-        ] {
-            args.extend(["--output", output]);
-        }
-        let r = mesoflow(&args, s.dir.path());
-        assert_eq!(r.code, 0, "{}", r.stderr);
+        ];
+        let out = run_truth_graph(&s, name, &sets, &outputs);
         let warned = report(&out)["warnings"].as_array().map(|w| {
             w.iter()
                 .filter(|w| w.to_string().contains("mean free paths"))
