@@ -33,6 +33,10 @@ pub enum Geometry {
     /// plane lit straight down: the light's incident direction and the exit point's normal
     /// (`directional.rs`; CPU gather only).
     Directional,
+    /// `exit_normal` plus what the object's own boundary takes away: the diffusion equation
+    /// solved on a grid inside the mesh for the difference from the dipoles (`body.rs`; CPU
+    /// gather only; the mesh must be closed).
+    Body,
 }
 
 /// Per channel: σtr, zr and zv (mm).

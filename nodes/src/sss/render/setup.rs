@@ -212,7 +212,8 @@ impl Setup {
             shadow,
             eta: material.eta,
             unit,
-            exit_normal: (p.geometry == Geometry::ExitNormal).then(|| ExitNormal::new(material)),
+            exit_normal: matches!(p.geometry, Geometry::ExitNormal | Geometry::Body)
+                .then(|| ExitNormal::new(material)),
             directional: (p.geometry == Geometry::Directional)
                 .then(|| Directional::new(material, light, unit)),
             energy,

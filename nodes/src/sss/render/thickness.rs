@@ -1,11 +1,13 @@
 //! How thick the object is against the material's reduced mean free path 1/σt′. Diffusion
 //! assumes light forgets its direction long before it crosses the object. Against the
 //! volumetric truth (`graphs/sss_truth.json` with other presets and shapes, the README's
-//! translucency section) the torus's error stayed under 0.13 where its tube was 7.5 or more
-//! reduced mean free paths across. At 3.7 (ketchup) and 2.5 (chicken1) `geometry: exit_normal`
-//! sent far too much light through the tube (0.23 and 0.39, the shadowed half 74–81% too
-//! bright), and 49% too much through a chicken1 sphere 4.6 paths across; `planar` left those
-//! shadowed sides 9–36% too dark. Below [`THIN`] the render warns.
+//! translucency section) the torus's error with `geometry: body` stayed under 0.12 where its tube was 7.5 or more
+//! reduced mean free paths across. At 3.7 (ketchup) and 2.5 (chicken1) `geometry: body` and
+//! `exit_normal` sent far too much light through the tube (0.23–0.39, the dimmer half
+//! 70–83% too bright), and 45–51% too much through a chicken1 sphere 4.6 paths across;
+//! `planar` left those dimmer halves 10–38% too dark (the half chosen by a second truth of
+//! another seed, so that its noise does not choose the pixels). Below [`THIN`] the render
+//! warns.
 
 use super::Geometry;
 use crate::geometry::{add, dot, mul, V3};
@@ -61,9 +63,10 @@ pub(super) fn warning(
         .collect();
     let expect = match geometry {
         Geometry::Planar => {
-            "expect the shadowed side 9–36% too dark (measured against the volumetric truth)"
+            "expect the dimmer half 10–38% too dark (measured against the volumetric truth)"
         }
-        Geometry::ExitNormal => "the light through thin parts comes out far too bright (the shadowed side 49–81% too bright against the volumetric truth; `geometry: planar` left it 9–36% too dark)",
+        Geometry::ExitNormal => "the light through thin parts comes out far too bright (the dimmer half 45–79% too bright against the volumetric truth; `geometry: planar` left it 10–38% too dark)",
+        Geometry::Body => "the light through thin parts comes out far too bright (the dimmer half 51–83% too bright against the volumetric truth; `geometry: planar` left it 10–38% too dark)",
         Geometry::Directional => {
             "expect large errors (not measured against the volumetric truth for `directional`)"
         }
