@@ -295,6 +295,13 @@ impl Grid {
         unit: f64,
         band: f64,
     ) -> Result<Vec<f64>, NodeError> {
+        let torn = open_edges(mesh);
+        if torn > 0 {
+            return Err(NodeError::input(
+                "mesh",
+                format!("geometry: body needs a closed mesh: {torn} edges border only one triangle (an open or torn surface has no inside to solve in)"),
+            ));
+        }
         let [nx, ny, nz] = self.dims;
         let nudge = 1.37e-4 * self.h;
         let rows: Vec<Option<Vec<bool>>> = (0..ny * nz)
@@ -527,6 +534,55 @@ impl Grid {
     }
 }
 
+/// Edges with an odd number of triangles on them, corners welded within a millionth of the
+/// mesh's size (a UV seam repeats its vertices; sin 2π is not exactly 0).
+fn open_edges(mesh: &Mesh) -> usize {
+    use std::collections::HashMap;
+    let (lo, hi) = mesh.bounds();
+    let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+    let tol = 1e-6 * size.max(1e-30);
+    let key = |p: [f32; 3]| p.map(|v| (v as f64 / tol).floor() as i64);
+    // Each vertex takes the id of a welded one already seen in its or a neighbouring cell.
+    let mut cells: HashMap<[i64; 3], Vec<(usize, [f32; 3])>> = HashMap::new();
+    let mut id = vec![0usize; mesh.positions.len()];
+    for (i, &p) in mesh.positions.iter().enumerate() {
+        let k = key(p);
+        let mut found = None;
+        'search: for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(list) = cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        if let Some(&(j, _)) = list
+                            .iter()
+                            .find(|(_, q)| (0..3).all(|c| ((p[c] - q[c]) as f64).abs() <= tol))
+                        {
+                            found = Some(j);
+                            break 'search;
+                        }
+                    }
+                }
+            }
+        }
+        id[i] = match found {
+            Some(j) => j,
+            None => {
+                cells.entry(k).or_default().push((i, p));
+                i
+            }
+        };
+    }
+    let mut edges: HashMap<(usize, usize), u32> = HashMap::new();
+    for t in 0..mesh.triangles() {
+        let c = mesh.corners(t).map(|i| id[i]);
+        for (a, b) in [(c[0], c[1]), (c[1], c[2]), (c[2], c[0])] {
+            if a != b {
+                *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+            }
+        }
+    }
+    edges.values().filter(|&&n| n % 2 == 1).count()
+}
+
 /// Σ aᵢbᵢ in fixed chunks summed in order: the same bits whatever the thread count.
 fn dot_fixed(a: &[f64], b: &[f64]) -> f64 {
     const CHUNK: usize = 4096;
@@ -705,6 +761,30 @@ mod tests {
         );
         // The body's share is what moves the bottom there: the dipoles alone are 38% short.
         assert!(half_bottom / transmitted < 0.7, "{half_bottom}");
+    }
+
+    #[test]
+    fn closed_primitives_pass_and_an_open_tube_does_not() {
+        for (shape, minor) in [(Shape::Sphere, 0.0), (Shape::Torus, 0.4)] {
+            let mesh = primitive::build(&primitive::Params {
+                shape,
+                size: 1.0,
+                minor,
+                segments: [32, 16],
+            })
+            .unwrap();
+            assert_eq!(open_edges(&mesh), 0, "{shape:?}");
+        }
+        assert_eq!(open_edges(&primitive::closed_box([1.0, 2.0, 0.5])), 0);
+        // A tube open at both ends: its two rims, 32 edges each.
+        let tube = primitive::build(&primitive::Params {
+            shape: Shape::Cylinder,
+            size: 1.0,
+            minor: 1.0,
+            segments: [32, 4],
+        })
+        .unwrap();
+        assert_eq!(open_edges(&tube), 64);
     }
 
     #[test]
