@@ -150,7 +150,7 @@ fn translucent_renders_against_the_volumetric_truth() {
         );
     }
     // The octree (threshold 0.1) at brute force's error: the README's speed-up is at equal
-    // error (measured 0.0924 and 0.0927 with the truth's noise in; the noise is common to both).
+    // error (measured 0.0923 and 0.0926 with the truth's noise in; the noise is common to both).
     let rep = report(&ours);
     let rel = |id: &str| metric(&rep, id, "relative_rmse");
     let (octree, brute) = (rel("marble_error"), rel("marble_brute_error"));
