@@ -535,43 +535,11 @@ impl Grid {
     }
 }
 
-/// Edges with an odd number of triangles on them, corners welded within a millionth of the
-/// mesh's size (a UV seam repeats its vertices; sin 2π is not exactly 0).
+/// Edges with an odd number of triangles on them, corners welded by position
+/// ([`Mesh::position_twins`]: a UV seam repeats its vertices).
 fn open_edges(mesh: &Mesh) -> usize {
     use std::collections::HashMap;
-    let (lo, hi) = mesh.bounds();
-    let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
-    let tol = 1e-6 * size.max(1e-30);
-    let key = |p: [f32; 3]| p.map(|v| (v as f64 / tol).floor() as i64);
-    // Each vertex takes the id of a welded one already seen in its or a neighbouring cell.
-    let mut cells: HashMap<[i64; 3], Vec<(usize, [f32; 3])>> = HashMap::new();
-    let mut id = vec![0usize; mesh.positions.len()];
-    for (i, &p) in mesh.positions.iter().enumerate() {
-        let k = key(p);
-        let mut found = None;
-        'search: for dx in -1..=1 {
-            for dy in -1..=1 {
-                for dz in -1..=1 {
-                    if let Some(list) = cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
-                        if let Some(&(j, _)) = list
-                            .iter()
-                            .find(|(_, q)| (0..3).all(|c| ((p[c] - q[c]) as f64).abs() <= tol))
-                        {
-                            found = Some(j);
-                            break 'search;
-                        }
-                    }
-                }
-            }
-        }
-        id[i] = match found {
-            Some(j) => j,
-            None => {
-                cells.entry(k).or_default().push((i, p));
-                i
-            }
-        };
-    }
+    let id = mesh.position_twins();
     let mut edges: HashMap<(usize, usize), u32> = HashMap::new();
     for t in 0..mesh.triangles() {
         let c = mesh.corners(t).map(|i| id[i]);
