@@ -78,27 +78,16 @@ impl Body {
         material: &ScatteringMaterial,
         unit: f64,
     ) -> Result<(Body, Report), NodeError> {
-        let dipoles = [0, 1, 2]
-            .map(|c| Dipole::new(material.sigma_s_prime[c], material.sigma_a[c], material.eta));
+        let dipoles = dipoles(material);
         let mut warnings = Vec::new();
-        let (lo, hi) = mesh.bounds();
-        let (lo, hi) = (lo.map(|v| v as f64 * unit), hi.map(|v| v as f64 * unit));
-        let extent = [0, 1, 2].map(|k| hi[k] - lo[k]);
-        let smallest = extent.iter().copied().fold(f64::INFINITY, f64::min);
+        let (lo, hi) = bounds_mm(mesh, unit);
+        let smallest = (0..3).map(|k| hi[k] - lo[k]).fold(f64::INFINITY, f64::min);
         let reach = dipoles
             .iter()
             .map(|d| 1.0 / d.sigma_tr)
             .fold(f64::INFINITY, f64::min);
-        let zb_max = dipoles
-            .iter()
-            .map(|d| 0.5 * (d.zv - d.zr))
-            .fold(0.0, f64::max);
         let wanted = (0.5 * reach).min(smallest / ACROSS);
-        let cells_at = |h: f64| {
-            (0..3)
-                .map(|k| ((extent[k] + 2.0 * (zb_max + 2.0 * h)) / h).ceil() + 1.0)
-                .product::<f64>()
-        };
+        let cells_at = |h: f64| Grid::over(lo, hi, h, pad(&dipoles, h)).count() as f64;
         let mut h = wanted;
         while cells_at(h) > MAX_CELLS {
             h *= 1.1;
@@ -123,20 +112,11 @@ impl Body {
         unit: f64,
         h: f64,
     ) -> Result<(Body, Report), NodeError> {
-        let dipoles = [0, 1, 2]
-            .map(|c| Dipole::new(material.sigma_s_prime[c], material.sigma_a[c], material.eta));
-        let zb_max = dipoles
-            .iter()
-            .map(|d| 0.5 * (d.zv - d.zr))
-            .fold(0.0, f64::max);
-        let (lo, hi) = mesh.bounds();
-        let grid = Grid::over(
-            lo.map(|v| v as f64 * unit),
-            hi.map(|v| v as f64 * unit),
-            h,
-            zb_max + 2.0 * h,
-        );
-        let signed = grid.signed_distance(tracer, mesh, unit, zb_max + 2.0 * h)?;
+        let dipoles = dipoles(material);
+        let (lo, hi) = bounds_mm(mesh, unit);
+        let band = pad(&dipoles, h);
+        let grid = Grid::over(lo, hi, h, band);
+        let signed = grid.signed_distance(tracer, mesh, unit, band)?;
         let mut warnings = Vec::new();
         let mut channels = Vec::with_capacity(3);
         for (c, dipole) in dipoles.iter().enumerate() {
@@ -179,18 +159,16 @@ impl Body {
 
     /// −D ∂ψ/∂n at `xo` given ψ's boundary value z_b outside along `no`.
     fn slope(&self, ch: &Channel, xo: V3, no: V3, at_boundary: f64) -> f64 {
-        {
-            let one = self.interpolate(ch, sub(xo, mul(no, self.h)));
-            let two = self.interpolate(ch, sub(xo, mul(no, 2.0 * self.h)));
-            let slope = match (one, two) {
-                (Some(a), Some(b)) => {
-                    derivative_at_zero([(ch.zb, at_boundary), (-self.h, a), (-2.0 * self.h, b)])
-                }
-                (Some(a), None) => (at_boundary - a) / (ch.zb + self.h),
-                _ => 0.0,
-            };
-            -ch.d * slope
-        }
+        let one = self.interpolate(ch, sub(xo, mul(no, self.h)));
+        let two = self.interpolate(ch, sub(xo, mul(no, 2.0 * self.h)));
+        let slope = match (one, two) {
+            (Some(a), Some(b)) => {
+                derivative_at_zero([(ch.zb, at_boundary), (-self.h, a), (-2.0 * self.h, b)])
+            }
+            (Some(a), None) => (at_boundary - a) / (ch.zb + self.h),
+            _ => 0.0,
+        };
+        -ch.d * slope
     }
 
     /// Trilinear ψ at `x` over the corners that are unknowns (renormalised), `None` if none is.
@@ -223,6 +201,27 @@ impl Body {
     fn cell(&self, i: [usize; 3]) -> usize {
         (i[2] * self.dims[1] + i[1]) * self.dims[0] + i[0]
     }
+}
+
+/// Jensen et al. 2001's dipole per channel.
+fn dipoles(material: &ScatteringMaterial) -> [Dipole; 3] {
+    [0, 1, 2].map(|c| Dipole::new(material.sigma_s_prime[c], material.sigma_a[c], material.eta))
+}
+
+/// The grid's margin around the mesh, and the band its signed distance is needed in: the
+/// largest extrapolation distance z_b = 2AD plus two cells.
+fn pad(dipoles: &[Dipole; 3], h: f64) -> f64 {
+    let zb_max = dipoles
+        .iter()
+        .map(|d| 0.5 * (d.zv - d.zr))
+        .fold(0.0, f64::max);
+    zb_max + 2.0 * h
+}
+
+/// The mesh's bounding box in mm.
+fn bounds_mm(mesh: &Mesh, unit: f64) -> (V3, V3) {
+    let (lo, hi) = mesh.bounds();
+    (lo.map(|v| v as f64 * unit), hi.map(|v| v as f64 * unit))
 }
 
 /// The derivative at 0 of the parabola through three (s, value) points.
