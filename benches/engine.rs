@@ -122,7 +122,7 @@ fn main() {
             &key,
             "bench",
             &Outputs::new().with("height", hf),
-            &mesoflow_runtime::cache::Timing::default(),
+            &mesoflow_runtime::cache::Record::default(),
         )
         .expect("put");
     let entry = cache.entry_path(&key);

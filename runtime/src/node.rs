@@ -168,6 +168,8 @@ pub struct NodeContext {
     pub(crate) gpu: Option<Arc<Gpu>>,
     pub(crate) sink: Arc<dyn ProgressSink>,
     pub(crate) timings: std::sync::Mutex<BTreeMap<String, f64>>,
+    /// The warnings given so far, kept with the value in the caches.
+    pub(crate) warnings: std::sync::Mutex<Vec<String>>,
 }
 
 impl NodeContext {
@@ -185,6 +187,7 @@ impl NodeContext {
             gpu,
             sink: Arc::new(Quiet),
             timings: Default::default(),
+            warnings: Default::default(),
         }
     }
 
@@ -201,9 +204,22 @@ impl NodeContext {
     pub fn progress(&self, done: u64, total: u64) {
         self.sink.progress(&self.node, done, total);
     }
-    /// A documented, non-fatal problem; it appears in the run report's warnings.
+    /// A documented, non-fatal problem; it appears in the run report's warnings, and again in
+    /// those of every run that takes the value from a cache.
     pub fn warn(&self, message: impl Into<String>) {
-        self.sink.warn(&self.node, message.into());
+        let message = message.into();
+        self.warnings
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .push(message.clone());
+        self.sink.warn(&self.node, message);
+    }
+    /// The warnings given so far (tests that call nodes directly read them).
+    pub fn warnings(&self) -> Vec<String> {
+        self.warnings
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
     /// Records a timing of this computation (declared in [`Node::timings`]) for the run report.
     /// A value that is not finite is dropped: an unknown time is absent, never 0 or NaN.

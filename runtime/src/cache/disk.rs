@@ -4,16 +4,16 @@
 //! "MESOFLOW-CACHE\x01\n" | u64 header length | header JSON | payload | blake3(header ‖ payload)
 //! ```
 //!
-//! The header names the key and kind the entry was written for, the compute time and timings, and
-//! each output's port, type and payload length. A read compares the recorded key and kind with the
-//! ones asked for, so an entry copied or renamed over another is refused (and recomputed) rather
-//! than served. Entries are written to a temporary file in `<dir>/tmp` and renamed into place, so
+//! The header names the key and kind the entry was written for, the compute time, timings and
+//! warnings, and each output's port, type and payload length. A read compares the recorded key
+//! and kind with the ones asked for, so an entry copied or renamed over another is refused (and
+//! recomputed) rather than served. Entries are written to a temporary file in `<dir>/tmp` and renamed into place, so
 //! a reader (in this process or another) sees a whole entry or none; the trailing checksum catches
 //! truncation and corruption, which the engine reports as a warning and recomputes. Temporary
 //! files older than [`ORPHAN_AGE`] were left by a process that died mid-write: every write and
 //! `cache stats` reclaim them.
 
-use super::Timing;
+use super::Record;
 use crate::codec::Encoder;
 use crate::key::Key;
 use crate::node::Outputs;
@@ -48,7 +48,7 @@ struct Header {
     key: String,
     kind: String,
     #[serde(flatten)]
-    timing: Timing,
+    record: Record,
     outputs: Vec<OutputHeader>,
     /// Absent in entries written before it was recorded.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -125,7 +125,7 @@ impl DiskCache {
         key: &Key,
         kind: &str,
         registry: &Registry,
-    ) -> Result<Option<(Outputs, Timing)>, DiskError> {
+    ) -> Result<Option<(Outputs, Record)>, DiskError> {
         let path = self.entry_path(key);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
@@ -165,7 +165,7 @@ impl DiskCache {
         key: &Key,
         kind: &str,
         outputs: &Outputs,
-        timing: &Timing,
+        record: &Record,
     ) -> Result<(), DiskError> {
         let io = |path: &Path| {
             let path = path.display().to_string();
@@ -185,7 +185,7 @@ impl DiskCache {
         let header = serde_json::to_vec(&Header {
             key: key.hex(),
             kind: kind.into(),
-            timing: timing.clone(),
+            record: record.clone(),
             outputs: headers,
             producer: Some(crate::producer::producer().clone()),
         })
@@ -380,7 +380,7 @@ fn decode_entry(
     key: &Key,
     kind: &str,
     registry: &Registry,
-) -> Result<(Outputs, Timing), String> {
+) -> Result<(Outputs, Record), String> {
     if bytes.len() < MAGIC.len() + 8 + 32 || &bytes[..16] != MAGIC {
         return Err("not a mesoflow cache entry or truncated".into());
     }
@@ -425,7 +425,7 @@ fn decode_entry(
     if !rest.is_empty() {
         return Err("trailing bytes".into());
     }
-    Ok((outputs, header.timing))
+    Ok((outputs, header.record))
 }
 
 #[cfg(test)]
@@ -450,13 +450,14 @@ mod tests {
         let reg = Registry::new();
         let key = Key([7; 32]);
         assert!(cache.get(&key, "test.kind", &reg).unwrap().is_none());
-        let timing = Timing {
+        let record = Record {
             seconds: 1.25,
             timings: [("gpu_ms".to_string(), 3.5)].into(),
+            warnings: vec!["thin: 2.5 mean free paths".into()],
         };
-        cache.put(&key, "test.kind", &sample(), &timing).unwrap();
+        cache.put(&key, "test.kind", &sample(), &record).unwrap();
         let (out, back) = cache.get(&key, "test.kind", &reg).unwrap().unwrap();
-        assert_eq!(back, timing);
+        assert_eq!(back, record);
         let producer = cache.producer(&key).unwrap();
         assert!(
             producer.build.starts_with(env!("CARGO_PKG_VERSION")),
@@ -475,8 +476,10 @@ mod tests {
                 "cut {cut}"
             );
         }
+        // A flipped payload byte (the last before the 32-byte checksum): the header still reads,
+        // so `stats` counts the entry, but the checksum refuses it.
         let mut flipped = full.clone();
-        flipped[full.len() / 2] ^= 1;
+        flipped[full.len() - 33] ^= 1;
         std::fs::write(cache.entry_path(&key), &flipped).unwrap();
         assert!(matches!(
             cache.get(&key, "test.kind", &reg),
@@ -502,7 +505,7 @@ mod tests {
         let reg = Registry::new();
         let (a, b) = (Key([1; 32]), Key([2; 32]));
         cache
-            .put(&a, "test.kind", &sample(), &Timing::default())
+            .put(&a, "test.kind", &sample(), &Record::default())
             .unwrap();
         // Another entry copied over this key's file: refused, never served.
         std::fs::create_dir_all(cache.entry_path(&b).parent().unwrap()).unwrap();
@@ -525,7 +528,7 @@ mod tests {
         let keys: Vec<Key> = (1..=4).map(|i| Key([i; 32])).collect();
         for (i, k) in keys.iter().enumerate() {
             cache
-                .put(k, "test.kind", &sample(), &Timing::default())
+                .put(k, "test.kind", &sample(), &Record::default())
                 .unwrap();
             // Entry i was last used i + 1 days ago, except entry 3, 40 days ago.
             let age = if i == 3 {

@@ -1,7 +1,7 @@
 //! In-process cache of node outputs, bounded in bytes. When full it evicts the entries that are
 //! cheapest to get back: least compute time per byte first.
 
-use super::Timing;
+use super::Record;
 use crate::key::Key;
 use crate::node::Outputs;
 use std::collections::HashMap;
@@ -10,7 +10,7 @@ use std::sync::Mutex;
 struct Entry {
     outputs: Outputs,
     bytes: usize,
-    timing: Timing,
+    record: Record,
 }
 
 pub struct MemoryCache {
@@ -42,11 +42,11 @@ impl MemoryCache {
         self.inner.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    pub fn get(&self, key: &Key) -> Option<(Outputs, Timing)> {
+    pub fn get(&self, key: &Key) -> Option<(Outputs, Record)> {
         self.lock()
             .entries
             .get(key)
-            .map(|e| (e.outputs.clone(), e.timing.clone()))
+            .map(|e| (e.outputs.clone(), e.record.clone()))
     }
 
     pub fn used(&self) -> usize {
@@ -62,7 +62,7 @@ impl MemoryCache {
     }
 
     /// Inserts, evicting as needed; an entry larger than the whole budget is not kept.
-    pub fn insert(&self, key: Key, outputs: Outputs, timing: Timing) {
+    pub fn insert(&self, key: Key, outputs: Outputs, record: Record) {
         let bytes = outputs.byte_size().max(1);
         if bytes > self.budget {
             return;
@@ -76,8 +76,8 @@ impl MemoryCache {
                 .entries
                 .iter()
                 .min_by(|a, b| {
-                    let va = a.1.timing.seconds / a.1.bytes as f64;
-                    let vb = b.1.timing.seconds / b.1.bytes as f64;
+                    let va = a.1.record.seconds / a.1.bytes as f64;
+                    let vb = b.1.record.seconds / b.1.bytes as f64;
                     va.total_cmp(&vb).then_with(|| a.0.cmp(b.0))
                 })
                 .map(|(k, _)| *k);
@@ -92,7 +92,7 @@ impl MemoryCache {
             Entry {
                 outputs,
                 bytes,
-                timing,
+                record,
             },
         );
     }
@@ -103,10 +103,10 @@ mod tests {
     use super::*;
     use crate::value::Artifact;
 
-    fn secs(seconds: f64) -> Timing {
-        Timing {
+    fn secs(seconds: f64) -> Record {
+        Record {
             seconds,
-            ..Timing::default()
+            ..Record::default()
         }
     }
 

@@ -10,14 +10,19 @@ pub use memory::MemoryCache;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// What the computation that produced a cached value measured: its wall time and the node's own
-/// timings (`NodeContext::timing`). Metadata about the value, never part of it: `--verify-cache`
-/// compares values only, and a hit reports these as the cost of the value it served.
+/// What the computation that produced a cached value measured and said: its wall time, the
+/// node's own timings (`NodeContext::timing`) and the warnings it gave (`NodeContext::warn`).
+/// Metadata about the value, never part of it: `--verify-cache` compares values only. A hit
+/// reports the timings as the cost of the value it served and repeats the warnings, which belong
+/// to the value (a thin object's is as true of a cached render as of a fresh one).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct Timing {
+pub struct Record {
     pub seconds: f64,
     #[serde(default)]
     pub timings: BTreeMap<String, f64>,
+    /// Absent from entries written before warnings were recorded: those hits repeat none.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// Default memory budget: a quarter of physical memory (2 GiB when it cannot be read).

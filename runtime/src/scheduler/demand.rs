@@ -2,10 +2,11 @@
 //! hit ends the walk on that branch: its ancestors are not needed and are reported as skipped,
 //! except writers (nodes with `File` outputs), which are always demanded so that every run writes
 //! every file. With `--verify-cache` a hit is still recomputed, so its inputs are demanded too.
+//! A hit repeats the warnings its computation gave.
 
 use super::plan::{writes_files, Plan};
 use super::{metrics, Sink, Slot};
-use crate::cache::Timing;
+use crate::cache::Record;
 use crate::engine::{Engine, RunOptions};
 use crate::key::Key;
 use crate::node::Outputs;
@@ -50,7 +51,11 @@ pub(crate) fn demand(
             None
         };
         match hit {
-            Some((outputs, status, seconds, timing)) if !opts.verify_cache => {
+            Some((outputs, status, seconds, record)) if !opts.verify_cache => {
+                // The warnings belong to the value: a cached render of a thin object is as thin.
+                for w in &record.warnings {
+                    sink.push(cn.id.as_str(), w.clone());
+                }
                 let spec = slot.node.spec();
                 slot.report = Some(NodeReport {
                     id: cn.id.clone(),
@@ -62,7 +67,7 @@ pub(crate) fn demand(
                     bytes: outputs.byte_size() as u64,
                     key: key.hex(),
                     metrics: metrics(&outputs),
-                    timings: super::timings_of(&timing),
+                    timings: super::timings_of(&record),
                     kind_version: spec.version,
                     error: None,
                     verified: false,
@@ -89,16 +94,16 @@ fn lookup(
     kind: &str,
     node: &str,
     sink: &Sink,
-) -> Option<(Outputs, NodeStatus, f64, Timing)> {
-    if let Some((out, timing)) = engine.memory.get(key) {
-        return Some((out, NodeStatus::Memory, 0.0, timing));
+) -> Option<(Outputs, NodeStatus, f64, Record)> {
+    if let Some((out, record)) = engine.memory.get(key) {
+        return Some((out, NodeStatus::Memory, 0.0, record));
     }
     let disk = engine.disk.as_ref()?;
     let t = Instant::now();
     match disk.get(key, kind, &engine.registry) {
-        Ok(Some((outputs, timing))) => {
-            engine.memory.insert(*key, outputs.clone(), timing.clone());
-            Some((outputs, NodeStatus::Disk, t.elapsed().as_secs_f64(), timing))
+        Ok(Some((outputs, record))) => {
+            engine.memory.insert(*key, outputs.clone(), record.clone());
+            Some((outputs, NodeStatus::Disk, t.elapsed().as_secs_f64(), record))
         }
         Ok(None) => None,
         Err(e) => {

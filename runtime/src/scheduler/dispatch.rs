@@ -7,7 +7,7 @@ use super::plan::Plan;
 use super::verify::{check_outputs, compare, mismatch};
 use super::write::write_artifacts;
 use super::{cancel_dependants, failure, metrics, timings_of, Sink, Slot};
-use crate::cache::Timing;
+use crate::cache::Record;
 use crate::engine::{Engine, RunObserver, RunOptions, NOT_IN_CACHE};
 use crate::key::Key;
 use crate::node::{DynNode, Inputs, NodeContext, NodeError, Outputs, Prepared};
@@ -22,7 +22,7 @@ use std::time::Instant;
 struct Done {
     idx: usize,
     result: Result<Outputs, NodeError>,
-    timing: Timing,
+    record: Record,
     device: &'static str,
     verified: bool,
 }
@@ -128,6 +128,7 @@ pub(crate) fn run_all(
                     gpu,
                     sink: sink.clone(),
                     timings: Default::default(),
+                    warnings: Default::default(),
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
                 memory: opts.use_cache.then(|| engine.memory.clone()),
@@ -186,11 +187,11 @@ pub(crate) fn run_all(
                     kind: cn.kind.clone(),
                     device: done.device.into(),
                     status,
-                    seconds: done.timing.seconds,
+                    seconds: done.record.seconds,
                     bytes: outputs.byte_size() as u64,
                     key: key.map(|k| k.hex()).unwrap_or_default(),
                     metrics: metrics(&outputs),
-                    timings: timings_of(&done.timing),
+                    timings: timings_of(&done.record),
                     kind_version: slot.node.spec().version,
                     error: None,
                     verified: done.verified,
@@ -213,7 +214,7 @@ pub(crate) fn run_all(
                     NodeStatus::Failed
                 };
                 let mut r = failure(cn, &slot.node, status, e.to_string(), key);
-                r.seconds = done.timing.seconds;
+                r.seconds = done.record.seconds;
                 r.device = done.device.into();
                 cancel_dependants(i, graph, &plan.upstream, compute, slots, observer);
                 r
@@ -258,9 +259,10 @@ impl Task {
             }),
             None => Err(NodeError::Failed("internal: no prepared parameters".into())),
         };
-        let timing = Timing {
+        let record = Record {
             seconds: t.elapsed().as_secs_f64(),
             timings: self.ctx.timings(),
+            warnings: self.ctx.warnings(),
         };
         let result = result.and_then(|out| check_outputs(self.node.as_ref(), out));
         let mut verified = false;
@@ -277,11 +279,11 @@ impl Task {
         // A cancelled run may still store a node that completed: the entry is whole.
         if let (Ok(out), Some(key)) = (&result, self.key) {
             if let Some(memory) = &self.memory {
-                memory.insert(key, out.clone(), timing.clone());
+                memory.insert(key, out.clone(), record.clone());
             }
             if let Some(disk) = &self.disk {
                 if !verified {
-                    if let Err(e) = disk.put(&key, self.node.spec().kind, out, &timing) {
+                    if let Err(e) = disk.put(&key, self.node.spec().kind, out, &record) {
                         self.ctx.warn(format!("disk cache not written: {e}"));
                     }
                 }
@@ -290,7 +292,7 @@ impl Task {
         let _ = self.tx.send(Done {
             idx: self.idx,
             result,
-            timing,
+            record,
             device: self.device,
             verified,
         });

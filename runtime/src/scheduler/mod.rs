@@ -17,7 +17,7 @@ mod plan;
 mod verify;
 mod write;
 
-use crate::cache::Timing;
+use crate::cache::Record;
 use crate::engine::{Engine, RunObserver, RunOptions, RunOutcome};
 use crate::key::Key;
 use crate::node::{DynNode, Outputs, Prepared, ProgressSink};
@@ -99,9 +99,9 @@ pub(crate) fn metrics(outputs: &Outputs) -> BTreeMap<String, f64> {
 }
 
 /// The report's `timings`: the compute wall time as `seconds`, then the kind's own.
-pub(crate) fn timings_of(timing: &Timing) -> BTreeMap<String, f64> {
-    let mut t = timing.timings.clone();
-    t.insert("seconds".into(), timing.seconds);
+pub(crate) fn timings_of(record: &Record) -> BTreeMap<String, f64> {
+    let mut t = record.timings.clone();
+    t.insert("seconds".into(), record.seconds);
     t
 }
 

@@ -214,6 +214,7 @@ impl Node for Writer {
     fn run(&self, ctx: &NodeContext, p: &WriterParams, _: &Inputs) -> Result<Outputs, NodeError> {
         ctx.timing("inner_ms", 1.5);
         ctx.timing("nan_ms", f64::NAN);
+        ctx.warn("written thin");
         Ok(Outputs::new()
             .with(
                 "file",
@@ -316,6 +317,29 @@ fn timings_go_to_the_report_and_survive_the_cache_but_never_the_outputs() {
     );
     assert_eq!(w2.kind_version, 1);
     assert!(!second.version.is_empty());
+}
+
+#[test]
+fn a_hit_repeats_the_warnings_of_the_computation_that_made_its_value() {
+    let dir = tempfile::tempdir().unwrap();
+    let warned = |r: &crate::report::RunReport| -> Vec<(String, String)> {
+        r.warnings
+            .iter()
+            .map(|w| (w.node.clone(), w.message.clone()))
+            .collect()
+    };
+    let expected = vec![("w".to_string(), "written thin".to_string())];
+    let engine = disk_engine(dir.path());
+    let first = run_into(&engine, WRITER_GRAPH, dir.path(), "out1");
+    assert_eq!(warned(&first), expected);
+    // The same engine: a memory hit.
+    let again = run_into(&engine, WRITER_GRAPH, dir.path(), "out2");
+    assert_eq!(again.node("w").unwrap().status, NodeStatus::Memory);
+    assert_eq!(warned(&again), expected);
+    // A new process over the warm disk cache.
+    let disk = run_into(&disk_engine(dir.path()), WRITER_GRAPH, dir.path(), "out3");
+    assert_eq!(disk.node("w").unwrap().status, NodeStatus::Disk);
+    assert_eq!(warned(&disk), expected);
 }
 
 #[test]

@@ -195,8 +195,8 @@ impl Node for Render {
             kind: "sss.render",
             // 4: the `geometry` parameter. 5: silhouette pixels covered in proportion;
             // `single_scattering_shape`, `geometry: directional`, `energy`. 6: `emission`.
-            // 7: the thin-object warning (results unchanged; a cache hit does not repeat a
-            // node's warnings, so earlier results rerun once). 8: `geometry: body`.
+            // 7: the thin-object warning (results unchanged; then a cache hit did not repeat a
+            // node's warnings, so earlier results reran once; it does now). 8: `geometry: body`.
             version: 8,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
