@@ -133,10 +133,35 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
             ("marble", 0.0, [2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071]),
             ("skin1", 0.5, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48]),
         ],
+        TORUS,
         None,
         1024,
     );
 }
+
+/// The same on the sphere 28 mm across that the README's translucency section renders back-lit
+/// (most of what the camera sees is lit only through the material), isotropic as the truth
+/// graph's materials are: the far side's light, which no diffusion render gets right there, is
+/// the peer's too. Measured: relative RMSE 0.047 against a combined noise of 0.047 (marble),
+/// 0.041 against 0.038 (skin1); channel sums within 0.9% (marble) and 0.9–1.7% above Mitsuba's
+/// (skin1, as much inside the disc as on its silhouette; under the 2% the test allows, and
+/// under half the combined noise of a pixel).
+#[test]
+fn the_volumetric_reference_agrees_with_mitsuba_on_a_back_lit_sphere() {
+    volumes_against_mitsuba(
+        &[
+            ("marble", 0.0, [2.19, 2.62, 3.00], [0.0021, 0.0041, 0.0071]),
+            ("skin1", 0.0, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48]),
+        ],
+        SPHERE,
+        None,
+        1024,
+    );
+}
+
+/// `mesh.primitive` parameters: `graphs/sss_render.json`'s torus, and the README's sphere.
+const TORUS: &str = r#"{ "shape": "torus", "size": 0.9, "minor": 0.38, "segments": [64, 32] }"#;
+const SPHERE: &str = r#"{ "shape": "sphere", "size": 0.7, "segments": [96, 48] }"#;
 
 /// The same at η = 1.3 behind a rough dielectric boundary (GGX, α = 0.3: Mitsuba's
 /// `roughdielectric`), skin1 only (marble's long paths would double the test's time): the
@@ -150,6 +175,7 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
 fn the_rough_dielectric_reference_agrees_with_mitsuba() {
     volumes_against_mitsuba(
         &[("skin1", 0.5, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48])],
+        TORUS,
         Some((1.3, 0.3)),
         8192,
     );
@@ -159,9 +185,14 @@ fn the_rough_dielectric_reference_agrees_with_mitsuba() {
 /// sss.material: (preset, g, σs′, σa).
 type Case = (&'static str, f64, [f64; 3], [f64; 3]);
 
-/// Renders each case with both renderers and holds their difference to their noise; the
-/// boundary is index-matched, or `(η, GGX α)`.
-fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples: u32) {
+/// Renders each case on the primitive `shape` with both renderers and holds their difference to
+/// their noise; the boundary is index-matched, or `(η, GGX α)`.
+fn volumes_against_mitsuba(
+    cases: &[Case],
+    shape: &str,
+    boundary: Option<(f64, f64)>,
+    samples: u32,
+) {
     let Some(python) = peer_python("mitsuba, numpy") else {
         return;
     };
@@ -173,8 +204,12 @@ fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples
         None => (1.0, None),
     };
     let mut nodes = serde_json::Map::new();
-    nodes.insert("torus".into(), json!({ "kind": "mesh.primitive", "params": { "shape": "torus", "size": 0.9, "minor": 0.38, "segments": [64, 32] } }));
-    nodes.insert("ply".into(), json!({ "kind": "mesh.write", "inputs": { "mesh": "torus.mesh" }, "params": { "path": "torus.ply" } }));
+    let shape: serde_json::Value = serde_json::from_str(shape).unwrap();
+    nodes.insert(
+        "shape".into(),
+        json!({ "kind": "mesh.primitive", "params": shape }),
+    );
+    nodes.insert("ply".into(), json!({ "kind": "mesh.write", "inputs": { "mesh": "shape.mesh" }, "params": { "path": "shape.ply" } }));
     for (name, g, ..) in cases {
         nodes.insert(
             format!("{name}_material"),
@@ -188,7 +223,7 @@ fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples
         nodes.insert(
             name.to_string(),
             json!({ "kind": "render.reference",
-            "inputs": { "mesh": "torus.mesh", "medium": format!("{name}_material.material") },
+            "inputs": { "mesh": "shape.mesh", "medium": format!("{name}_material.material") },
             "params": params }),
         );
         nodes.insert(format!("{name}_npy"), json!({ "kind": "npy.write", "inputs": { "value": format!("{name}.image") }, "params": { "path": format!("{name}.npy") } }));
@@ -222,7 +257,7 @@ fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples
             .map(|seed| {
                 let scene = s.write(
                     &format!("{name}_{seed}.json"),
-                    &json!({ "mesh": out.join("torus.ply"), "camera": camera, "light": light,
+                    &json!({ "mesh": out.join("shape.ply"), "camera": camera, "light": light,
                              "albedo": [0.0, 0.0, 0.0], "samples": 2048, "seed": seed,
                              "medium": medium })
                     .to_string(),
@@ -263,7 +298,8 @@ fn volumes_against_mitsuba(cases: &[Case], boundary: Option<(f64, f64)>, samples
             rel < 1.3 * expected,
             "{name}: {rel} against noise {expected}"
         );
-        // No bias in the mean per channel beyond 2% (measured at most 1.4%).
+        // No bias in the mean per channel beyond 2% (measured at most 1.4% on the torus, 1.7%
+        // on the sphere).
         for r in &ratio {
             assert!((r - 1.0).abs() < 0.02, "{name}: {ratio:?}");
         }
