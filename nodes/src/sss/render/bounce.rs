@@ -9,7 +9,6 @@ use crate::geometry::{add, dot, mul, V3};
 use crate::render::reference::Tracer;
 use crate::sss::montecarlo::{rotate, Stream};
 use crate::sss::points::SamplePoint;
-use crate::types::Mesh;
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -117,13 +116,12 @@ impl Nearest {
 /// Per sample the irradiance (per channel, outside the surface) arriving from the other samples'
 /// exitance `m` (flux per area leaving, diffuse).
 pub(super) fn arriving(
-    mesh: &Mesh,
+    tracer: &Tracer,
     points: &[SamplePoint],
     nearest: &Nearest,
     m: &[[f64; 3]],
     seed: u64,
 ) -> Vec<[f64; 3]> {
-    let tracer = Tracer::new(mesh);
     let raw: Vec<[f64; 3]> = points
         .par_iter()
         .enumerate()

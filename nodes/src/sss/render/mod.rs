@@ -344,11 +344,21 @@ pub fn render_with(
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     let light = Light::new(&p.light)?;
     let mut warnings = Vec::new();
+    // One BVH for the bounces, the thickness, the body's inside test, the view and single
+    // scattering.
+    let tracer = Tracer::new(mesh);
     let setup = match p.mode {
-        Mode::Diffusion => Setup::new(mesh, material, profile, p, &light, weights, &mut warnings)?,
+        Mode::Diffusion => Setup::new(
+            &tracer,
+            material,
+            profile,
+            p,
+            &light,
+            weights,
+            &mut warnings,
+        )?,
         Mode::Brdf => Setup::local(mesh, material, profile, p, &light)?,
     };
-    let tracer = Tracer::new(mesh);
     if p.mode == Mode::Diffusion {
         let thick = thickness::median_mm(&tracer, &setup.sources, p.mm_per_unit);
         warnings.extend(thick.and_then(|t| thickness::warning(t, material, p.geometry)));

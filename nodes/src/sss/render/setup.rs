@@ -12,6 +12,7 @@ use crate::progress::Counter;
 use crate::render::camera::Camera;
 use crate::render::layers::{self, Frag};
 use crate::render::light::Light;
+use crate::render::reference::Tracer;
 use crate::render::shade::{shadow_bias, ShadowMap};
 use crate::sss::fresnel;
 use crate::sss::octree::{Octree, Source};
@@ -112,8 +113,10 @@ pub(super) fn transmit_in(cos: f64, eta: f64) -> f64 {
 }
 
 impl Setup {
+    /// The irradiance samples on `tracer`'s mesh and their octree (the bounces trace through
+    /// its BVH).
     pub(super) fn new(
-        mesh: &Mesh,
+        tracer: &Tracer,
         material: &ScatteringMaterial,
         profile: &DiffusionProfile,
         p: &Params,
@@ -121,6 +124,7 @@ impl Setup {
         weights: &dyn Weights,
         warnings: &mut Vec<String>,
     ) -> Result<Setup, NodeError> {
+        let mesh = tracer.mesh;
         let unit = p.mm_per_unit;
         let area_mm2 = points::area(mesh) * unit * unit;
         if area_mm2 <= 0.0 {
@@ -223,7 +227,7 @@ impl Setup {
         })
         .map(|mut setup| {
             if p.bounces > 0 {
-                setup.bounce(mesh, &samples.points, p, area_each);
+                setup.bounce(tracer, &samples.points, p, area_each);
             }
             setup
         })
@@ -248,7 +252,7 @@ impl Setup {
     /// `bounces` rounds of light between parts (`bounce.rs`): each gathers the samples' own
     /// exitance from the light so far, sends it to the samples that see it, and rebuilds the
     /// sources from their direct and arriving light.
-    fn bounce(&mut self, mesh: &Mesh, points: &[SamplePoint], p: &Params, area_each: f64) {
+    fn bounce(&mut self, tracer: &Tracer, points: &[SamplePoint], p: &Params, area_each: f64) {
         let direct: Vec<[f64; 3]> = self
             .sources
             .iter()
@@ -290,7 +294,7 @@ impl Setup {
                     [0, 1, 2].map(|c| sum[c] + e[c] * self.near_energy[c])
                 })
                 .collect();
-            arriving = bounce::arriving(mesh, subset, &nearest, &exitance, p.seed ^ round as u64);
+            arriving = bounce::arriving(tracer, subset, &nearest, &exitance, p.seed ^ round as u64);
             for (i, s) in self.sources.iter_mut().enumerate() {
                 let a = arriving[member[i]];
                 s.power = [0, 1, 2].map(|c| (direct[i][c] + into[c] * a[c]) * area_each);
