@@ -3,12 +3,13 @@
 //! `exit_normal` takes each entry point's dipole (Jensen et al. 2001) and its flux through the
 //! exit point's normal; the dipole is the diffusion equation's solution for a half-space
 //! bounded by the entry point's own tangent plane, so light that a small or curved body lets
-//! out elsewhere stays in (a back-lit marble ball's unlit front 27% too bright against the
+//! out elsewhere stays in (a back-lit marble ball's unlit front 47% too bright against the
 //! volumetric truth), and light crossing a slab meets no boundary on the far side (38% too
-//! little through it against the one-dimensional solution). Here the body's own diffusion problem is solved: with φ_dip the sum of
-//! every sample's dipole, the true fluence is φ = φ_dip + ψ, where ψ has no sources inside
-//! (the dipoles' real sources are φ_dip's) and makes φ vanish on the extrapolated boundary
-//! (the surface moved out by z_b = 2AD, where each dipole vanishes on its own plane):
+//! little through it against the one-dimensional solution). Here the body's own diffusion
+//! problem is solved: with φ_dip the sum of every sample's dipole, the true fluence is
+//! φ = φ_dip + ψ, where ψ has no sources inside (the dipoles' real sources are φ_dip's) and
+//! makes φ vanish on the extrapolated boundary (the surface moved out by z_b = 2AD, where each
+//! dipole vanishes on its own plane):
 //!
 //!   −D∇²ψ + σa ψ = 0 inside,   ψ = −φ_dip on the extrapolated boundary.
 //!
