@@ -110,6 +110,7 @@ impl Params {
             mode: self.mode,
             energy: sss_render::Energy::Profile,
             emission: sss_render::Emission::Diffuse,
+            sources: sss_render::Sources::Point,
         }
     }
 }

@@ -19,6 +19,7 @@
 //! (Gibou et al. 2002's symmetric treatment), conjugate gradients per channel. The exitance
 //! gains −D ∂ψ/∂n at each shaded point, on top of the `exit_normal` gather.
 
+use super::beam::Beam;
 use crate::geometry::{add, dot, mul, sub, V3};
 use crate::render::reference::Tracer;
 use crate::sss::dipole::Dipole;
@@ -53,6 +54,8 @@ pub(super) struct Body {
     channels: Vec<Channel>,
     /// The dipoles' constants per channel.
     dipoles: [Dipole; 3],
+    /// With `sources: beam`, the beams that stand for the dipoles.
+    beam: Option<Beam>,
 }
 
 struct Channel {
@@ -70,12 +73,13 @@ pub(super) struct Report {
 }
 
 impl Body {
-    /// The grid over `mesh` (world units of `unit` mm), ψ solved for the dipoles of the
-    /// sources in `octree` (mm, E·ΔA).
+    /// The grid over `mesh` (world units of `unit` mm), ψ solved for the dipoles (or, with
+    /// `beam`, the beams) of the sources in `octree` (mm, E·ΔA).
     pub(super) fn new(
         tracer: &Tracer,
         mesh: &Mesh,
         octree: &Octree,
+        beam: Option<Beam>,
         material: &ScatteringMaterial,
         unit: f64,
     ) -> Result<(Body, Report), NodeError> {
@@ -98,7 +102,7 @@ impl Body {
                 "geometry: body: the grid's cells are {h:.3} mm, coarser than the {wanted:.3} mm the material asks for ({MAX_CELLS} cells at most)"
             ));
         }
-        let mut body = Body::with_spacing(tracer, mesh, octree, material, unit, h)?;
+        let mut body = Body::with_spacing(tracer, mesh, octree, beam, material, unit, h)?;
         warnings.append(&mut body.1.warnings);
         body.1.warnings = warnings;
         Ok(body)
@@ -109,6 +113,7 @@ impl Body {
         tracer: &Tracer,
         mesh: &Mesh,
         octree: &Octree,
+        beam: Option<Beam>,
         material: &ScatteringMaterial,
         unit: f64,
         h: f64,
@@ -122,7 +127,7 @@ impl Body {
         let mut channels = Vec::with_capacity(3);
         for (c, dipole) in dipoles.iter().enumerate() {
             let (channel, its, converged) = grid.solve(&signed, dipole, material.sigma_a[c], |x| {
-                -fluence(octree, &dipoles, c, x)
+                -fluence(octree, &dipoles, beam.as_ref(), c, x)
             });
             if !converged {
                 warnings.push(format!(
@@ -139,6 +144,7 @@ impl Body {
                 dims: grid.dims,
                 channels,
                 dipoles,
+                beam,
             },
             Report {
                 spacing_mm: h,
@@ -153,7 +159,7 @@ impl Body {
     pub(super) fn exitance(&self, octree: &Octree, xo: V3, no: V3) -> [f64; 3] {
         [0, 1, 2].map(|c| {
             let outside = add(xo, mul(no, self.channels[c].zb));
-            let at_boundary = -fluence(octree, &self.dipoles, c, outside);
+            let at_boundary = -fluence(octree, &self.dipoles, self.beam.as_ref(), c, outside);
             self.slope(&self.channels[c], xo, no, at_boundary)
         })
     }
@@ -239,8 +245,9 @@ fn derivative_at_zero(p: [(f64, f64); 3]) -> f64 {
 
 /// φ_dip at `x` (mm) in channel `c`: every source's dipole, α′Φ/(4πD)·(e^(−σtr dr)/dr −
 /// e^(−σtr dv)/dv), the real source z_r inside along its normal, the virtual one z_v outside.
-/// A lumped node whose normals cancel has its dipoles cancel too.
-fn fluence(octree: &Octree, dipoles: &[Dipole; 3], c: usize, x: V3) -> f64 {
+/// A lumped node whose normals cancel has its dipoles cancel too. With `beam`, each source's
+/// beam in place of its dipole.
+fn fluence(octree: &Octree, dipoles: &[Dipole; 3], beam: Option<&Beam>, c: usize, x: V3) -> f64 {
     let d = &dipoles[c];
     let diffusion = d.zr / 3.0;
     let scale = d.alpha_prime / (4.0 * PI * diffusion);
@@ -251,7 +258,11 @@ fn fluence(octree: &Octree, dipoles: &[Dipole; 3], c: usize, x: V3) -> f64 {
             (-d.sigma_tr * r).exp() / r
         };
         let mut out = [0.0; 3];
-        out[c] = scale * (term(-d.zr) - term(d.zv));
+        out[c] = scale
+            * match beam {
+                Some(beam) => beam.fluence(c, x, p, n),
+                None => term(-d.zr) - term(d.zv),
+            };
         out
     };
     octree.gather(x, 0.0, LUMPING, &kernel).0[c]
@@ -647,6 +658,7 @@ mod tests {
             dims: grid.dims,
             channels: Vec::new(),
             dipoles: [0, 1, 2].map(|_| Dipole::new(1.0, sigma_a, 1.0)),
+            beam: None,
         };
         // Inside, away from the boundary's cut cells.
         let centre = body.interpolate(&channel, [0.0; 3]).unwrap();
@@ -700,7 +712,7 @@ mod tests {
         let octree = Octree::build(sources, spacing * spacing);
         let tracer = Tracer::new(&mesh);
         let (body, report) =
-            Body::with_spacing(&tracer, &mesh, &octree, &material, unit, 0.4).unwrap();
+            Body::with_spacing(&tracer, &mesh, &octree, None, &material, unit, 0.4).unwrap();
         assert!(report.warnings.is_empty(), "{:?}", report.warnings);
         let dipole = Dipole::new(1.0, 0.05, 1.0);
         let exit = ExitNormal::new(&material);
@@ -777,7 +789,7 @@ mod tests {
             .collect();
         let octree = Octree::build(sources, area);
         let tracer = Tracer::new(&mesh);
-        let (body, report) = Body::new(&tracer, &mesh, &octree, &material, radius).unwrap();
+        let (body, report) = Body::new(&tracer, &mesh, &octree, None, &material, radius).unwrap();
         assert!(report.warnings.is_empty(), "{:?}", report.warnings);
         eprintln!("cells of {:.3} mm", report.spacing_mm);
         let exit = ExitNormal::new(&material);

@@ -99,20 +99,6 @@ impl Directional {
         })
     }
 
-    /// The light's direction into the medium at a sample at `xi` (mm) with normal `ni`.
-    fn refracted(&self, xi: V3, ni: V3) -> V3 {
-        let (l, _) = self.light.at(xi.map(|v| v / self.unit));
-        let cos = dot(ni, l);
-        if cos <= 0.0 {
-            return mul(ni, -1.0);
-        }
-        // Snell with η = n_inside/n_outside: the tangential part shrinks by 1/η.
-        let tangential = sub(mul(ni, cos), l);
-        let sin2 = (1.0 - cos * cos) / (self.eta * self.eta);
-        let along = (1.0 - sin2).max(0.0).sqrt();
-        normalize(sub(mul(tangential, 1.0 / self.eta), mul(ni, along))).unwrap_or(mul(ni, -1.0))
-    }
-
     /// The factor for a source at `xi` with normal `ni` seen from `xo` with normal `no` (mm,
     /// unit normals). A lumped node whose normals cancel (zero normal) keeps the profile (1).
     pub(super) fn factor(&self, xo: V3, no: V3, xi: V3, ni: V3) -> [f64; 3] {
@@ -120,7 +106,13 @@ impl Directional {
             return [1.0; 3];
         }
         let r = dot(sub(xo, xi), sub(xo, xi)).sqrt();
-        let actual = self.dipole(xo, no, xi, ni, self.refracted(xi, ni));
+        let actual = self.dipole(
+            xo,
+            no,
+            xi,
+            ni,
+            refracted(&self.light, self.unit, self.eta, xi, ni),
+        );
         // The same distance on a plane lit straight down: source at the origin, exit along x.
         let up = [0.0, 0.0, 1.0];
         let flat = self.dipole([r, 0.0, 0.0], up, [0.0; 3], up, [0.0, 0.0, -1.0]);
@@ -132,6 +124,21 @@ impl Directional {
             }
         })
     }
+}
+
+/// The light's direction into the medium at a sample at `xi` (mm, `unit` mm per world unit)
+/// with unit normal `ni`; along −`ni` where the light is behind the sample's tangent plane.
+pub(super) fn refracted(light: &Light, unit: f64, eta: f64, xi: V3, ni: V3) -> V3 {
+    let (l, _) = light.at(xi.map(|v| v / unit));
+    let cos = dot(ni, l);
+    if cos <= 0.0 {
+        return mul(ni, -1.0);
+    }
+    // Snell with η = n_inside/n_outside: the tangential part shrinks by 1/η.
+    let tangential = sub(mul(ni, cos), l);
+    let sin2 = (1.0 - cos * cos) / (eta * eta);
+    let along = (1.0 - sin2).max(0.0).sqrt();
+    normalize(sub(mul(tangential, 1.0 / eta), mul(ni, along))).unwrap_or(mul(ni, -1.0))
 }
 
 #[cfg(test)]

@@ -20,9 +20,11 @@
 //! dipole's flux through the exit point's own normal (`geometry: exit_normal`, `geometry.rs`),
 //! that corrected for the object's own boundary by the diffusion equation solved on a grid
 //! inside the mesh (`geometry: body`, `body.rs`), the directional dipole (`geometry:
-//! directional`, `directional.rs`), single scattering traced through the mesh
-//! (`single_scattering_shape: traced`, `single.rs`), the exact half-space's energy (`energy:
-//! half_space`, `energy.rs`) and the exitance's angular shape (`emission`, `emission.rs`).
+//! directional`, `directional.rs`), diffusion from where the light scatters along its
+//! refracted ray rather than from one point under each sample (`sources: beam`, `beam.rs`),
+//! single scattering traced through the mesh (`single_scattering_shape: traced`,
+//! `single.rs`), the exact half-space's energy (`energy: half_space`, `energy.rs`) and the
+//! exitance's angular shape (`emission`, `emission.rs`).
 //! Silhouette pixels show the object over the share of the pixel it covers (`gather.rs`), as
 //! the truth's samples do. An object fewer than six reduced mean free paths thick gets a
 //! warning (`thickness.rs`): there the truth showed the light `exit_normal` and `body` send
@@ -45,6 +47,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
+mod beam;
 mod body;
 mod bounce;
 mod directional;
@@ -134,6 +137,25 @@ pub struct Params {
     /// the rest as the deep field; the multiple scattering's when `single_scattering` adds the
     /// first).
     pub emission: Emission,
+    /// Where the light entering at each sample starts to diffuse: `point` (default; Jensen et
+    /// al. 2001's one source a reduced mean free path under the sample, whatever the light's
+    /// angle) or `beam` (along the refracted light, where its second collisions happen:
+    /// oblique light scatters shallower and sends its multiple scattering less far, as
+    /// transport does; the profile still sets how much, `beam.rs`). `beam` needs `geometry:
+    /// exit_normal` or `body`, and is meant with a profile of multiple scattering alone
+    /// (`pbd_multiple`) and `single_scattering`.
+    pub sources: Sources,
+}
+
+/// Where the light entering at a sample starts to diffuse.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Sources {
+    /// One point 1/σt′ under the sample along its normal (Jensen et al. 2001).
+    #[default]
+    Point,
+    /// The first scatterings along the refracted light (Habel et al. 2013's photon beam).
+    Beam,
 }
 
 /// Where single scattering is evaluated.
@@ -178,6 +200,7 @@ impl Default for Params {
             mode: Mode::Diffusion,
             energy: Energy::Profile,
             emission: Emission::Diffuse,
+            sources: Sources::Point,
         }
     }
 }
@@ -197,7 +220,8 @@ impl Node for Render {
             // `single_scattering_shape`, `geometry: directional`, `energy`. 6: `emission`.
             // 7: the thin-object warning (results unchanged; then a cache hit did not repeat a
             // node's warnings, so earlier results reran once; it does now). 8: `geometry: body`.
-            version: 8,
+            // 9: `sources`.
+            version: 9,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -365,8 +389,14 @@ pub fn render_with(
     }
     let body_start = Instant::now();
     let body = if p.mode == Mode::Diffusion && p.geometry == Geometry::Body {
-        let (body, report) =
-            body::Body::new(&tracer, mesh, &setup.octree, material, p.mm_per_unit)?;
+        let (body, report) = body::Body::new(
+            &tracer,
+            mesh,
+            &setup.octree,
+            setup.beam.clone(),
+            material,
+            p.mm_per_unit,
+        )?;
         warnings.extend(report.warnings);
         Some((body, report.spacing_mm))
     } else {
@@ -455,6 +485,12 @@ pub fn check_params(p: &Params) -> Result<(), NodeError> {
     }
     if p.bounces > 8 {
         return Err(NodeError::param("bounces", "must be in [0, 8]"));
+    }
+    if p.sources == Sources::Beam && !matches!(p.geometry, Geometry::ExitNormal | Geometry::Body) {
+        return Err(NodeError::param(
+            "sources",
+            "beam needs geometry exit_normal or body (the others take the profile's own shape at the sample)",
+        ));
     }
     Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     Light::new(&p.light).map(drop)

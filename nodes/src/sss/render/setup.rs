@@ -1,12 +1,13 @@
 //! What every pixel shares: the Rd table, the near-disc energy, the irradiance samples as
 //! octree sources (with the shadow map that decides which are lit).
 
+use super::beam::Beam;
 use super::bounce;
 use super::directional::Directional;
 use super::emission::Exit;
 use super::energy::{Energy, Scale};
 use super::geometry::{ExitNormal, Geometry};
-use super::{Params, Weights, MIN_POINTS};
+use super::{Params, Sources, Weights, MIN_POINTS};
 use crate::geometry::{bounding_sphere, dot, normalize, sub, V3};
 use crate::progress::Counter;
 use crate::render::camera::Camera;
@@ -26,6 +27,10 @@ pub(super) struct Table {
     pub(super) ln_r0: f64,
     pub(super) inv_h: f64,
     pub(super) rd: [Vec<f64>; 3],
+    /// The last radius, and per channel the tail's decay rate σ and power p, Rd ∝ e^(−σr)/r^p
+    /// (`None` where the tail does not decay: no extrapolation).
+    last: f64,
+    tail: [Option<(f64, f64)>; 3],
 }
 
 impl Table {
@@ -34,16 +39,59 @@ impl Table {
         let (a, b) = (p.radii[0].ln(), p.radii[n - 1].ln());
         let h = (b - a) / (n - 1) as f64;
         // Resampled through log-linear interpolation: exact for sss.profile's log-uniform grid.
-        let rd = [0, 1, 2].map(|c| {
+        let rd: [Vec<f64>; 3] = [0, 1, 2].map(|c| {
             (0..n)
                 .map(|i| crate::sss::compare::sample(p, c, (a + h * i as f64).exp()))
                 .collect()
         });
+        // The tail as Rd ∝ e^(−σr)/r^p through three points eight table steps apart at the
+        // end: a profile's far field is an exponential over a power of r (the dipole's flux
+        // terms r⁻², the better dipole's fluence term r⁻¹).
+        let k = 8.min((n - 1) / 2);
+        let at = |i: usize| (a + h * i as f64).exp();
+        let (i0, i1, i2) = (n - 1 - 2 * k, n - 1 - k, n - 1);
+        let tail = [0, 1, 2].map(|c: usize| {
+            let y = [i0, i1, i2].map(|i| rd[c][i]);
+            if k == 0 || y.iter().any(|&v| v.is_nan() || v <= 0.0) {
+                return None;
+            }
+            let r = [i0, i1, i2].map(at);
+            let (d1, d2) = ((y[1] / y[0]).ln(), (y[2] / y[1]).ln());
+            let (e1, e2) = (r[1] - r[0], r[2] - r[1]);
+            let (l1, l2) = ((r[1] / r[0]).ln(), (r[2] / r[1]).ln());
+            // d = −σe − p·l for both intervals.
+            let det = e1 * l2 - e2 * l1;
+            let sigma = -(d1 * l2 - d2 * l1) / det;
+            let power = -(e1 * d2 - e2 * d1) / det;
+            (sigma > 0.0 && sigma.is_finite() && power.is_finite()).then_some((sigma, power))
+        });
+        let last = b.exp();
         Table {
             ln_r0: a,
             inv_h: 1.0 / h,
             rd,
+            last,
+            tail,
         }
+    }
+
+    /// [`Table::at`], and beyond the last radius the tail's decay instead of 0.
+    /// The table stops where the profile holds 99.9% of its energy (`sss.profile`), which
+    /// the planar gather can ignore; the body's share cannot: it takes away the dipoles'
+    /// fluence at every distance, and without their flux beyond the table a back-lit skin
+    /// ball's far side lost two thirds of its red.
+    pub(super) fn at_any_distance(&self, r: f64) -> [f64; 3] {
+        if r <= self.last {
+            return self.at(r);
+        }
+        [0, 1, 2].map(|c| match self.tail[c] {
+            Some((sigma, power)) => {
+                self.rd[c][self.rd[c].len() - 1]
+                    * (-sigma * (r - self.last)).exp()
+                    * (self.last / r).powf(power)
+            }
+            None => 0.0,
+        })
     }
 
     pub(super) fn at(&self, r: f64) -> [f64; 3] {
@@ -93,8 +141,10 @@ pub(super) struct Setup {
     pub(super) eta: f64,
     /// mm per world unit.
     pub(super) unit: f64,
-    /// The shape's term, with `exit_normal` geometry.
+    /// The shape's term, with `exit_normal` or `body` geometry and point sources.
     pub(super) exit_normal: Option<ExitNormal>,
+    /// The shape's and the light's angle's term, with those geometries and beam sources.
+    pub(super) beam: Option<Beam>,
     /// With `directional` geometry, the directional dipole's factor.
     pub(super) directional: Option<Directional>,
     /// With `energy: half_space`, the factor on the light entering.
@@ -206,6 +256,7 @@ impl Setup {
             .collect();
         let octree = Octree::build(sources.clone(), area_each);
         let near = 2.0 * area_each.sqrt();
+        let follows_the_shape = matches!(p.geometry, Geometry::ExitNormal | Geometry::Body);
         Ok(Setup {
             table: Table::new(profile),
             sources,
@@ -216,8 +267,10 @@ impl Setup {
             shadow,
             eta: material.eta,
             unit,
-            exit_normal: matches!(p.geometry, Geometry::ExitNormal | Geometry::Body)
+            exit_normal: (follows_the_shape && p.sources == Sources::Point)
                 .then(|| ExitNormal::new(material)),
+            beam: (follows_the_shape && p.sources == Sources::Beam)
+                .then(|| Beam::new(material, light, unit)),
             directional: (p.geometry == Geometry::Directional)
                 .then(|| Directional::new(material, light, unit)),
             energy,
@@ -236,15 +289,17 @@ impl Setup {
     /// Rd per channel between the shaded point `xo` (mm, normal `no`) and a source at `q` with
     /// normal `nq`, d² apart.
     pub(super) fn rd(&self, xo: V3, no: V3, q: V3, nq: V3, d2: f64) -> [f64; 3] {
-        let r = self.table.at(d2.sqrt());
-        let f = match (&self.exit_normal, &self.directional) {
-            (Some(en), Some(dd)) => {
-                let (a, b) = (en.factor(xo, no, q, nq), dd.factor(xo, no, q, nq));
-                [0, 1, 2].map(|c| a[c] * b[c])
-            }
-            (Some(en), None) => en.factor(xo, no, q, nq),
-            (None, Some(dd)) => dd.factor(xo, no, q, nq),
-            (None, None) => return r,
+        let (f, r) = match (&self.exit_normal, &self.beam, &self.directional) {
+            (Some(en), _, _) => (
+                en.factor(xo, no, q, nq),
+                self.table.at_any_distance(d2.sqrt()),
+            ),
+            (_, Some(beam), _) => (
+                beam.factor(xo, no, q, nq),
+                self.table.at_any_distance(d2.sqrt()),
+            ),
+            (_, _, Some(dd)) => (dd.factor(xo, no, q, nq), self.table.at(d2.sqrt())),
+            _ => return self.table.at(d2.sqrt()),
         };
         [0, 1, 2].map(|c| r[c] * f[c])
     }
@@ -352,6 +407,7 @@ impl Setup {
             eta: material.eta,
             unit: p.mm_per_unit,
             exit_normal: None,
+            beam: None,
             directional: None,
             energy: energy_scale(material, profile, p)?,
             total: profile.total,
