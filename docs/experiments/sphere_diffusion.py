@@ -8,9 +8,11 @@ equation per Legendre order, finite volumes in r. The camera sees P1's radiance,
 (phi + 3 J.w)/(4 pi), plus single scattering, taken from our render (its `single_scattering`
 on minus off: traced through the mesh, exact at first order). Two source models:
 
-  jensen  alpha' E per unit area one reduced mean free path under each entry point (what
-          `sss.render` uses; `geometry: body` solves its diffusion problem, see body.rs's tests)
+  jensen  alpha' E per unit area one reduced mean free path under each entry point
+          (`sss.render`'s `sources: point`; `geometry: body` solves its diffusion problem, see
+          body.rs's tests)
   beam    where the light first scatters: sigma_s I exp(-sigma_t d) at depth d along the rays
+          (`sources: beam` keeps only what collides again, moved to where it does: beam.rs)
 
     python sphere_diffusion.py PRESET TRUTH.npy OURS.npy OURS_WITHOUT_SINGLE.npy {jensen,beam}
 
