@@ -32,6 +32,7 @@
 //! the rest.
 
 use super::directional::refracted;
+use super::geometry::flux_kernel;
 use crate::geometry::{add, dot, mul, sub, V3};
 use crate::render::light::Light;
 use crate::sss::dipole::Dipole;
@@ -113,8 +114,7 @@ impl Beam {
         let s = self.sigma_tr[c];
         let through = |p: V3| {
             let v = sub(xo, p);
-            let d = dot(v, v).sqrt().max(1e-12);
-            dot(v, no) * (1.0 + s * d) * (-s * d).exp() / (d * d * d)
+            dot(v, no) * flux_kernel(s, dot(v, v).sqrt().max(1e-12))
         };
         let sum: f64 = (0..NODES)
             .map(|k| {

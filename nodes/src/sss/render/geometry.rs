@@ -63,9 +63,8 @@ impl ExitNormal {
         let r2 = dot(sub(xi, xo), sub(xi, xo));
         [0, 1, 2].map(|c| {
             let (s, zr, zv) = (self.sigma_tr[c], self.zr[c], self.zv[c]);
-            // The flux kernel of a point source at distance d, times the source's height
-            // above the exit plane.
-            let kernel = |d: f64| (1.0 + s * d) * (-s * d).exp() / (d * d * d);
+            let kernel = |d: f64| flux_kernel(s, d);
+            // Each source's kernel times its height above the exit plane.
             let flat = zr * kernel((r2 + zr * zr).sqrt()) + zv * kernel((r2 + zv * zv).sqrt());
             if flat.is_nan() || flat <= 0.0 {
                 return 1.0;
@@ -79,6 +78,12 @@ impl ExitNormal {
             ((through(-zr) - through(zv)) / flat).max(0.0)
         })
     }
+}
+
+/// The diffusion flux of a unit point source per unit of the source's offset along the normal
+/// it crosses, d away: (1 + σtr d)e^(−σtr d)/d³ (the flux kernel of Jensen et al. 2001's Rd).
+pub(super) fn flux_kernel(sigma_tr: f64, d: f64) -> f64 {
+    (1.0 + sigma_tr * d) * (-sigma_tr * d).exp() / (d * d * d)
 }
 
 #[cfg(test)]
