@@ -129,6 +129,19 @@ impl Octree {
         threshold: f64,
         rd: &dyn Fn([f64; 3], [f64; 3], f64) -> [f64; 3],
     ) -> ([f64; 3], usize) {
+        self.gather_keyed(x, near, threshold, &|_, p, n, d2| rd(p, n, d2))
+    }
+
+    /// [`Octree::gather`] whose `rd` also gets the term's key, its place in [`Octree::points`]:
+    /// what a kernel derives from a source's position and normal alone can be made once per
+    /// point instead of once per term.
+    pub fn gather_keyed(
+        &self,
+        x: [f64; 3],
+        near: f64,
+        threshold: f64,
+        rd: &dyn Fn(usize, [f64; 3], [f64; 3], f64) -> [f64; 3],
+    ) -> ([f64; 3], usize) {
         let mut sum = [0.0; 3];
         let mut evaluated = 0;
         if self.nodes.is_empty() {
@@ -136,15 +149,16 @@ impl Octree {
         }
         let near2 = near * near;
         let mut stack = vec![0usize];
-        let add = |p: [f64; 3], n: [f64; 3], power: [f64; 3], sum: &mut [f64; 3]| {
+        let add = |key: usize, p: [f64; 3], n: [f64; 3], power: [f64; 3], sum: &mut [f64; 3]| {
             let d2 = dist2(x, p);
             if d2 >= near2 {
-                let r = rd(p, n, d2);
+                let r = rd(key, p, n, d2);
                 for k in 0..3 {
                     sum[k] += r[k] * power[k];
                 }
             }
         };
+        let leaves = self.nodes.len();
         while let Some(id) = stack.pop() {
             let node = &self.nodes[id];
             let inside = (0..3).all(|k| x[k] >= node.lo[k] && x[k] <= node.hi[k]);
@@ -152,12 +166,12 @@ impl Octree {
             // A node whose centre lies inside the near disc is opened, so that only its points
             // inside the disc are left out, as brute force does.
             if !inside && threshold > 0.0 && node.area < threshold * d2 && d2 >= near2 {
-                add(node.centre, node.normal, node.power, &mut sum);
+                add(id, node.centre, node.normal, node.power, &mut sum);
                 evaluated += 1;
             } else if node.children.is_empty() {
                 for &i in &self.order[node.first..node.first + node.count] {
                     let s = &self.sources[i];
-                    add(s.p, s.n, s.power, &mut sum);
+                    add(leaves + i, s.p, s.n, s.power, &mut sum);
                     evaluated += 1;
                 }
             } else {
@@ -165,6 +179,16 @@ impl Octree {
             }
         }
         (sum, evaluated)
+    }
+
+    /// Every position and normal a term of [`Octree::gather_keyed`] can have, by key: the
+    /// nodes' means, then the sources in their own order.
+    pub fn points(&self) -> Vec<([f64; 3], [f64; 3])> {
+        self.nodes
+            .iter()
+            .map(|n| (n.centre, n.normal))
+            .chain(self.sources.iter().map(|s| (s.p, s.n)))
+            .collect()
     }
 }
 
@@ -224,5 +248,39 @@ mod tests {
         // Points closer than `near` are left out.
         let (s, _) = tree.gather([0.0, 0.0, 0.0], 0.5, 0.0, &|_, _, _| [1.0; 3]);
         assert!((s[0] - 1599.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn each_term_s_key_names_its_own_point() {
+        // Normals vary, so a lumped node's mean differs from every source's.
+        let sources: Vec<Source> = grid(20)
+            .into_iter()
+            .enumerate()
+            .map(|(i, s)| Source {
+                n: crate::geometry::normalize([(i % 7) as f64 * 0.1, 0.2, 1.0]).unwrap(),
+                ..s
+            })
+            .collect();
+        let tree = Octree::build(sources.clone(), 1.0);
+        let points = tree.points();
+        let wrong = std::sync::atomic::AtomicUsize::new(0);
+        let seen = std::sync::Mutex::new(std::collections::HashSet::new());
+        let x = [3.2, 17.9, 0.4];
+        for threshold in [0.0, 0.05] {
+            let (_, terms) = tree.gather_keyed(x, 0.0, threshold, &|key, p, n, _| {
+                if points.get(key) != Some(&(p, n)) {
+                    wrong.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                }
+                seen.lock().unwrap().insert(key);
+                [0.0; 3]
+            });
+            assert!(terms > 0);
+        }
+        assert_eq!(wrong.into_inner(), 0);
+        // Brute force's keys are the sources themselves, one each, after the nodes'.
+        let seen = seen.into_inner().unwrap();
+        let nodes = points.len() - sources.len();
+        assert!((nodes..points.len()).all(|k| seen.contains(&k)));
+        assert!(seen.iter().any(|&k| k < nodes), "no lumped term at 0.05");
     }
 }

@@ -36,7 +36,9 @@ use super::geometry::flux_kernel;
 use crate::geometry::{add, dot, mul, sub, V3};
 use crate::render::light::Light;
 use crate::sss::dipole::Dipole;
+use crate::sss::octree::Octree;
 use crate::types::ScatteringMaterial;
+use rayon::prelude::*;
 use std::sync::OnceLock;
 
 /// Points along the beam: midpoints of 12 equal slices put the shallowest 0.04 and the deepest
@@ -108,9 +110,17 @@ impl Beam {
         (real, add(real, mul(at.ni, 2.0 * (depth + self.zb[c]))))
     }
 
-    /// The beam's flux through `no` at `xo` in channel `c`, as a share of all it lets out
-    /// through a plane.
-    fn flux(&self, c: usize, xo: V3, no: V3, at: &Entry, seconds: &[Second; NODES]) -> f64 {
+    /// The beam's flux through `no` at `xo` in channel `c`, as a share of `total`, all it lets
+    /// out through a plane.
+    fn flux(
+        &self,
+        c: usize,
+        xo: V3,
+        no: V3,
+        at: &Entry,
+        seconds: &[Second; NODES],
+        total: f64,
+    ) -> f64 {
         let s = self.sigma_tr[c];
         let through = |p: V3| {
             let v = sub(xo, p);
@@ -122,7 +132,7 @@ impl Beam {
                 seconds[k].kept * (through(real) - through(virt))
             })
             .sum();
-        sum / self.total(c, at.cos, seconds)
+        sum / total
     }
 
     /// Where the light enters at a sample at `xi` (mm) with unit normal `ni`.
@@ -136,18 +146,33 @@ impl Beam {
         }
     }
 
-    /// The factor for a source at `xi` with normal `ni` seen from `xo` with normal `no` (mm).
-    /// A lumped node whose normals cancel (zero normal) has its images cancel its sources, as
-    /// with `exit_normal`.
-    pub(super) fn factor(&self, xo: V3, no: V3, xi: V3, ni: V3) -> [f64; 3] {
+    /// The beam of a source at `xi` with unit normal `ni` (mm): where its light enters, each
+    /// point's second collision and what it lets out through a plane, the same for every
+    /// shaded point. `None` for a lumped node whose normals cancel (zero normal): its images
+    /// cancel its sources, as with `exit_normal`.
+    pub(super) fn enter(&self, xi: V3, ni: V3) -> Option<Entered> {
         if dot(ni, ni) < 0.25 {
-            return [0.0; 3];
+            return None;
         }
-        let r = dot(sub(xo, xi), sub(xo, xi)).sqrt();
         let at = self.entry(xi, ni);
         let seconds = self.seconds(at.cos);
+        let total = [0, 1, 2].map(|c| self.total(c, at.cos, &seconds));
+        Some(Entered { at, seconds, total })
+    }
+
+    /// The factor for a source at `xi` with normal `ni` seen from `xo` with normal `no` (mm).
+    #[cfg(test)]
+    pub(super) fn factor(&self, xo: V3, no: V3, xi: V3, ni: V3) -> [f64; 3] {
+        self.enter(xi, ni)
+            .map_or([0.0; 3], |e| self.factor_entered(xo, no, &e))
+    }
+
+    /// The factor for the source `e` seen from `xo` with normal `no` (mm).
+    fn factor_entered(&self, xo: V3, no: V3, e: &Entered) -> [f64; 3] {
+        let v = sub(xo, e.at.xi);
+        let r = dot(v, v).sqrt();
         [0, 1, 2].map(|c| {
-            let actual = self.flux(c, xo, no, &at, &seconds);
+            let actual = self.flux(c, xo, no, &e.at, &e.seconds, e.total[c]);
             let flat = self.flat[c].at(r, self, c);
             if flat > 0.0 && flat.is_finite() && actual.is_finite() {
                 (actual / flat).max(0.0)
@@ -157,16 +182,11 @@ impl Beam {
         })
     }
 
-    /// The beam's fluence at `x` (mm) in channel `c` per unit power entering, over α′/(4πD):
-    /// as a dipole's bracket e^(−σtr dr)/dr − e^(−σtr dv)/dv, summed over the points with the
-    /// light they keep, scaled to let out through a plane what the point dipole does (as the
-    /// gather's factor keeps the profile's energy).
-    pub(super) fn fluence(&self, c: usize, x: V3, xi: V3, ni: V3) -> f64 {
-        if dot(ni, ni) < 0.25 {
-            return 0.0;
-        }
-        let at = self.entry(xi, ni);
-        let seconds = self.seconds(at.cos);
+    /// The beam's fluence at `x` (mm) in channel `c` per unit power entering at the source
+    /// `e`, over α′/(4πD): as a dipole's bracket e^(−σtr dr)/dr − e^(−σtr dv)/dv, summed over
+    /// the points with the light they keep, scaled to let out through a plane what the point
+    /// dipole does (as the gather's factor keeps the profile's energy).
+    fn fluence_entered(&self, c: usize, x: V3, e: &Entered) -> f64 {
         let s = self.sigma_tr[c];
         let term = |p: V3| {
             let v = sub(x, p);
@@ -175,11 +195,11 @@ impl Beam {
         };
         let sum: f64 = (0..NODES)
             .map(|k| {
-                let (real, virt) = self.pair(c, k, &at, seconds[k]);
-                seconds[k].kept * (term(real) - term(virt))
+                let (real, virt) = self.pair(c, k, &e.at, e.seconds[k]);
+                e.seconds[k].kept * (term(real) - term(virt))
             })
             .sum();
-        sum * self.dipole_total[c] / self.total(c, at.cos, &seconds)
+        sum * self.dipole_total[c] / e.total[c]
     }
 
     /// What the beam in channel `c` entering at `cos` to the normal lets out through a flat
@@ -200,6 +220,7 @@ impl Beam {
 
 /// A sample's entry: position and unit normal (mm), the light's direction inside and its
 /// cosine to the inward normal.
+#[derive(Clone)]
 struct Entry {
     xi: V3,
     ni: V3,
@@ -215,6 +236,55 @@ impl Entry {
         w: [0.0, 0.0, -1.0],
         cos: 1.0,
     };
+}
+
+/// One source's beam as [`Beam::enter`] makes it.
+#[derive(Clone)]
+pub(super) struct Entered {
+    at: Entry,
+    seconds: [Second; NODES],
+    /// What it lets out through a plane per channel ([`Beam::total`]).
+    total: [f64; 3],
+}
+
+/// A beam with every term an octree's gather can have entered once ([`Octree::points`]):
+/// per term a gather then pays only for the pairs, not for the light's refraction, the
+/// second collisions and the totals again, which were half its time.
+#[derive(Clone)]
+pub(super) struct Beams {
+    beam: Beam,
+    entered: Vec<Option<Entered>>,
+}
+
+impl Beams {
+    pub(super) fn new(beam: Beam, octree: &Octree) -> Beams {
+        let entered = octree
+            .points()
+            .par_iter()
+            .map(|&(p, n)| beam.enter(p, n))
+            .collect();
+        Beams { beam, entered }
+    }
+
+    /// The same beam for a rebuilt octree.
+    pub(super) fn rebuilt(self, octree: &Octree) -> Beams {
+        Beams::new(self.beam, octree)
+    }
+
+    /// [`Beam::enter`]'s factor for the term `key` of a gather over the octree these were
+    /// made for.
+    pub(super) fn factor(&self, xo: V3, no: V3, key: usize) -> [f64; 3] {
+        self.entered[key]
+            .as_ref()
+            .map_or([0.0; 3], |e| self.beam.factor_entered(xo, no, e))
+    }
+
+    /// The beam's fluence (`Beam::fluence_entered`) for the term `key`.
+    pub(super) fn fluence(&self, c: usize, x: V3, key: usize) -> f64 {
+        self.entered[key]
+            .as_ref()
+            .map_or(0.0, |e| self.beam.fluence_entered(c, x, e))
+    }
 }
 
 /// The beam straight down on a plane, the flux at distance r on it as a share of all it lets
@@ -254,7 +324,8 @@ impl Flat {
     fn direct(beam: &Beam, c: usize, r: f64) -> f64 {
         let up = [0.0, 0.0, 1.0];
         let seconds = beam.seconds(1.0);
-        beam.flux(c, [r, 0.0, 0.0], up, &Entry::STRAIGHT_DOWN, &seconds)
+        let total = beam.total(c, 1.0, &seconds);
+        beam.flux(c, [r, 0.0, 0.0], up, &Entry::STRAIGHT_DOWN, &seconds, total)
     }
 
     fn at(&self, r: f64, beam: &Beam, c: usize) -> f64 {
@@ -417,7 +488,8 @@ mod tests {
                     let x = [mid * phi.cos(), mid * phi.sin(), 0.0];
                     let da = mid * dr * 2.0 * std::f64::consts::PI / angles as f64;
                     for (c, sum) in sum.iter_mut().enumerate() {
-                        *sum += beam.flux(c, x, up, &at, &seconds) * da;
+                        *sum += beam.flux(c, x, up, &at, &seconds, beam.total(c, at.cos, &seconds))
+                            * da;
                     }
                 }
                 r += dr;
@@ -451,6 +523,7 @@ mod tests {
             let up = [0.0, 0.0, 1.0];
             let at = beam.entry([0.0; 3], up);
             let seconds = beam.seconds(at.cos);
+            let total = beam.total(0, at.cos, &seconds);
             let (steps, angles) = (160, 256);
             let mut sum = 0.0;
             for i in 0..steps {
@@ -458,7 +531,7 @@ mod tests {
                 for a in 0..angles {
                     let phi = 2.0 * std::f64::consts::PI * (a as f64 + 0.5) / angles as f64;
                     let x = [r * phi.cos(), r * phi.sin(), 0.0];
-                    sum += beam.flux(0, x, up, &at, &seconds) * r;
+                    sum += beam.flux(0, x, up, &at, &seconds, total) * r;
                 }
             }
             let area = 8.0 / steps as f64 * 2.0 * std::f64::consts::PI / angles as f64;

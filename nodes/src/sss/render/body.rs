@@ -19,7 +19,7 @@
 //! (Gibou et al. 2002's symmetric treatment), conjugate gradients per channel. The exitance
 //! gains −D ∂ψ/∂n at each shaded point, on top of the `exit_normal` gather.
 
-use super::beam::Beam;
+use super::beam::Beams;
 use crate::geometry::{add, dot, mul, sub, V3};
 use crate::render::reference::Tracer;
 use crate::sss::dipole::Dipole;
@@ -54,8 +54,9 @@ pub(super) struct Body {
     channels: Vec<Channel>,
     /// The dipoles' constants per channel.
     dipoles: [Dipole; 3],
-    /// With `sources: beam`, the beams that stand for the dipoles.
-    beam: Option<Beam>,
+    /// With `sources: beam`, the beams that stand for the dipoles, entered for the octree
+    /// the body was made with.
+    beam: Option<Beams>,
 }
 
 struct Channel {
@@ -74,12 +75,12 @@ pub(super) struct Report {
 
 impl Body {
     /// The grid over `mesh` (world units of `unit` mm), ψ solved for the dipoles (or, with
-    /// `beam`, the beams) of the sources in `octree` (mm, E·ΔA).
+    /// `beam`, the beams, entered for `octree`) of the sources in `octree` (mm, E·ΔA).
     pub(super) fn new(
         tracer: &Tracer,
         mesh: &Mesh,
         octree: &Octree,
-        beam: Option<Beam>,
+        beam: Option<Beams>,
         material: &ScatteringMaterial,
         unit: f64,
     ) -> Result<(Body, Report), NodeError> {
@@ -113,7 +114,7 @@ impl Body {
         tracer: &Tracer,
         mesh: &Mesh,
         octree: &Octree,
-        beam: Option<Beam>,
+        beam: Option<Beams>,
         material: &ScatteringMaterial,
         unit: f64,
         h: f64,
@@ -153,9 +154,9 @@ impl Body {
         ))
     }
 
-    /// −D ∂ψ/∂n at the surface point `xo` (mm) with outward unit normal `no`, per channel: a
-    /// quadratic along the normal through ψ's boundary value z_b outside and the grid's values
-    /// one and two cells inside.
+    /// −D ∂ψ/∂n at the surface point `xo` (mm) with outward unit normal `no`, per channel
+    /// (`octree` the one the body was made with): a quadratic along the normal through ψ's
+    /// boundary value z_b outside and the grid's values one and two cells inside.
     pub(super) fn exitance(&self, octree: &Octree, xo: V3, no: V3) -> [f64; 3] {
         [0, 1, 2].map(|c| {
             let outside = add(xo, mul(no, self.channels[c].zb));
@@ -247,11 +248,11 @@ fn derivative_at_zero(p: [(f64, f64); 3]) -> f64 {
 /// e^(−σtr dv)/dv), the real source z_r inside along its normal, the virtual one z_v outside.
 /// A lumped node whose normals cancel has its dipoles cancel too. With `beam`, each source's
 /// beam in place of its dipole.
-fn fluence(octree: &Octree, dipoles: &[Dipole; 3], beam: Option<&Beam>, c: usize, x: V3) -> f64 {
+fn fluence(octree: &Octree, dipoles: &[Dipole; 3], beam: Option<&Beams>, c: usize, x: V3) -> f64 {
     let d = &dipoles[c];
     let diffusion = d.zr / 3.0;
     let scale = d.alpha_prime / (4.0 * PI * diffusion);
-    let kernel = |p: V3, n: V3, _: f64| {
+    let kernel = |key: usize, p: V3, n: V3, _: f64| {
         let term = |z: f64| {
             let v = sub(x, add(p, mul(n, z)));
             let r = dot(v, v).sqrt().max(1e-9);
@@ -260,12 +261,12 @@ fn fluence(octree: &Octree, dipoles: &[Dipole; 3], beam: Option<&Beam>, c: usize
         let mut out = [0.0; 3];
         out[c] = scale
             * match beam {
-                Some(beam) => beam.fluence(c, x, p, n),
+                Some(beam) => beam.fluence(c, x, key),
                 None => term(-d.zr) - term(d.zv),
             };
         out
     };
-    octree.gather(x, 0.0, LUMPING, &kernel).0[c]
+    octree.gather_keyed(x, 0.0, LUMPING, &kernel).0[c]
 }
 
 /// The cell-centred grid.

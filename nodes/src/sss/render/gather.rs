@@ -134,8 +134,8 @@ pub(super) fn gather_cpu(
                 .map(|h| match h {
                     Some((p, n, ..)) if !stopped => {
                         let xo = p.map(|v| v * unit);
-                        let rd = |q: V3, nq: V3, d2: f64| setup.rd(xo, *n, q, nq, d2);
-                        setup.octree.gather(xo, setup.near, threshold, &rd)
+                        let rd = |key, q, nq, d2| setup.rd(xo, *n, key, q, nq, d2);
+                        setup.octree.gather_keyed(xo, setup.near, threshold, &rd)
                     }
                     _ => ([0.0; 3], 0),
                 })

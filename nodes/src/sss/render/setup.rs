@@ -1,7 +1,7 @@
 //! What every pixel shares: the Rd table, the near-disc energy, the irradiance samples as
 //! octree sources (with the shadow map that decides which are lit).
 
-use super::beam::Beam;
+use super::beam::{Beam, Beams};
 use super::bounce;
 use super::directional::Directional;
 use super::emission::Exit;
@@ -143,8 +143,9 @@ pub(super) struct Setup {
     pub(super) unit: f64,
     /// The shape's term, with `exit_normal` or `body` geometry and point sources.
     pub(super) exit_normal: Option<ExitNormal>,
-    /// The shape's and the light's angle's term, with those geometries and beam sources.
-    pub(super) beam: Option<Beam>,
+    /// The shape's and the light's angle's term, with those geometries and beam sources,
+    /// entered for `octree`'s points.
+    pub(super) beam: Option<Beams>,
     /// With `directional` geometry, the directional dipole's factor.
     pub(super) directional: Option<Directional>,
     /// With `energy: half_space`, the factor on the light entering.
@@ -257,6 +258,8 @@ impl Setup {
         let octree = Octree::build(sources.clone(), area_each);
         let near = 2.0 * area_each.sqrt();
         let follows_the_shape = matches!(p.geometry, Geometry::ExitNormal | Geometry::Body);
+        let beam = (follows_the_shape && p.sources == Sources::Beam)
+            .then(|| Beams::new(Beam::new(material, light, unit), &octree));
         Ok(Setup {
             table: Table::new(profile),
             sources,
@@ -269,8 +272,7 @@ impl Setup {
             unit,
             exit_normal: (follows_the_shape && p.sources == Sources::Point)
                 .then(|| ExitNormal::new(material)),
-            beam: (follows_the_shape && p.sources == Sources::Beam)
-                .then(|| Beam::new(material, light, unit)),
+            beam,
             directional: (p.geometry == Geometry::Directional)
                 .then(|| Directional::new(material, light, unit)),
             energy,
@@ -287,15 +289,15 @@ impl Setup {
     }
 
     /// Rd per channel between the shaded point `xo` (mm, normal `no`) and a source at `q` with
-    /// normal `nq`, d² apart.
-    pub(super) fn rd(&self, xo: V3, no: V3, q: V3, nq: V3, d2: f64) -> [f64; 3] {
+    /// normal `nq`, d² apart, the term `key` of a gather over `octree`.
+    pub(super) fn rd(&self, xo: V3, no: V3, key: usize, q: V3, nq: V3, d2: f64) -> [f64; 3] {
         let (f, r) = match (&self.exit_normal, &self.beam, &self.directional) {
             (Some(en), _, _) => (
                 en.factor(xo, no, q, nq),
                 self.table.at_any_distance(d2.sqrt()),
             ),
             (_, Some(beam), _) => (
-                beam.factor(xo, no, q, nq),
+                beam.factor(xo, no, key),
                 self.table.at_any_distance(d2.sqrt()),
             ),
             (_, _, Some(dd)) => (dd.factor(xo, no, q, nq), self.table.at(d2.sqrt())),
@@ -340,11 +342,11 @@ impl Setup {
                 .par_iter()
                 .enumerate()
                 .map(|(i, s)| {
-                    let (sum, _) = self
-                        .octree
-                        .gather(s.p, self.near, p.threshold, &|q, nq, d2| {
-                            self.rd(s.p, s.n, q, nq, d2)
-                        });
+                    let (sum, _) =
+                        self.octree
+                            .gather_keyed(s.p, self.near, p.threshold, &|key, q, nq, d2| {
+                                self.rd(s.p, s.n, key, q, nq, d2)
+                            });
                     let e = [0, 1, 2].map(|c| direct[i][c] + into[c] * arriving[i][c]);
                     [0, 1, 2].map(|c| sum[c] + e[c] * self.near_energy[c])
                 })
@@ -355,6 +357,7 @@ impl Setup {
                 s.power = [0, 1, 2].map(|c| (direct[i][c] + into[c] * a[c]) * area_each);
             }
             self.octree = Octree::build(self.sources.clone(), area_each);
+            self.beam = self.beam.take().map(|b| b.rebuilt(&self.octree));
         }
         self.bounced = Some(Bounced {
             nearest,
