@@ -135,12 +135,12 @@ fn translucent_renders_against_the_volumetric_truth() {
         &["marble_truth_npy.files", "skin1_truth_npy.files"],
     );
     for (material, rel, bias, dim) in [
-        // Measured 0.093 (the truth's noise 0.044 taken out), bias −6.2%, dimmer half −2.8%
+        // Measured 0.093 (the truth's noise 0.044 taken out), bias −6.3%, dimmer half −3.7%
         // (Jensen & Buhler: 0.235, −1.8%, −41%); the issue asks for 0.12 and ±15%.
         ("marble", 0.10, 0.08, 0.06),
-        // Measured 0.1025 (noise 0.033 taken out), bias −4.1%, dimmer half +12.5% (Jensen &
+        // Measured 0.099 (noise 0.033 taken out), bias −4.9%, dimmer half +3.3% (Jensen &
         // Buhler: 0.232, −14%, −67%); the issue asks for 0.15 and ±15%.
-        ("skin1", 0.12, 0.08, 0.15),
+        ("skin1", 0.11, 0.08, 0.08),
     ] {
         let m = measure(&ours, &chooser, material);
         let j = measure(&jensen, &chooser, material);
@@ -181,7 +181,7 @@ fn translucent_renders_against_the_volumetric_truth() {
 /// through the tube, and `sss.render` says so with its thin-object warning, which gives
 /// `planar`'s error too; `planar` (with the better dipole) meets the bounds there. The same
 /// chicken1 torus three times larger (7.5 paths) comes within 0.12 with the graph's
-/// configuration and no warning, its dimmer half too bright (+33%): the thickness is the
+/// configuration and no warning, its dimmer half too bright (+20%): the thickness is the
 /// cause of the failure, not the material's colour.
 #[test]
 fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
@@ -245,12 +245,11 @@ fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
         );
         (m, warned.unwrap_or_default())
     };
-    // Measured: skin2 0.098, dimmer half +5.2%; chicken1 planar 0.133, −9.9%; the issue's
-    // bounds for skin1 (0.15, ±15%). chicken1 at 60 mm a unit: 0.113, but its dimmer half
-    // +33% misses ±15%, held at ±40%: the beam's sources took it from +17.5% (Jensen's
-    // sources and the better dipole) while they brought the ball's within bounds.
+    // Measured: skin2 0.098, dimmer half −0.3%; chicken1 planar 0.133, −9.9%; the issue's
+    // bounds for skin1 (0.15, ±15%). chicken1 at 60 mm a unit: 0.103, but its dimmer half
+    // +20% misses ±15%, held at ±25% (Jensen's sources and the better dipole: +17.5%).
     for (name, preset, mm, geometry, thin, rel, dim) in [
-        ("skin2", "skin2", "20", "body", false, 0.12, 0.10),
+        ("skin2", "skin2", "20", "body", false, 0.12, 0.06),
         (
             "chicken1_planar",
             "chicken1",
@@ -260,7 +259,7 @@ fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
             0.15,
             0.15,
         ),
-        ("chicken1_60", "chicken1", "60", "body", false, 0.12, 0.40),
+        ("chicken1_60", "chicken1", "60", "body", false, 0.12, 0.25),
     ] {
         let (m, warned) = run(name, preset, mm, geometry);
         assert!(
@@ -271,7 +270,7 @@ fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
         );
         assert_eq!(!warned.is_empty(), thin, "{name}: {warned:?}");
     }
-    // Measured 0.276, dimmer half +75%: the warning's "far too bright" holds.
+    // Measured 0.233, dimmer half +63%: the warning's "far too bright" holds.
     let (m, warned) = run("chicken1", "chicken1", "20", "body");
     assert!(
         warned
@@ -296,9 +295,9 @@ fn a_back_lit_ball_meets_the_bounds_with_the_beams_sources() {
         "marble_npy.files",
         "marble_truth.noise",
     ];
-    // Measured: marble 0.107, bias −8.5%, dimmer half +6.0%; skin1 0.122, −8.9%, +8.2%. With
+    // Measured: marble 0.107, bias −8.6%, dimmer half +5.9%; skin1 0.122, −9.9%, +5.3%. With
     // `sources: point`: marble 0.099, −6.9%, +32%; skin1 0.195, −20%, +4.7%.
-    for (material, rel, dim) in [("marble", 0.12, 0.10), ("skin1", 0.14, 0.12)] {
+    for (material, rel, dim) in [("marble", 0.12, 0.10), ("skin1", 0.14, 0.10)] {
         let ball = |sources: &str, samples: &str, seed: &str| {
             [
                 "torus.shape=sphere".to_string(),

@@ -16,6 +16,12 @@
 //! happens on average, deeper by what the step gains (`Collision`): light that leaves after
 //! one scattering is single scattering, which the render adds exactly (`single_scattering`).
 //! Each source has its image mirrored in the entry point's extrapolated plane (z_b above it).
+//! The beam ends where its ray leaves the object (traced through the mesh once per source):
+//! the slices are of the first scatterings before that point, and the light past it, which
+//! crosses without scattering, is lost to diffusion. Without the cut, light entering near the
+//! terminator of a curved object ran on through the air beyond a short chord and diffused
+//! from there into the shadowed side: ketchup's torus at 60 mm a unit (1/σt′ = 4.2 mm in red)
+//! had its dimmer half +38% against the volumetric truth, +2% with it; skin1's +12.5%, +3%.
 //! Against the transport above this gives 0.726 and 0.582 (0.632 against 0.628 at μ0 = 0.2;
 //! the test below); the first scatterings themselves as sources give 0.64 and 0.39, and on
 //! the back-lit skin ball they sent green and blue 23–77% too much light near the terminator,
@@ -35,6 +41,7 @@ use super::directional::refracted;
 use super::geometry::flux_kernel;
 use crate::geometry::{add, dot, mul, sub, V3};
 use crate::render::light::Light;
+use crate::render::reference::Tracer;
 use crate::sss::dipole::Dipole;
 use crate::sss::octree::Octree;
 use crate::types::ScatteringMaterial;
@@ -97,14 +104,36 @@ impl Beam {
         std::array::from_fn(|k| Collision::table().at(self.optical[k] * cos))
     }
 
+    /// Channel `c`'s points for light entering at `cos` to the normal whose ray leaves the
+    /// object `reach` mm on (infinite: it never does), and the share of its light that
+    /// scatters before: the first scatterings' distribution cut at `reach`, its NODES equal
+    /// slices' midpoints. What passes the object without scattering leaves it unchanged.
+    fn points(&self, c: usize, cos: f64, reach: f64) -> (Points, f64) {
+        if reach == f64::INFINITY {
+            let points = Points {
+                along: self.along[c],
+                seconds: self.seconds(cos),
+            };
+            return (points, 1.0);
+        }
+        let reaching = -(-reach.max(0.0) / self.zr[c]).exp_m1();
+        let optical: [f64; NODES] =
+            std::array::from_fn(|k| -(-reaching * (k as f64 + 0.5) / NODES as f64).ln_1p());
+        let points = Points {
+            along: optical.map(|x| x * self.zr[c]),
+            seconds: optical.map(|x| Collision::table().at(x * cos)),
+        };
+        (points, reaching)
+    }
+
     /// The real and virtual source of beam point `k` in channel `c`, for a sample at `xi` with
     /// unit normal `ni`, light travelling along `w` inside at `cos` to the normal, and that
     /// point's second collision. The real source is where the second collision happens on
     /// average: the first's place, moved deeper by the mean of the depth it gains (those that
     /// leave upwards are the ones that do not collide again).
-    fn pair(&self, c: usize, k: usize, at: &Entry, second: Second) -> (V3, V3) {
-        let t = self.along[c][k];
-        let deeper = second.deeper * self.zr[c];
+    fn pair(&self, c: usize, k: usize, at: &Entry, points: &Points) -> (V3, V3) {
+        let t = points.along[k];
+        let deeper = points.seconds[k].deeper * self.zr[c];
         let real = add(at.xi, add(mul(at.w, t), mul(at.ni, -deeper)));
         let depth = t * at.cos + deeper;
         (real, add(real, mul(at.ni, 2.0 * (depth + self.zb[c]))))
@@ -112,15 +141,7 @@ impl Beam {
 
     /// The beam's flux through `no` at `xo` in channel `c`, as a share of `total`, all it lets
     /// out through a plane.
-    fn flux(
-        &self,
-        c: usize,
-        xo: V3,
-        no: V3,
-        at: &Entry,
-        seconds: &[Second; NODES],
-        total: f64,
-    ) -> f64 {
+    fn flux(&self, c: usize, xo: V3, no: V3, at: &Entry, points: &Points, total: f64) -> f64 {
         let s = self.sigma_tr[c];
         let through = |p: V3| {
             let v = sub(xo, p);
@@ -128,8 +149,8 @@ impl Beam {
         };
         let sum: f64 = (0..NODES)
             .map(|k| {
-                let (real, virt) = self.pair(c, k, at, seconds[k]);
-                seconds[k].kept * (through(real) - through(virt))
+                let (real, virt) = self.pair(c, k, at, points);
+                points.seconds[k].kept * (through(real) - through(virt))
             })
             .sum();
         sum / total
@@ -150,20 +171,48 @@ impl Beam {
     /// point's second collision and what it lets out through a plane, the same for every
     /// shaded point. `None` for a lumped node whose normals cancel (zero normal): its images
     /// cancel its sources, as with `exit_normal`.
-    pub(super) fn enter(&self, xi: V3, ni: V3) -> Option<Entered> {
+    /// With `tracer` (world units of `unit` mm), the beam stops where its ray leaves the
+    /// object.
+    pub(super) fn enter(&self, xi: V3, ni: V3, tracer: Option<&Tracer>) -> Option<Entered> {
         if dot(ni, ni) < 0.25 {
             return None;
         }
         let at = self.entry(xi, ni);
-        let seconds = self.seconds(at.cos);
-        let total = [0, 1, 2].map(|c| self.total(c, at.cos, &seconds));
-        Some(Entered { at, seconds, total })
+        let reach = tracer.map_or(f64::INFINITY, |t| self.reach(t, &at));
+        let mut reaching = [1.0; 3];
+        let points = [0, 1, 2].map(|c| {
+            let (points, share) = self.points(c, at.cos, reach);
+            reaching[c] = share;
+            points
+        });
+        let total = [0, 1, 2].map(|c| self.total(c, at.cos, &points[c]));
+        Some(Entered {
+            at,
+            points,
+            total,
+            reaching,
+        })
+    }
+
+    /// How far (mm) the light entering at `at` goes before its ray leaves the object;
+    /// infinite where it finds no way out (an open mesh) or starts outside.
+    fn reach(&self, tracer: &Tracer, at: &Entry) -> f64 {
+        let from = sub(at.xi.map(|v| v / self.unit), mul(at.ni, tracer.epsilon));
+        let Some(hit) = tracer.closest(from, at.w) else {
+            return f64::INFINITY;
+        };
+        let (_, ng) = tracer.triangle(hit.tri);
+        if dot(ng, at.w) > 0.0 {
+            (hit.t + tracer.epsilon) * self.unit
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// The factor for a source at `xi` with normal `ni` seen from `xo` with normal `no` (mm).
     #[cfg(test)]
     pub(super) fn factor(&self, xo: V3, no: V3, xi: V3, ni: V3) -> [f64; 3] {
-        self.enter(xi, ni)
+        self.enter(xi, ni, None)
             .map_or([0.0; 3], |e| self.factor_entered(xo, no, &e))
     }
 
@@ -172,7 +221,7 @@ impl Beam {
         let v = sub(xo, e.at.xi);
         let r = dot(v, v).sqrt();
         [0, 1, 2].map(|c| {
-            let actual = self.flux(c, xo, no, &e.at, &e.seconds, e.total[c]);
+            let actual = self.flux(c, xo, no, &e.at, &e.points[c], e.total[c]) * e.reaching[c];
             let flat = self.flat[c].at(r, self, c);
             if flat > 0.0 && flat.is_finite() && actual.is_finite() {
                 (actual / flat).max(0.0)
@@ -195,11 +244,11 @@ impl Beam {
         };
         let sum: f64 = (0..NODES)
             .map(|k| {
-                let (real, virt) = self.pair(c, k, &e.at, e.seconds[k]);
-                e.seconds[k].kept * (term(real) - term(virt))
+                let (real, virt) = self.pair(c, k, &e.at, &e.points[c]);
+                e.points[c].seconds[k].kept * (term(real) - term(virt))
             })
             .sum();
-        sum * self.dipole_total[c] / e.total[c]
+        sum * self.dipole_total[c] / e.total[c] * e.reaching[c]
     }
 
     /// What the beam in channel `c` entering at `cos` to the normal lets out through a flat
@@ -207,12 +256,13 @@ impl Beam {
     /// kernel z(1 + σtr d)e^(−σtr d)/d³ integrated over the plane) and its image, as far above
     /// the extrapolated plane, e^(−σtr (z + 2z_b)) (Jensen et al.'s total reflectance is α′/2
     /// times the two).
-    fn total(&self, c: usize, cos: f64, seconds: &[Second; NODES]) -> f64 {
+    fn total(&self, c: usize, cos: f64, points: &Points) -> f64 {
         let s = self.sigma_tr[c];
         (0..NODES)
             .map(|k| {
-                let z = self.along[c][k] * cos + seconds[k].deeper * self.zr[c];
-                seconds[k].kept * ((-s * z).exp() + (-s * (z + 2.0 * self.zb[c])).exp())
+                let second = points.seconds[k];
+                let z = points.along[k] * cos + second.deeper * self.zr[c];
+                second.kept * ((-s * z).exp() + (-s * (z + 2.0 * self.zb[c])).exp())
             })
             .sum()
     }
@@ -238,13 +288,23 @@ impl Entry {
     };
 }
 
+/// One channel's beam points: the first scatterings' distances along the light (mm) and
+/// their second collisions.
+#[derive(Clone, Copy)]
+struct Points {
+    along: [f64; NODES],
+    seconds: [Second; NODES],
+}
+
 /// One source's beam as [`Beam::enter`] makes it.
 #[derive(Clone)]
 pub(super) struct Entered {
     at: Entry,
-    seconds: [Second; NODES],
+    points: [Points; 3],
     /// What it lets out through a plane per channel ([`Beam::total`]).
     total: [f64; 3],
+    /// The share of its light that scatters before its ray leaves the object.
+    reaching: [f64; 3],
 }
 
 /// A beam with every term an octree's gather can have entered once ([`Octree::points`]):
@@ -257,18 +317,19 @@ pub(super) struct Beams {
 }
 
 impl Beams {
-    pub(super) fn new(beam: Beam, octree: &Octree) -> Beams {
+    /// Each beam cut where its ray leaves the mesh `tracer` holds.
+    pub(super) fn new(beam: Beam, octree: &Octree, tracer: &Tracer) -> Beams {
         let entered = octree
             .points()
             .par_iter()
-            .map(|&(p, n)| beam.enter(p, n))
+            .map(|&(p, n)| beam.enter(p, n, Some(tracer)))
             .collect();
         Beams { beam, entered }
     }
 
     /// The same beam for a rebuilt octree.
-    pub(super) fn rebuilt(self, octree: &Octree) -> Beams {
-        Beams::new(self.beam, octree)
+    pub(super) fn rebuilt(self, octree: &Octree, tracer: &Tracer) -> Beams {
+        Beams::new(self.beam, octree, tracer)
     }
 
     /// [`Beam::enter`]'s factor for the term `key` of a gather over the octree these were
@@ -323,9 +384,9 @@ impl Flat {
 
     fn direct(beam: &Beam, c: usize, r: f64) -> f64 {
         let up = [0.0, 0.0, 1.0];
-        let seconds = beam.seconds(1.0);
-        let total = beam.total(c, 1.0, &seconds);
-        beam.flux(c, [r, 0.0, 0.0], up, &Entry::STRAIGHT_DOWN, &seconds, total)
+        let (points, _) = beam.points(c, 1.0, f64::INFINITY);
+        let total = beam.total(c, 1.0, &points);
+        beam.flux(c, [r, 0.0, 0.0], up, &Entry::STRAIGHT_DOWN, &points, total)
     }
 
     fn at(&self, r: f64, beam: &Beam, c: usize) -> f64 {
@@ -477,7 +538,8 @@ mod tests {
             let beam = Beam::new(&m, &lit_from(to_light), 1.0);
             let up = [0.0, 0.0, 1.0];
             let at = beam.entry([0.0; 3], up);
-            let seconds = beam.seconds(at.cos);
+            let points = [0, 1, 2].map(|c| beam.points(c, at.cos, f64::INFINITY).0);
+            let totals = [0, 1, 2].map(|c| beam.total(c, at.cos, &points[c]));
             let mut sum = [0.0; 3];
             let (mut r, angles): (f64, usize) = (0.0, 256);
             while r < 400.0 {
@@ -488,8 +550,7 @@ mod tests {
                     let x = [mid * phi.cos(), mid * phi.sin(), 0.0];
                     let da = mid * dr * 2.0 * std::f64::consts::PI / angles as f64;
                     for (c, sum) in sum.iter_mut().enumerate() {
-                        *sum += beam.flux(c, x, up, &at, &seconds, beam.total(c, at.cos, &seconds))
-                            * da;
+                        *sum += beam.flux(c, x, up, &at, &points[c], totals[c]) * da;
                     }
                 }
                 r += dr;
@@ -522,8 +583,8 @@ mod tests {
             let beam = Beam::new(&m, &lit_from(to_light), 1.0);
             let up = [0.0, 0.0, 1.0];
             let at = beam.entry([0.0; 3], up);
-            let seconds = beam.seconds(at.cos);
-            let total = beam.total(0, at.cos, &seconds);
+            let (points, _) = beam.points(0, at.cos, f64::INFINITY);
+            let total = beam.total(0, at.cos, &points);
             let (steps, angles) = (160, 256);
             let mut sum = 0.0;
             for i in 0..steps {
@@ -531,7 +592,7 @@ mod tests {
                 for a in 0..angles {
                     let phi = 2.0 * std::f64::consts::PI * (a as f64 + 0.5) / angles as f64;
                     let x = [r * phi.cos(), r * phi.sin(), 0.0];
-                    sum += beam.flux(0, x, up, &at, &seconds, total) * r;
+                    sum += beam.flux(0, x, up, &at, &points, total) * r;
                 }
             }
             let area = 8.0 / steps as f64 * 2.0 * std::f64::consts::PI / angles as f64;
@@ -568,6 +629,63 @@ mod tests {
             for f in beam.factor([r, 0.0, 0.0], up, [0.0; 3], up) {
                 assert!((f - 1.0).abs() < 1e-4, "{r}: {f}");
             }
+        }
+    }
+
+    #[test]
+    fn a_beam_stops_where_its_ray_leaves_a_ball() {
+        // A ball of 10 mm lit from straight above, η = 1: the light entering at polar angle θ
+        // runs straight down a chord 2R·cos θ long (closed form; the facets stay within 0.06%
+        // of the sphere). A medium of 1/σt′ = 4 mm lets e^(−σt′·chord) of it through unscattered,
+        // so 1 − e^(−σt′·chord) reaches the beam, and every point lies on the chord.
+        let mesh = crate::mesh::primitive::build(&crate::mesh::primitive::Params {
+            shape: crate::mesh::primitive::Shape::Sphere,
+            size: 1.0,
+            minor: 0.0,
+            segments: [96, 48],
+        })
+        .expect("a sphere");
+        let tracer = Tracer::new(&mesh);
+        let (radius, zr) = (10.0, 4.0);
+        let m = ScatteringMaterial {
+            sigma_s_prime: [0.9 / zr; 3],
+            sigma_a: [0.1 / zr; 3],
+            eta: 1.0,
+            g: 0.0,
+        };
+        let beam = Beam::new(&m, &lit_from([0.0, 0.0, 1.0]), radius);
+        for theta in [0.05f64, 0.6, 1.2] {
+            let phi: f64 = 0.013;
+            let n = [
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ];
+            // The entry on the mesh (the facets lie inside the sphere): where a ray from
+            // outside along −n meets it.
+            let hit = tracer.closest(mul(n, 2.0), mul(n, -1.0)).expect("the ball");
+            let xi = mul(n, (2.0 - hit.t) * radius);
+            let e = beam.enter(xi, n, Some(&tracer)).expect("lit");
+            let chord = 2.0 * radius * theta.cos();
+            let want = 1.0 - (-chord / zr).exp();
+            // The facets sit up to 0.06% of R inside the sphere, at both ends of the chord,
+            // which meets them at cos θ.
+            let slack = 2.0 * 6e-4 * radius / theta.cos();
+            for c in 0..3 {
+                assert!(
+                    (e.reaching[c] - want).abs() < slack / zr,
+                    "θ {theta}: {} vs {want}",
+                    e.reaching[c]
+                );
+                let last = e.points[c].along[NODES - 1];
+                assert!(
+                    last < chord + slack,
+                    "θ {theta}: point {last} mm past {chord}"
+                );
+            }
+            // Never cut without a tracer.
+            let open = beam.enter(xi, n, None).expect("lit");
+            assert_eq!(open.reaching, [1.0; 3]);
         }
     }
 }

@@ -141,7 +141,8 @@ pub struct Params {
     /// al. 2001's one source a reduced mean free path under the sample, whatever the light's
     /// angle) or `beam` (along the refracted light, where its second collisions happen:
     /// oblique light scatters shallower and sends its multiple scattering less far, as
-    /// transport does; the profile still sets how much, `beam.rs`). `beam` needs `geometry:
+    /// transport does; each beam ends where its ray leaves the mesh; the profile still sets
+    /// how much, `beam.rs`). `beam` needs `geometry:
     /// exit_normal` or `body`, and is meant with a profile of multiple scattering alone
     /// (`pbd_multiple`) and `single_scattering`.
     pub sources: Sources,
@@ -220,8 +221,8 @@ impl Node for Render {
             // `single_scattering_shape`, `geometry: directional`, `energy`. 6: `emission`.
             // 7: the thin-object warning (results unchanged; then a cache hit did not repeat a
             // node's warnings, so earlier results reran once; it does now). 8: `geometry: body`.
-            // 9: `sources`.
-            version: 9,
+            // 9: `sources`. 10: `sources: beam` ends each beam where its ray leaves the mesh.
+            version: 10,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![

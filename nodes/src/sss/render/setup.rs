@@ -259,7 +259,7 @@ impl Setup {
         let near = 2.0 * area_each.sqrt();
         let follows_the_shape = matches!(p.geometry, Geometry::ExitNormal | Geometry::Body);
         let beam = (follows_the_shape && p.sources == Sources::Beam)
-            .then(|| Beams::new(Beam::new(material, light, unit), &octree));
+            .then(|| Beams::new(Beam::new(material, light, unit), &octree, tracer));
         Ok(Setup {
             table: Table::new(profile),
             sources,
@@ -357,7 +357,7 @@ impl Setup {
                 s.power = [0, 1, 2].map(|c| (direct[i][c] + into[c] * a[c]) * area_each);
             }
             self.octree = Octree::build(self.sources.clone(), area_each);
-            self.beam = self.beam.take().map(|b| b.rebuilt(&self.octree));
+            self.beam = self.beam.take().map(|b| b.rebuilt(&self.octree, tracer));
         }
         self.bounced = Some(Bounced {
             nearest,
