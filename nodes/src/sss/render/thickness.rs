@@ -3,8 +3,8 @@
 //! volumetric truth (`graphs/sss_truth.json` with other presets and shapes, the README's
 //! translucency section) the torus's error with `geometry: body` stayed under 0.12 where its tube was 7.5 or more
 //! reduced mean free paths across. At 3.7 (ketchup) and 2.5 (chicken1) `geometry: body` and
-//! `exit_normal` sent far too much light through the tube (0.23–0.39, the dimmer half
-//! 70–83% too bright), and 45–51% too much through a chicken1 sphere 4.6 paths across;
+//! `exit_normal` sent far too much light through the tube (0.20–0.39, the dimmer half
+//! 63–83% too bright), and 45–51% too much through a chicken1 sphere 4.6 paths across;
 //! `planar` left those dimmer halves 10–38% too dark (the half chosen by a second truth of
 //! another seed, so that its noise does not choose the pixels). Below [`THIN`] the render
 //! warns.
