@@ -158,7 +158,8 @@ impl Octree {
                 }
             }
         };
-        let leaves = self.nodes.len();
+        // Sources are keyed after every node.
+        let first_source = self.nodes.len();
         while let Some(id) = stack.pop() {
             let node = &self.nodes[id];
             let inside = (0..3).all(|k| x[k] >= node.lo[k] && x[k] <= node.hi[k]);
@@ -171,7 +172,7 @@ impl Octree {
             } else if node.children.is_empty() {
                 for &i in &self.order[node.first..node.first + node.count] {
                     let s = &self.sources[i];
-                    add(leaves + i, s.p, s.n, s.power, &mut sum);
+                    add(first_source + i, s.p, s.n, s.power, &mut sum);
                     evaluated += 1;
                 }
             } else {
