@@ -11,6 +11,7 @@ pub mod gpu;
 pub mod key;
 pub mod node;
 pub mod producer;
+pub mod progress;
 pub mod registry;
 pub mod report;
 mod scheduler;
@@ -23,6 +24,7 @@ pub use engine::{
 pub use gpu::{Gpu, GpuProvider};
 pub use key::{Key, KEY_SCHEME};
 pub use node::{DynNode, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Prepared};
+pub use progress::ProgressSteps;
 pub use registry::Registry;
 pub use report::{NodeReport, NodeStatus, RunReport, Warning};
 pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};
