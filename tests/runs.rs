@@ -1407,6 +1407,7 @@ fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
             k_cpu, k_auto,
             "no adapter: auto is the CPU path, the same value"
         );
+        mesoflow_testkit::skip("no GPU adapter: the GPU half (its own key) did not run");
     }
 }
 

@@ -1,5 +1,4 @@
-//! Command-line options of the benches (`cargo bench --bench NAME -- --option value`), shared
-//! by `#[path]` inclusion since every bench is its own crate.
+//! Command-line options of the benches (`cargo bench --bench NAME -- --option value`).
 
 /// The value after `name`, parsed, or `default` when absent or unparsable.
 pub fn arg<T: std::str::FromStr>(name: &str, default: T) -> T {

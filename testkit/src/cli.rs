@@ -1,15 +1,35 @@
-//! Running the `mesoflow` binary from a bench and reading its report, shared by `#[path]`
-//! inclusion (the planner's calibration and verification).
+//! Running the `mesoflow` binary of this checkout from a test or a bench, and reading its report.
 
 use serde_json::Value;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Runs `mesoflow ARGS`; a failure ends the bench with its stderr.
+/// The repository's root folder.
+pub fn repo() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+/// The `mesoflow` binary: `MESOFLOW_BIN`, else the one beside the running test or bench
+/// (`target/<profile>/mesoflow`; cargo builds it before the root package's tests and benches).
+pub fn bin() -> PathBuf {
+    if let Some(p) = std::env::var_os("MESOFLOW_BIN") {
+        return PathBuf::from(p);
+    }
+    let exe = std::env::current_exe().expect("the running test's path");
+    let mut dir = exe.parent().expect("the test's folder").to_path_buf();
+    if dir.ends_with("deps") {
+        dir.pop();
+    }
+    dir.join(format!("mesoflow{}", std::env::consts::EXE_SUFFIX))
+}
+
+/// Runs `mesoflow ARGS`; a failure ends the test or bench with its stderr.
 pub fn mesoflow(args: &[&str]) -> std::process::Output {
-    let out = Command::new(env!("CARGO_BIN_EXE_mesoflow"))
+    let out = Command::new(bin())
         .args(args)
+        .env_remove("MESOFLOW_CACHE")
         .output()
-        .expect("run mesoflow");
+        .unwrap_or_else(|e| panic!("run {}: {e}", bin().display()));
     assert!(
         out.status.success(),
         "mesoflow {}: {}",

@@ -5,7 +5,7 @@
 //! (over the pixels either shows the object in), the prediction, and the render times (a frame's
 //! time for `render.mesh`, the node's for `sss.render`).
 
-use super::cli::{mesoflow, node};
+use crate::cli::{mesoflow, node, repo};
 use serde_json::Value;
 use std::path::Path;
 
@@ -44,7 +44,7 @@ pub struct Row {
 /// planning with `split` (`joint` or `equal`) for a viewer at `ppd` pixels per degree (FLIP's
 /// default when `None`), the FLIP measured at the same.
 pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = repo();
     let height = width * 3 / 4;
     std::fs::create_dir_all(out).unwrap();
     let graph = root.join("graphs/plan_verify.json");
@@ -175,7 +175,7 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
 /// at FLIP's default viewing condition.
 #[allow(dead_code)]
 pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let root = repo();
     let height = width * 3 / 4;
     std::fs::create_dir_all(out).unwrap();
     let graph = root.join("graphs/plan_qh.json");

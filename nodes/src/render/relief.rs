@@ -705,7 +705,7 @@ mod tests {
             let g = match render(&hf, &m, &p, Some(Arc::new(gpu))) {
                 Ok(g) => g,
                 Err(e) if e.to_string().contains("cannot build") => {
-                    eprintln!("skipping {name}: {e}");
+                    mesoflow_testkit::skip(&format!("{name}: {e}"));
                     continue;
                 }
                 Err(e) => panic!("{name}: {e}"),

@@ -1,0 +1,12 @@
+//! mesoflow's test kit, a dev-only crate that the tests and benches of every package use: skips
+//! that say so (`skip`), the `mesoflow` binary and its reports (`cli`), the benches' options
+//! (`args`), and the scenes and sweeps that a test holds to a bound and a bench charts
+//! (`plan_sweep`, `truth_scenes`), written once for both.
+
+pub mod args;
+pub mod cli;
+pub mod plan_sweep;
+pub mod skip;
+pub mod truth_scenes;
+
+pub use skip::{skip, skip_unless_required};
