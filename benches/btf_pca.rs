@@ -14,9 +14,7 @@ use std::io::Write;
 use std::sync::Arc;
 use std::time::Instant;
 
-#[path = "common/args.rs"]
-mod args;
-use args::arg;
+use mesoflow_testkit::args::arg;
 
 fn flag(name: &str) -> bool {
     std::env::args().any(|a| a == name)

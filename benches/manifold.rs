@@ -14,9 +14,7 @@ use mesoflow_nodes::rng;
 use mesoflow_nodes::types::PointSet;
 use std::time::Instant;
 
-#[path = "common/args.rs"]
-mod args;
-use args::arg;
+use mesoflow_testkit::args::arg;
 
 /// scikit-learn's `make_s_curve` shape, from our own seeded randomness.
 fn s_curve(n: usize) -> PointSet {

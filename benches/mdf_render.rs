@@ -15,9 +15,7 @@ use mesoflow_nodes::render::render_mesh::{self, RenderMesh};
 use mesoflow_runtime::{Gpu, Inputs, Node, NodeContext, ValueRef};
 use std::sync::Arc;
 
-#[path = "common/args.rs"]
-mod args;
-use args::arg;
+use mesoflow_testkit::args::arg;
 
 fn port(node: &dyn Fn() -> mesoflow_runtime::Outputs, name: &str) -> ValueRef {
     node().get(name).expect("port").clone()

@@ -24,10 +24,7 @@
 //!
 //! `cargo bench --bench plan_calibrate -- [--out DIR] [--width W]`
 
-#[path = "common/args.rs"]
-mod args;
-#[path = "common/cli.rs"]
-mod cli;
+use mesoflow_testkit::{args, cli};
 
 use cli::{mesoflow, node};
 use mesoflow_nodes::render::footprint::{shadow_resolution, SHADOW_TEXELS_PER_PIXEL};

@@ -1,5 +1,5 @@
 //! The planner's proof (`graphs/plan_verify.json`), charted: runs the verification sweep
-//! (`common/plan_sweep.rs`) with the joint and the equal budget split at FLIP's default 67
+//! (`mesoflow_testkit::plan_sweep`) with the joint and the equal budget split at FLIP's default 67
 //! pixels per degree, and with the joint split for viewers at 30 and 120, and writes
 //! `sweep.csv` (joint), `sweep_equal.csv`, `sweep_ppd30.csv`, `sweep_ppd120.csv` and the charts
 //! `popping.csv` (where a decision changes between neighbouring distances, the FLIP between
@@ -10,15 +10,8 @@
 //!
 //! `cargo bench --bench plan_verify -- [--out DIR] [--width W]`
 
-#[path = "common/args.rs"]
-mod args;
-#[allow(dead_code)]
-#[path = "../src/chart.rs"]
-mod chart;
-#[path = "common/cli.rs"]
-mod cli;
-#[path = "common/plan_sweep.rs"]
-mod plan_sweep;
+use mesoflow::chart;
+use mesoflow_testkit::{args, cli, plan_sweep};
 
 use plan_sweep::{Row, BUDGETS, DISTANCES, OBJECTS};
 use std::fmt::Write as _;

@@ -21,9 +21,7 @@ use mesoflow_nodes::types::ScatteringMaterial;
 use mesoflow_runtime::Gpu;
 use std::time::Instant;
 
-#[path = "common/args.rs"]
-mod args;
-use args::arg;
+use mesoflow_testkit::args::arg;
 
 fn flag(name: &str) -> bool {
     std::env::args().any(|a| a == name)

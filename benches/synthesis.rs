@@ -20,9 +20,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-#[path = "common/args.rs"]
-mod args;
-use args::arg;
+use mesoflow_testkit::args::arg;
 
 fn load(path: &Path) -> Plane {
     let img = image::open(path).expect("read PNG").to_rgb8();

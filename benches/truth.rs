@@ -17,15 +17,8 @@
 //!
 //! `cargo bench --bench truth -- [--out DIR] [--width W]`
 
-#[path = "common/args.rs"]
-mod args;
-#[allow(dead_code)]
-#[path = "../src/chart.rs"]
-mod chart;
-#[path = "common/cli.rs"]
-mod cli;
-#[path = "common/truth_scenes.rs"]
-mod truth_scenes;
+use mesoflow::chart;
+use mesoflow_testkit::{args, cli, truth_scenes};
 
 use cli::{mesoflow, node};
 use serde_json::{json, Value};

@@ -4,15 +4,10 @@
 //! budget (mean FLIP over the object's pixels), and every miss within 1.5× of it. Render times
 //! are the bench's business, not this test's.
 
-#[path = "../benches/common/cli.rs"]
-#[allow(dead_code)]
-mod cli;
-// The render times it records are the bench's.
-#[path = "../benches/common/plan_sweep.rs"]
-#[allow(dead_code)]
-mod plan_sweep;
+use mesoflow_testkit::plan_sweep;
 
 #[test]
+#[ignore = "slow: the full verification sweep, 56 cases, 1 min"]
 fn planned_views_stay_within_their_flip_budget() {
     let out = tempfile::tempdir().expect("temp dir");
     let rows = plan_sweep::sweep(out.path(), 240, "joint", None);

@@ -8,8 +8,7 @@
 
 mod common;
 
-#[path = "../benches/common/truth_scenes.rs"]
-mod truth_scenes;
+use mesoflow_testkit::truth_scenes;
 
 use common::{mesoflow, read_npy, report, Scratch};
 use serde_json::Value;
@@ -84,6 +83,7 @@ fn measure(s: &Scratch, name: &str, sets: &[String]) -> Measured {
 }
 
 #[test]
+#[ignore = "slow: the ground truth at full size, 66 s"]
 fn renders_stay_as_close_to_the_true_mesostructure_as_measured() {
     let s = Scratch::new();
     // The torus: the bounds (measured: relative RMSE 0.199, IoU 0.993, pixels lit at
