@@ -33,6 +33,13 @@ pub enum Command {
     },
     /// Print the JSON Schema of graph files (for editors).
     Schema,
+    /// Write the node reference: one Markdown page per kind (ports, parameters, defaults,
+    /// documentation) and an index, generated from the catalog.
+    Docs {
+        /// The folder to write into (docs/reference in this repository).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+    },
     /// Print a graph in Graphviz dot.
     Dot {
         graph: PathBuf,

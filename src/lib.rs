@@ -16,6 +16,7 @@ mod interrupt;
 mod load;
 mod plan;
 mod progress;
+pub mod reference;
 mod studio;
 pub mod sweep_table;
 

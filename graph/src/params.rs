@@ -80,7 +80,8 @@ impl Problem {
     }
 }
 
-fn resolve<'a>(root: &'a Value, schema: &'a Value) -> &'a Value {
+/// The schema `schema` stands for, following `$ref`s into `root`'s definitions.
+pub fn resolve<'a>(root: &'a Value, schema: &'a Value) -> &'a Value {
     let mut s = schema;
     for _ in 0..16 {
         match s.get("$ref").and_then(Value::as_str) {

@@ -15,6 +15,7 @@ pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
         Command::Validate { graph, set } => info::validate(&graph, &set),
         Command::Nodes { kind, json } => info::nodes(kind.as_deref(), json),
         Command::Schema => info::schema(),
+        Command::Docs { out } => crate::reference::write(&out),
         Command::Dot { graph, report } => info::dot(&graph, report.as_deref()),
         Command::Watch {
             run,
