@@ -215,7 +215,7 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         .node(PROBE)
         .map(|n| n.metrics.clone())
         .unwrap_or_default();
-    let mut scene = Scene::from_metrics(&metrics);
+    let mut scene = Scene::from_metrics(&metrics).map_err(|e| invalid(e.to_string()))?;
     for (i, src) in plan::texture_sources(&file, &args.render)
         .iter()
         .enumerate()

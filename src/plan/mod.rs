@@ -110,10 +110,14 @@ pub fn texture_sources(file: &GraphFile, render: &str) -> Vec<String> {
 }
 
 impl Scene {
-    pub fn from_metrics(m: &BTreeMap<String, f64>) -> Scene {
+    /// The scene a probe measured. `visible_fraction` decides whether anything is seen at all
+    /// (none seen plans the cheapest model), so a probe that did not report it, or reported a
+    /// non-finite value, is an error: read as 0 it would plan the cheapest model for any view.
+    pub fn from_metrics(m: &BTreeMap<String, f64>) -> Result<Scene, PlanError> {
         let g = |k: &str| m.get(k).copied().filter(|v| v.is_finite());
-        Scene {
-            visible_fraction: g("visible_fraction").unwrap_or(0.0),
+        Ok(Scene {
+            visible_fraction: g("visible_fraction")
+                .ok_or(PlanError::MissingMetric("visible_fraction"))?,
             camera_inside: g("camera_inside").is_some_and(|v| v > 0.5),
             backfacing_fraction: g("backfacing_fraction"),
             pixel_footprint_mm: g("pixel_footprint_mm"),
@@ -128,7 +132,7 @@ impl Scene {
             mfp_min_mm: g("mfp_min_mm"),
             mfp_pixels: g("mfp_pixels"),
             textures: BTreeMap::new(),
-        }
+        })
     }
 
     pub fn to_json(&self) -> Value {
@@ -229,6 +233,8 @@ pub enum PlanError {
     Ppd(f64),
     #[error("{0}")]
     Calibration(String),
+    #[error("the view's probe (scene.footprint) reported no finite `{0}`: cannot plan from an unknown view")]
+    MissingMetric(&'static str),
 }
 
 /// The chain a BTF reaches the renderer through.
@@ -1315,6 +1321,24 @@ mod tests {
             silhouette_fraction: Some(0.1),
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn a_probe_without_visible_fraction_is_an_error_not_an_empty_view() {
+        // Read as 0, a missing fraction planned the cheapest model for any view (issue 39).
+        let mut m = BTreeMap::new();
+        m.insert("texels_per_pixel".to_string(), 2.0);
+        assert_eq!(
+            Scene::from_metrics(&m),
+            Err(PlanError::MissingMetric("visible_fraction"))
+        );
+        m.insert("visible_fraction".to_string(), f64::NAN);
+        assert!(Scene::from_metrics(&m).is_err());
+        m.insert("visible_fraction".to_string(), 0.25);
+        let s = Scene::from_metrics(&m).unwrap();
+        assert_eq!((s.visible_fraction, s.texels_per_pixel), (0.25, Some(2.0)));
+        // The other metrics stay unknown, not 0.
+        assert_eq!(s.shell_pixels, None);
     }
 
     fn run(s: &Scene, b: f64) -> Plan {
