@@ -90,6 +90,7 @@ fn run_truth_graph(s: &Scratch, name: &str, sets: &[&str], outputs: &[&str]) -> 
 }
 
 #[test]
+#[ignore = "slow: volumetric path-traced truths at 1024 samples"]
 fn translucent_renders_against_the_volumetric_truth() {
     let s = Scratch::new();
     let ours = run_truth_graph(&s, "ours", &[], &[]);
@@ -184,6 +185,7 @@ fn translucent_renders_against_the_volumetric_truth() {
 /// configuration and no warning, its dimmer half too bright (+20%): the thickness is the
 /// cause of the failure, not the material's colour.
 #[test]
+#[ignore = "slow: volumetric path-traced truths of five materials"]
 fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
     let s = Scratch::new();
     let run = |name: &str, preset: &str, mm: &str, geometry: &str| {
@@ -288,6 +290,7 @@ fn the_configuration_holds_on_thick_materials_and_warns_on_thin_ones() {
 /// mean free path under each sample (`sources: point`) instead of the beam's, marble's unlit
 /// front comes out far too bright and skin1's error is half as large again.
 #[test]
+#[ignore = "slow: volumetric path-traced truths at 2048 samples"]
 fn a_back_lit_ball_meets_the_bounds_with_the_beams_sources() {
     let s = Scratch::new();
     let outputs = [

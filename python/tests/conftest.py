@@ -10,6 +10,10 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 
 
+def pytest_configure(config):
+    config.addinivalue_line("markers", "slow: the slow tier, run by `scripts/test --all` (CI)")
+
+
 @pytest.fixture(scope="session")
 def repo() -> Path:
     return REPO

@@ -325,6 +325,7 @@ def test_the_btf_browser_shows_the_chosen_direction_pair(studio_of, browser, tmp
     shot(browser, "studio-btf-browser.png")
 
 
+@pytest.mark.slow
 @needs_browser
 def test_acceptance_mdf_render_rank_change_reruns_only_what_it_affects(studio_of, browser):
     s = studio_of(ROOT / "graphs" / "mdf_render.json")

@@ -435,6 +435,7 @@ mod tests {
     }
 
     #[test]
+    #[ignore = "slow: Monte Carlo profiles of every Jensen material, 2 min"]
     fn every_model_against_monte_carlo_for_the_jensen_materials() {
         use crate::sss::compare::compare;
         let all = [

@@ -364,6 +364,7 @@ fn brdf_mode_is_the_total_reflectance_with_fresnel_in_and_out() {
 }
 
 #[test]
+#[ignore = "slow: traced bounces on two meshes, 38 s"]
 fn bounces_leave_a_convex_object_alone_and_light_a_concave_one() {
     // From a sphere no ray leaving the surface meets it again, so the bounces add nothing but
     // what rays grazing its facets find (measured 2e-4 of the image); a torus's inner sides
