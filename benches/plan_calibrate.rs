@@ -20,7 +20,7 @@
 //! Each FLIP is measured at 67 pixels per degree (FLIP's default) and at 30 and 120.
 //! Each candidate's render time is recorded too: the node's seconds, and for `render.mesh` a
 //! frame's milliseconds (what the planner's time curves use where present). Writes `calibration.json` (what
-//! `src/plan_calibration.json` holds) to the output folder.
+//! `plan/plan_calibration.json` holds) to the output folder.
 //!
 //! `cargo bench --bench plan_calibrate -- [--out DIR] [--width W]`
 

@@ -14,7 +14,6 @@ mod env;
 mod exit;
 mod interrupt;
 mod load;
-mod plan;
 mod progress;
 pub mod reference;
 mod studio;

@@ -175,6 +175,23 @@ fn every_command_the_guide_shows_names_a_subcommand_and_graphs_that_validate() {
                     }
                 }
             }
+            // The nodes it names (`--render ID`, `--output ID.PORT`) are in that graph.
+            let text = std::fs::read_to_string(root().join(graph)).unwrap();
+            let nodes = serde_json::from_str::<serde_json::Value>(&text).unwrap()["nodes"].clone();
+            for (i, w) in words.iter().enumerate() {
+                if *w == "--render" || *w == "--output" {
+                    let id = words
+                        .get(i + 1)
+                        .and_then(|v| v.split('.').next())
+                        .unwrap_or("");
+                    if nodes.get(id).is_none() {
+                        problems.push(format!(
+                            "{}: `mesoflow {cmd}`: {graph} has no node `{id}`",
+                            page.display()
+                        ));
+                    }
+                }
+            }
             let argv: Vec<&str> = args.iter().map(String::as_str).collect();
             let r = mesoflow(&argv, s.dir.path());
             checked += 1;

@@ -5,6 +5,7 @@
 mod cli;
 mod convert;
 mod observe;
+mod plan;
 mod pynode;
 mod session;
 mod sweep;
@@ -18,6 +19,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(session::validate, m)?)?;
     m.add_function(wrap_pyfunction!(session::register_node, m)?)?;
     m.add_function(wrap_pyfunction!(session::run, m)?)?;
+    m.add_function(wrap_pyfunction!(plan::plan, m)?)?;
     m.add_function(wrap_pyfunction!(sweep::write_sweep, m)?)?;
     m.add_function(wrap_pyfunction!(cli::cli, m)?)?;
     m.add_class::<convert::ArrayBuffer>()?;

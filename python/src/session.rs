@@ -59,7 +59,7 @@ fn registry(s: &mut State) -> Arc<Registry> {
     r
 }
 
-fn engine(cache_dir: Option<&str>) -> Arc<Engine> {
+pub(crate) fn engine(cache_dir: Option<&str>) -> Arc<Engine> {
     let mut s = state();
     let name = cache_dir.unwrap_or("").to_string();
     let generation = s.generation;
@@ -196,7 +196,7 @@ pub fn register_node(
     Ok(())
 }
 
-fn device_mode(device: &str) -> PyResult<DeviceMode> {
+pub(crate) fn device_mode(device: &str) -> PyResult<DeviceMode> {
     match device {
         "auto" => Ok(DeviceMode::Auto),
         "cpu" => Ok(DeviceMode::Cpu),

@@ -23,12 +23,13 @@ from ._catalog import describe, kinds, signature  # noqa: E402
 from ._errors import GraphError, MesoflowError, NodeError  # noqa: E402
 from ._graph import Graph, Node, Output, Result, load  # noqa: E402
 from ._node import node  # noqa: E402
+from ._plan import Decision, Plan, plan  # noqa: E402
 from ._sweep import sweep  # noqa: E402
 
 
 def cli(*args: str) -> int:
     """Runs the command line in this process: ``mesoflow.cli("plan", "graphs/mdf_render.json",
-    "--render", "render", "--budget", "flip=0.05")`` does what ``mesoflow plan …`` does, and
+    "--render", "torus_mdf", "--budget", "flip=0.05")`` does what ``mesoflow plan …`` does, and
     returns its exit code (0 ok, 1 run failed, 2 invalid, 130 cancelled). Its output goes to the
     process's stdout and stderr (in Jupyter, the kernel's console). Kinds defined with
     :func:`node` are not seen by it, as they are not by the ``mesoflow`` binary."""
@@ -37,12 +38,14 @@ def cli(*args: str) -> int:
     return _cli([str(a) for a in args])
 
 __all__ = [
+    "Decision",
     "Graph",
     "GraphError",
     "MesoflowError",
     "Node",
     "NodeError",
     "Output",
+    "Plan",
     "Result",
     "__version__",
     "cli",
@@ -50,6 +53,7 @@ __all__ = [
     "kinds",
     "load",
     "node",
+    "plan",
     "signature",
     "sweep",
 ]

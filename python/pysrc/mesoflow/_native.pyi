@@ -54,6 +54,22 @@ def run(
 ) -> Tuple[str, Dict[str, Any]]:
     """Runs a graph file's text; returns the report (JSON text) and the values by "node.port"."""
 
+def plan(
+    text: str,
+    name: str,
+    base_dir: str,
+    render: str,
+    budget: float,
+    sets: Sequence[str],
+    ppd: Optional[float] = None,
+    split: str = "joint",
+    device: str = "auto",
+    cache_dir: Optional[str] = None,
+    use_cache: bool = True,
+) -> Tuple[str, str]:
+    """Plans a render node of a graph file's text; returns the plan document and the planned
+    graph, both as JSON text."""
+
 def write_sweep(
     out_dir: str,
     varies: Sequence[Tuple[str, str]],

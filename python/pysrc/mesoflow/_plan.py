@@ -1,0 +1,114 @@
+"""``mesoflow.plan``: the planner on a graph, from Python, as ``mesoflow plan`` does it."""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Dict, List, Mapping, Optional, Union
+
+from . import _native
+from ._errors import GraphError
+from ._graph import Graph, load
+
+PathLike = Union[str, Path]
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One stage's choice: ``stage`` (``btf``, ``mdf``, ``sss``, ``shadows``, ``synthesis``…),
+    ``choice`` (what was chosen, as ``plan.json`` holds it), ``reason``, and the error and cost
+    the measured model predicts (``None`` where it has nothing to say: unknown, never 0)."""
+
+    stage: str
+    choice: Any
+    reason: str
+    predicted_error: Optional[float]
+    predicted_cost: Optional[Dict[str, Any]]
+
+
+class Plan:
+    """A planned view: :attr:`graph` (the graph with the decisions applied, ready to
+    :meth:`Graph.run`), :attr:`decisions`, :attr:`predicted_error` (the stages' sum, ``None``
+    when one is unknown), :attr:`scene` (what the probe measured), :attr:`budget`, :attr:`ppd`,
+    and :attr:`doc`, the whole ``plan.json`` document."""
+
+    def __init__(self, doc: Dict[str, Any], graph: Graph) -> None:
+        self.doc = doc
+        self.graph = graph
+        self.decisions: List[Decision] = [
+            Decision(
+                d["stage"],
+                d["choice"],
+                d["reason"],
+                d.get("predicted_error"),
+                d.get("predicted_cost"),
+            )
+            for d in doc["decisions"]
+        ]
+        self.predicted_error: Optional[float] = doc.get("predicted_error")
+        self.scene: Dict[str, Any] = doc["scene"]
+        self.budget: float = doc["budget"]["flip"]
+        self.ppd: float = doc["budget"]["ppd"]
+
+    def save(self, path: PathLike) -> Path:
+        """Writes the planned graph to ``path`` and ``plan.json`` beside it, as ``mesoflow plan
+        -o path`` does."""
+        path = self.graph.save(path)
+        doc = dict(self.doc, planned=str(path))
+        (path.parent / "plan.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        return path
+
+    def __repr__(self) -> str:
+        e = "unknown" if self.predicted_error is None else f"{self.predicted_error:.4f}"
+        stages = ", ".join(f"{d.stage}: {json.dumps(d.choice)}" for d in self.decisions)
+        return f"<mesoflow plan at FLIP {self.budget} (predicted {e}): {stages}>"
+
+
+def plan(
+    graph: Union[Graph, PathLike],
+    render: str,
+    budget: float = 0.05,
+    *,
+    ppd: Optional[float] = None,
+    split: str = "joint",
+    device: str = "auto",
+    cache_dir: Optional[PathLike] = None,
+    use_cache: bool = True,
+    set: Optional[Mapping[str, Any]] = None,
+) -> Plan:
+    """Plans node ``render`` of ``graph`` (a :class:`Graph` or a graph file's path) for a FLIP
+    ``budget`` (mean FLIP over the object's pixels) at ``ppd`` pixels per degree (FLIP's default
+    67 when ``None``): measures the view with the render's own camera and data on the engine and
+    cache that :meth:`Graph.run` uses, then picks each stage's cheapest model predicted within
+    its share. Raises :class:`GraphError` for an invalid graph or render node, ``ValueError`` for
+    a plan that cannot be made (camera inside the mesh, a bad budget), ``RuntimeError`` when the
+    view cannot be measured."""
+    g = graph if isinstance(graph, Graph) else load(graph)
+    sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
+    errors = _native.validate(g.to_json(), g.name)
+    if errors:
+        raise GraphError(errors)
+    if use_cache:
+        import os
+
+        cache = cache_dir if cache_dir is not None else os.environ.get("MESOFLOW_CACHE")
+        cache = str(cache) if cache else str(g.base_dir / ".mesoflow" / "cache")
+    else:
+        cache = None
+    doc_text, planned_text = _native.plan(
+        g.to_json(),
+        g.name,
+        str(g.base_dir),
+        render,
+        float(budget),
+        sets,
+        ppd=ppd,
+        split=split,
+        device=device,
+        cache_dir=cache,
+        use_cache=use_cache,
+    )
+    d = json.loads(planned_text)
+    planned = Graph(d.get("description", ""), base_dir=g.base_dir, name=g.name)
+    planned._nodes = d.get("nodes", {})
+    planned._extra = {k: v for k, v in d.items() if k not in ("mesoflow", "description", "nodes")}
+    return Plan(json.loads(doc_text), planned)

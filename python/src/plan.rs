@@ -1,0 +1,86 @@
+//! `mesoflow.plan(graph, render, budget=…)`: the planner library on a graph from Python, on the
+//! same engine and cache as `Graph.run`. Returns the plan document (`plan.json`'s fields) and
+//! the planned graph's text; the Python layer makes them a `Plan` object.
+
+use crate::session::{device_mode, engine};
+use mesoflow_graph::{check, parse_override, GraphFile};
+use mesoflow_plan::{plan_view, Budget, PlanError, Split};
+use mesoflow_runtime::RunOptions;
+use pyo3::exceptions::{PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// Plans node `render` of the graph `text` for a FLIP `budget` at `ppd` pixels per degree
+/// (FLIP's default 67 when `None`). Returns `(plan_json, planned_graph_json)`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (text, name, base_dir, render, budget, sets, ppd=None, split="joint", device="auto", cache_dir=None, use_cache=true))]
+pub fn plan(
+    py: Python<'_>,
+    text: &str,
+    name: &str,
+    base_dir: PathBuf,
+    render: &str,
+    budget: f64,
+    sets: Vec<String>,
+    ppd: Option<f64>,
+    split: &str,
+    device: &str,
+    cache_dir: Option<String>,
+    use_cache: bool,
+) -> PyResult<(String, String)> {
+    let mut file = GraphFile::parse(text).map_err(|e| {
+        PyValueError::new_err(
+            e.iter()
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join("\n"),
+        )
+    })?;
+    for s in &sets {
+        let o = parse_override(s).map_err(|e| PyValueError::new_err(format!("set {e}")))?;
+        file.apply(&o).map_err(PyValueError::new_err)?;
+    }
+    let split = match split {
+        "joint" => Split::Joint,
+        "equal" => Split::Equal,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "split={other:?}: expected \"joint\" or \"equal\""
+            )))
+        }
+    };
+    let budget = Budget {
+        flip: budget,
+        ppd: ppd.unwrap_or(mesoflow_nodes::image::flip::DEFAULT_PPD),
+    };
+    let engine = engine(cache_dir.as_deref());
+    check(name, &file, engine.registry())
+        .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
+    let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
+    opts.device = device_mode(device)?;
+    opts.require_gpu = std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    opts.use_cache = use_cache;
+    let cancel = Arc::new(AtomicBool::new(false));
+    opts.cancel = cancel.clone();
+    let (name, render) = (name.to_string(), render.to_string());
+    let worker = engine.clone();
+    let (result, interrupted) = crate::wait::run_interruptibly(
+        py,
+        "the plan",
+        move || plan_view(&worker, &name, &file, &render, budget, split, opts),
+        || cancel.store(true, Ordering::Relaxed),
+    )?;
+    if let Some(e) = interrupted {
+        return Err(e);
+    }
+    let planned = result.map_err(|e| match e {
+        PlanError::Probe(_) => PyRuntimeError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    })?;
+    let doc = serde_json::to_string(&planned.to_json())
+        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok((doc, planned.plan.file.to_json()))
+}

@@ -1,0 +1,43 @@
+"""`mesoflow.plan` from Python: the same plan as `mesoflow plan` on the command line (the
+planner is one library under both), as objects."""
+
+import json
+import subprocess
+
+import pytest
+
+import mesoflow
+
+
+def test_a_plan_from_python_is_the_command_line_s(repo, cli, tmp_path):
+    graph = repo / "graphs" / "plan_verify.json"
+    sets = ["btf_view.camera.eye=[0.0,4.0,6.75]"]
+    out = tmp_path / "cli" / "planned.json"
+    subprocess.run(
+        [str(cli), "plan", str(graph), "--render", "btf_view", "--budget", "flip=0.1",
+         "--set", sets[0], "-o", str(out), "--quiet", "--cache-dir", str(tmp_path / "cli-cache")],
+        check=True,
+    )
+    cli_plan = json.loads((out.parent / "plan.json").read_text())
+    cli_graph = json.loads(out.read_text())
+
+    p = mesoflow.plan(graph, "btf_view", budget=0.1, set={"btf_view.camera.eye": [0.0, 4.0, 6.75]},
+                      cache_dir=tmp_path / "py-cache")
+    assert isinstance(p, mesoflow.Plan)
+    assert [d.stage for d in p.decisions] == [d["stage"] for d in cli_plan["decisions"]]
+    assert [d.choice for d in p.decisions] == [d["choice"] for d in cli_plan["decisions"]]
+    assert p.predicted_error == cli_plan.get("predicted_error")
+    assert p.scene == cli_plan["scene"] and p.budget == 0.1
+    # The planned graph is the command line's, less the description naming the budget.
+    assert p.graph.to_dict()["nodes"] == cli_graph["nodes"]
+    # It runs as any graph does, and saves with its plan.json beside it.
+    saved = p.save(tmp_path / "py" / "planned.json")
+    assert json.loads((saved.parent / "plan.json").read_text())["decisions"] == p.doc["decisions"]
+
+
+def test_an_unknown_render_node_and_a_bad_budget_are_errors(repo):
+    graph = repo / "graphs" / "plan_verify.json"
+    with pytest.raises(ValueError, match="no node `btf_veiw`"):
+        mesoflow.plan(graph, "btf_veiw", budget=0.1)
+    with pytest.raises(ValueError, match="budget"):
+        mesoflow.plan(graph, "btf_view", budget=-1.0)
