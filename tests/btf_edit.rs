@@ -1,9 +1,7 @@
 //! From a BTF to editable geometry (issue 17), held from the command line on the saved graphs:
 //! height from noisy normals, weighted and not, against the tile the normals came from.
 
-mod common;
-
-use common::{mesoflow, report, Scratch};
+use crate::common::{mesoflow, report, Scratch};
 use serde_json::Value;
 use std::path::Path;
 

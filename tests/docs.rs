@@ -3,8 +3,7 @@
 //! leads to a file, and every `mesoflow` command the guide shows names a real subcommand and
 //! graph files that validate with the `--set`s it gives.
 
-mod common;
-use common::*;
+use crate::common::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

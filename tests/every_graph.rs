@@ -2,8 +2,7 @@
 //! output folder (every file must be written again, every node served from the cache or not
 //! needed), and with `--verify-cache` (every hit recomputed and equal to its cache entry).
 
-mod common;
-use common::*;
+use crate::common::*;
 use std::collections::BTreeSet;
 use std::path::Path;
 

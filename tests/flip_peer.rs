@@ -5,9 +5,7 @@
 //! `MESOFLOW_PEER_PYTHON`, else `target/peer-venv/bin/python` (what `.ci/run` makes). Without one
 //! the test says so and passes, unless `MESOFLOW_REQUIRE_PEERS=1` (set by CI), where it fails.
 
-mod common;
-
-use common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
+use crate::common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
 use mesoflow_nodes::image::flip::{evaluate, Mode, Params};
 use mesoflow_nodes::types::{srgb_to_linear, Image};
 use std::path::{Path, PathBuf};

@@ -2,8 +2,7 @@
 //! run` with a time limit and must end with its expected exit code and message, never a panic, an
 //! abort or a hang. The counts are printed for BENCHMARKS.md.
 
-mod common;
-use common::*;
+use crate::common::*;
 use serde_json::Value;
 use std::io::Read;
 use std::path::Path;
@@ -13,7 +12,7 @@ use std::time::{Duration, Instant};
 /// Longer than any case needs (they are refused before work, or are tiny): past it, a hang.
 const LIMIT: Duration = Duration::from_secs(60);
 
-use common::npy_bytes as npy;
+use crate::common::npy_bytes as npy;
 
 fn fixtures(dir: &Path) {
     let f32s = |n: usize| -> Vec<u8> { (0..n).flat_map(|i| (i as f32).to_le_bytes()).collect() };

@@ -4,9 +4,7 @@
 //! translucency becomes a BRDF when scattering is sub-pixel; a camera inside the object and bad
 //! arguments are clear errors.
 
-mod common;
-
-use common::{mesoflow, metric, report, Run, Scratch};
+use crate::common::{mesoflow, metric, report, Run, Scratch};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 

@@ -7,9 +7,7 @@
 //! The peer runs from a Python with `mitsuba` and `numpy` (see `common::peer_python`; `.ci/run`
 //! installs it).
 
-mod common;
-
-use common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
+use crate::common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
 use serde_json::json;
 use std::path::Path;
 

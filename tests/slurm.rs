@@ -2,8 +2,7 @@
 //! one CPU each), which `.ci/run` starts and names in `SLURM_CONF`. Without it these tests say
 //! so and pass, except where `MESOFLOW_REQUIRE_SLURM=1` (CI), where they fail.
 
-mod common;
-use common::*;
+use crate::common::*;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -1,8 +1,7 @@
 //! `mesoflow validate` on broken graphs: each static-check error exits with code 2 and names the
 //! file, the node and the parameter or port.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 fn validate(text: &str) -> Run {
     let s = Scratch::new();

@@ -4,9 +4,7 @@
 //! run, saving in place, the file watch, composing nodes, previews and sweeps.
 //! The browser tests of the page itself are in tests/studio/ (Python, Chromium).
 
-mod common;
-
-use common::{bin, mesoflow, Scratch};
+use crate::common::{bin, mesoflow, Scratch};
 use serde_json::{json, Value};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -386,8 +384,8 @@ fn a_change_reruns_only_its_dependants_and_streams_their_status() {
         assert_eq!(status, expected, "{id}");
     }
     // The report on disk says the same.
-    let report = common::report(&s.scratch.path("out"));
-    let statuses = common::statuses(&report);
+    let report = crate::common::report(&s.scratch.path("out"));
+    let statuses = crate::common::statuses(&report);
     assert_eq!(statuses["height_png"], "computed");
     assert!(statuses
         .iter()
@@ -529,7 +527,7 @@ fn concurrent_clients_each_see_every_run_and_a_newer_change_cancels_the_running_
         (json!(10.0), json!(6))
     );
     // The final report is the last change's, complete.
-    let report = common::report(&s.scratch.path("out"));
+    let report = crate::common::report(&s.scratch.path("out"));
     assert_eq!(report["ok"], true);
     assert_eq!(report["cancelled"], false);
 }

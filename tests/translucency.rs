@@ -12,9 +12,7 @@
 //! what is reached, with a margin, no looser than the issue's, so that a change that loses
 //! accuracy fails, and the gain over Jensen & Buhler's render is held too.
 
-mod common;
-
-use common::{mesoflow, metric, read_npy, report, Scratch};
+use crate::common::{mesoflow, metric, read_npy, report, Scratch};
 use std::path::{Path, PathBuf};
 
 struct Measured {

@@ -6,11 +6,9 @@
 //! 0.97), and a margin over what `cargo bench --bench truth` measured where the issue sets none,
 //! so that a change that loses accuracy fails here.
 
-mod common;
-
 use mesoflow_testkit::truth_scenes;
 
-use common::{mesoflow, read_npy, report, Scratch};
+use crate::common::{mesoflow, read_npy, report, Scratch};
 use serde_json::Value;
 use std::path::Path;
 

@@ -3,9 +3,7 @@
 //! for bit, the expanded BTF as the peer expands it, bad files refused with the file named, and
 //! mesoflow's DFMF writer read back by the peer.
 
-mod common;
-
-use common::{mesoflow, peer_python, read_npy, Scratch};
+use crate::common::{mesoflow, peer_python, read_npy, Scratch};
 use half::f16;
 use mesoflow_nodes::btf::reconstruct::reconstruct;
 use mesoflow_nodes::btf::ubo2014::{self, Payload};
@@ -34,7 +32,7 @@ fn same_bits(name: &str, ours: &[f32], theirs: &[f32]) {
 
 /// Writes `graph` as NAME.json in the scratch folder and runs it uncached into out_NAME/ (the
 /// files it reads are relative to the scratch folder): the run and its output folder.
-fn run_graph(s: &Scratch, name: &str, graph: &str) -> (common::Run, PathBuf) {
+fn run_graph(s: &Scratch, name: &str, graph: &str) -> (crate::common::Run, PathBuf) {
     let g = s.write(&format!("{name}.json"), graph);
     let out = s.path(&format!("out_{name}"));
     let args = [

@@ -1,4 +1,5 @@
-//! Helpers for the command-line tests: a scratch folder, graph files, running the binary.
+//! Helpers for the command-line tests: a scratch folder, graph files, running the binary, the
+//! small pipeline the cache and cancellation tests share.
 #![allow(dead_code)]
 
 use serde_json::Value;
@@ -183,4 +184,102 @@ pub fn read_npy(path: &Path) -> (Vec<usize>, Vec<f32>) {
     let npy = npyz::NpyFile::new(&bytes[..]).expect("an .npy file");
     let shape: Vec<usize> = npy.shape().iter().map(|d| *d as usize).collect();
     (shape, npy.into_vec().expect("f32 values"))
+}
+
+/// A reader, two derived nodes and writers: enough to see exactly what a change touches.
+pub fn pipeline(s: &Scratch) -> std::path::PathBuf {
+    // A 2-D float32 NPY file written by hand (numpy's v1.0 format) so the test needs no numpy.
+    write_npy(&s.path("data/tile.npy"), 8, 8, |x, y| {
+        ((x * 3 + y * 5) % 7) as f32
+    });
+    s.write(
+        "data/g.json",
+        r#"{
+          "mesoflow": 1,
+          "nodes": {
+            "tile": {"kind": "heightfield.read", "params": {"path": "tile.npy", "depth": 2.0}},
+            "surface": {"kind": "heightfield.procedural", "params": {"size": 16, "pattern": "bumps", "count": 2}},
+            "n_tile": {"kind": "heightfield.normals", "inputs": {"height": "tile.height"}},
+            "n_surface": {"kind": "heightfield.normals", "inputs": {"height": "surface.height"}},
+            "w_tile": {"kind": "image.write", "inputs": {"image": "n_tile.preview"}, "params": {"path": "tile.png"}},
+            "w_surface": {"kind": "npy.write", "inputs": {"value": "n_surface.normals"}, "params": {"path": "surface.npy"}}
+          }
+        }"#,
+    )
+}
+
+pub fn write_npy(path: &Path, w: usize, h: usize, f: impl Fn(usize, usize) -> f32) {
+    let payload: Vec<u8> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .flat_map(|(x, y)| f(x, y).to_le_bytes())
+        .collect();
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(path, npy_bytes("<f4", false, &[h, w], &payload)).unwrap();
+}
+
+/// `mesoflow run GRAPH --quiet --no-cache --out-dir OUT` in the background, for Ctrl-C tests.
+pub fn spawn_run(graph: &Path, out: &Path, cwd: &Path) -> std::process::Child {
+    bin()
+        .args([
+            "run",
+            graph.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+        ])
+        .arg(out)
+        .current_dir(cwd)
+        .spawn()
+        .unwrap()
+}
+
+/// Ctrl-C, as a terminal sends it.
+pub fn interrupt(child: &std::process::Child) {
+    let ok = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+}
+
+pub fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> (Run, serde_json::Value) {
+    let out_dir = s.path(out);
+    let mut args = vec![
+        "run",
+        graph.to_str().unwrap(),
+        "--quiet",
+        "--out-dir",
+        out_dir.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let r = mesoflow(&args, s.dir.path());
+    let rep = report(&out_dir);
+    (r, rep)
+}
+
+pub fn ids<'a>(st: &'a std::collections::BTreeMap<String, String>, status: &str) -> Vec<&'a str> {
+    st.iter()
+        .filter(|(_, v)| *v == status)
+        .map(|(k, _)| k.as_str())
+        .collect()
+}
+
+/// `mesoflow run GRAPH --quiet --no-cache --out-dir OUT` with `--set` pairs; the report.
+pub fn run_graph(root: &Path, graph: &str, out: &Path, sets: &[String]) -> serde_json::Value {
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        root.join(graph).display().to_string(),
+        "--quiet".into(),
+        "--no-cache".into(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    for kv in sets {
+        args.push("--set".into());
+        args.push(kv.clone());
+    }
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let r = mesoflow(&args, root);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    report(out)
 }

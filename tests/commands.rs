@@ -1,0 +1,374 @@
+//! The other commands and options end to end: `sweep`, `watch`, `--output`, listing into a
+//! closed pipe, timings as sweep columns, hostile inputs, the quickstart's files.
+
+use crate::common::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+#[test]
+fn sweep_writes_csv_and_charts_and_computes_upstream_once() {
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "surface": {"kind": "heightfield.procedural", "params": {"size": 32, "pattern": "noise"}},
+            "normals": {"kind": "heightfield.normals", "inputs": {"height": "surface.height"}},
+            "save": {"kind": "image.write", "inputs": {"image": "normals.preview"}, "params": {"path": "n.png"}}
+        }}"#,
+    );
+    let out = s.path("sweep");
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=0.5,1,2",
+            "--measure",
+            "normals.rms_slope",
+            "--quiet",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let lines: Vec<&str> = csv.lines().collect();
+    assert_eq!(
+        lines[0],
+        "normals.scale,normals.rms_slope,normals.seconds,run_seconds,ok"
+    );
+    assert_eq!(lines.len(), 4);
+    // rms slope is linear in the scale (∇(s·h) = s·∇h): compare with the first row exactly.
+    let slope = |l: &str| l.split(',').nth(1).unwrap().parse::<f64>().unwrap();
+    let base = slope(lines[2]);
+    assert!(
+        (slope(lines[1]) - 0.5 * base).abs() < 1e-6 * base
+            && (slope(lines[3]) - 2.0 * base).abs() < 1e-6 * base,
+        "{csv}"
+    );
+    for f in [
+        "normals.rms_slope_vs_normals.scale",
+        "normals.rms_slope_vs_seconds",
+    ] {
+        for ext in ["png", "svg"] {
+            let p = out.join(format!("{f}.{ext}"));
+            assert!(
+                std::fs::metadata(&p)
+                    .map(|m| m.len() > 1000)
+                    .unwrap_or(false),
+                "{} missing or empty",
+                p.display()
+            );
+        }
+    }
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=1",
+            "--measure",
+            "normals.preview",
+            "--quiet",
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("a measure must be a scalar output"),
+        "{}",
+        r.stderr
+    );
+    let computed =
+        |i: usize| statuses(&report(&out.join(format!("runs/{i:03}"))))["surface"].clone();
+    assert_eq!(computed(0), "computed");
+    assert_eq!(computed(1), "memory");
+    assert_eq!(computed(2), "memory");
+}
+
+#[test]
+fn watch_reruns_only_what_a_change_touches() {
+    let s = Scratch::new();
+    let g = pipeline(&s);
+    let out = s.path("w");
+    let child = bin()
+        .args([
+            "watch",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--max-runs",
+            "2",
+            "--interval-ms",
+            "50",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ])
+        .current_dir(s.dir.path())
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !out.join("report.json").exists() {
+        assert!(start.elapsed() < Duration::from_secs(60));
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    write_npy(&s.path("data/tile.npy"), 8, 8, |x, _| x as f32);
+    let o = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{stdout}");
+    assert!(
+        stdout.contains("run 2: re-ran tile, n_tile, w_tile"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn output_prints_the_values_asked_for_and_suggests_near_names() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let out = s.path("o");
+    let go = |output: &str| {
+        mesoflow(
+            &[
+                "run",
+                g.to_str().unwrap(),
+                "--quiet",
+                "--no-cache",
+                "--set",
+                "surface.size=16",
+                "--output",
+                output,
+                "--out-dir",
+                out.to_str().unwrap(),
+            ],
+            root,
+        )
+    };
+    let r = go("normals.rms_slope");
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stdout.contains("normals.rms_slope = "), "{}", r.stdout);
+    let r = go("normals.rms_slop");
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("did you mean `rms_slope`"),
+        "{}",
+        r.stderr
+    );
+    let r = go("normal.rms_slope");
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("did you mean `normals`"), "{}", r.stderr);
+}
+
+#[test]
+fn listing_into_a_closed_pipe_ends_quietly() {
+    use std::io::Read;
+    use std::process::Stdio;
+    for cmd in ["schema", "nodes"] {
+        let mut child = bin()
+            .arg(cmd)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Read one byte, then close the pipe: the writer meets EPIPE.
+        let mut stdout = child.stdout.take().unwrap();
+        let mut one = [0u8; 1];
+        stdout.read_exact(&mut one).unwrap();
+        drop(stdout);
+        let out = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!err.contains("panicked"), "{cmd}: {err}");
+    }
+}
+
+#[test]
+fn a_measured_time_is_one_column_read_from_the_report() {
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "surface": {"kind": "heightfield.procedural", "params": {"size": 16, "pattern": "noise"}},
+            "normals": {"kind": "heightfield.normals", "inputs": {"height": "surface.height"}}
+        }}"#,
+    );
+    let out = s.path("sweep");
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=1,2",
+            "--measure",
+            "normals.rms_slope",
+            "--measure",
+            "normals.seconds",
+            "--device",
+            "cpu",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    // Each run's line shows its measures.
+    assert!(r.stdout.contains("normals.rms_slope="), "{}", r.stdout);
+    let csv = std::fs::read_to_string(out.join("sweep.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert_eq!(
+        header,
+        "normals.scale,normals.rms_slope,normals.seconds,run_seconds,ok"
+    );
+    for line in csv.lines().skip(1) {
+        let t: f64 = line.split(',').nth(2).unwrap().parse().unwrap();
+        assert!(t >= 0.0 && t.is_finite(), "{line}");
+    }
+    // A misspelt measure is refused with what there is.
+    let r = mesoflow(
+        &[
+            "sweep",
+            g.to_str().unwrap(),
+            "--vary",
+            "normals.scale=1",
+            "--measure",
+            "normals.secnds",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 2);
+    assert!(r.stderr.contains("did you mean `seconds`"), "{}", r.stderr);
+}
+
+#[test]
+fn hostile_inputs_get_clear_errors_not_panics_or_hangs() {
+    let s = Scratch::new();
+    let run = |name: &str, graph: &str, env: &[(&str, &str)]| {
+        let g = s.write(&format!("{name}.json"), graph);
+        let out = s.path(&format!("out_{name}"));
+        let mut c = bin();
+        c.args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--out-dir",
+        ])
+        .arg(&out)
+        .current_dir(s.dir.path());
+        for (k, v) in env {
+            c.env(k, v);
+        }
+        let started = Instant::now();
+        let r = Run::from(c.output().unwrap());
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "{name}: took too long"
+        );
+        assert!(!r.stderr.contains("panicked"), "{name}: {}", r.stderr);
+        r
+    };
+    // Writes stay inside the output folder: refused at validation, exit 2.
+    for (name, path) in [("abs", "/tmp/mesoflow_escape.png"), ("up", "../escape.png")] {
+        let r = run(
+            name,
+            &format!(
+                r#"{{"mesoflow": 1, "nodes": {{
+                  "s": {{"kind": "heightfield.procedural", "params": {{"size": 8}}}},
+                  "n": {{"kind": "heightfield.normals", "inputs": {{"height": "s.height"}}}},
+                  "w": {{"kind": "image.write", "inputs": {{"image": "n.preview"}}, "params": {{"path": "{path}"}}}}}}}}"#
+            ),
+            &[],
+        );
+        assert_eq!(r.code, 2, "{name}: {}", r.stderr);
+        assert!(
+            r.stderr.contains("node `w`: parameter `path`"),
+            "{}",
+            r.stderr
+        );
+    }
+    // Integers the parameter cannot hold: exit 2 naming the field.
+    for (name, param, value) in [
+        ("big", "size", "4294967296"),
+        ("negzero", "seed", "-0.0"),
+        ("huge", "seed", "18446744073709551616"),
+    ] {
+        let r = run(
+            name,
+            &format!(
+                r#"{{"mesoflow": 1, "nodes": {{"s": {{"kind": "heightfield.procedural", "params": {{"{param}": {value}}}}}}}}}"#
+            ),
+            &[],
+        );
+        assert_eq!(r.code, 2, "{name}: {}", r.stderr);
+        assert!(
+            r.stderr.contains(&format!("parameter `{param}`")),
+            "{name}: {}",
+            r.stderr
+        );
+    }
+    // A non-regular file as input: refused, not read forever.
+    let r = run(
+        "devzero",
+        r#"{"mesoflow": 1, "nodes": {"h": {"kind": "heightfield.read", "params": {"path": "/dev/zero"}}}}"#,
+        &[],
+    );
+    assert_eq!(r.code, 1, "{}", r.stderr);
+    let rep = report(&s.path("out_devzero"));
+    assert!(
+        rep["nodes"][0]["error"]
+            .as_str()
+            .unwrap()
+            .contains("not a regular file"),
+        "{rep}"
+    );
+    // A malformed memory budget is an error, not ignored.
+    let r = run(
+        "budget",
+        r#"{"mesoflow": 1, "nodes": {"s": {"kind": "heightfield.procedural", "params": {"size": 8}}}}"#,
+        &[("MESOFLOW_MEMORY_BUDGET_GB", "abc")],
+    );
+    assert_eq!(r.code, 2, "{}", r.stderr);
+    assert!(
+        r.stderr.contains("MESOFLOW_MEMORY_BUDGET_GB"),
+        "{}",
+        r.stderr
+    );
+    // An absurd thread count is capped, not spawned.
+    let r = run(
+        "threads",
+        r#"{"mesoflow": 1, "nodes": {"s": {"kind": "heightfield.procedural", "params": {"size": 8}}}}"#,
+        &[("RAYON_NUM_THREADS", "100000")],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(r.stderr.contains("using"), "{}", r.stderr);
+}
+
+#[test]
+fn quickstart_writes_png_and_exr() {
+    let s = Scratch::new();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = s.path("q");
+    let r = mesoflow(
+        &[
+            "run",
+            root.join("graphs/quickstart.json").to_str().unwrap(),
+            "--out-dir",
+            out.to_str().unwrap(),
+            "--no-cache",
+        ],
+        root,
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(
+        r.stdout.contains("normals") && r.stdout.contains("ok in"),
+        "summary table: {}",
+        r.stdout
+    );
+    for f in ["normals.png", "height.exr", "height.npy", "report.json"] {
+        assert!(out.join(f).is_file(), "{f}");
+    }
+}

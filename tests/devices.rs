@@ -1,0 +1,150 @@
+//! Where GPU nodes run: the CPU fallback unless a GPU is required, and a machine whose only
+//! adapter is software OpenGL.
+
+use crate::common::*;
+use std::path::Path;
+
+#[test]
+fn gpu_nodes_fall_back_to_the_cpu_unless_a_gpu_is_required() {
+    // WGPU_BACKEND=dx12 on Linux leaves wgpu without any adapter: the no-GPU machine, simulated.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let go = |out: &str, require: &str| {
+        let out = s.path(out);
+        let r = Run::from(
+            bin()
+                .args([
+                    "run",
+                    g.to_str().unwrap(),
+                    "--quiet",
+                    "--no-cache",
+                    "--output",
+                    "normals.rms_slope",
+                    "--out-dir",
+                    out.to_str().unwrap(),
+                ])
+                .env("WGPU_BACKEND", "dx12")
+                .env("MESOFLOW_REQUIRE_GPU", require)
+                .output()
+                .unwrap(),
+        );
+        (r, report(&out))
+    };
+    let (r, rep) = go("fallback", "0");
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let normals = rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "normals")
+        .unwrap()
+        .clone();
+    assert_eq!(normals["device"], "cpu");
+    let w = rep["warnings"].as_array().unwrap();
+    assert!(
+        w.iter().any(|w| w["node"] == "normals"
+            && w["message"].as_str().unwrap().contains("ran the CPU path")),
+        "{w:?}"
+    );
+
+    let (r, rep) = go("required", "1");
+    assert_eq!(r.code, 1);
+    let normals = rep["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "normals")
+        .unwrap()
+        .clone();
+    assert_eq!(normals["status"], "failed");
+    assert!(
+        normals["error"]
+            .as_str()
+            .unwrap()
+            .contains("MESOFLOW_REQUIRE_GPU=1"),
+        "{normals}"
+    );
+
+    // --device cpu is an explicit choice: no adapter needed, no warning.
+    let out = s.path("cpu");
+    let r = bin()
+        .args([
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--no-cache",
+            "--device",
+            "cpu",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ])
+        .env("WGPU_BACKEND", "dx12")
+        .env("MESOFLOW_REQUIRE_GPU", "1")
+        .output()
+        .unwrap();
+    assert!(r.status.success());
+    assert!(report(&out)["warnings"].as_array().unwrap().is_empty());
+}
+
+#[test]
+fn a_machine_whose_only_adapter_is_software_opengl_runs_the_gpu_graphs_on_the_cpu_path() {
+    // WGPU_BACKEND=gl: the machine without Mesa's Vulkan driver. `auto` must not pick llvmpipe
+    // through GL (no float render targets, slower than the CPU path): the CPU path, a warning.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let out = s.path("o");
+    let dirs = r#"{"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#;
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        root.join("graphs/mdf_render.json").display().to_string(),
+        "--quiet".into(),
+        "--no-cache".into(),
+        "--out-dir".into(),
+        out.display().to_string(),
+    ];
+    let mut sets: Vec<String> = vec![
+        "surface.size=16".into(),
+        format!("capture.views={dirs}"),
+        format!("capture.lights={dirs}"),
+        format!("mdf.views={dirs}"),
+    ];
+    for r in [
+        "sphere_plain",
+        "sphere_mdf",
+        "torus_plain",
+        "torus_mdf",
+        "torus_reference",
+    ] {
+        sets.push(format!("{r}.camera.resolution=[32,24]"));
+    }
+    for kv in sets {
+        args.push("--set".into());
+        args.push(kv);
+    }
+    let r = Run::from(
+        bin()
+            .args(&args)
+            .env("WGPU_BACKEND", "gl")
+            .env_remove("MESOFLOW_REQUIRE_GPU")
+            .output()
+            .unwrap(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out);
+    let devices = per_node(&rep, "device");
+    for id in ["mdf", "sphere_mdf", "torus_mdf"] {
+        assert_eq!(devices[id], "cpu", "{id}: {rep}");
+    }
+    let w = rep["warnings"].as_array().unwrap();
+    let why = |text: &str| {
+        w.iter()
+            .any(|w| w["node"] == "torus_mdf" && w["message"].as_str().unwrap().contains(text))
+    };
+    // CI installs Mesa's GL driver, so there the adapter exists and the reason is named.
+    if std::env::var("CI").is_ok() {
+        assert!(why("software OpenGL"), "{w:?}");
+    } else {
+        assert!(why("software OpenGL") || why("no GPU adapter"), "{w:?}");
+    }
+}
