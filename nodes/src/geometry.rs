@@ -56,3 +56,15 @@ pub fn bounding_sphere(mesh: &Mesh) -> (V3, f64) {
         .fold(0.0, f64::max);
     (c, r.max(1e-9))
 }
+
+/// Turns `d` by the polar angle with cosine `cos` and azimuth `phi`.
+pub(crate) fn rotate(d: [f64; 3], cos: f64, phi: f64) -> [f64; 3] {
+    let sin = (1.0 - cos * cos).max(0.0).sqrt();
+    let (t, s) = frame(d);
+    let (c, si) = (phi.cos() * sin, phi.sin() * sin);
+    [
+        c * t[0] + si * s[0] + cos * d[0],
+        c * t[1] + si * s[1] + cos * d[1],
+        c * t[2] + si * s[2] + cos * d[2],
+    ]
+}

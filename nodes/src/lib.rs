@@ -13,6 +13,7 @@ pub mod manifold;
 pub mod mdf;
 pub mod memory;
 pub mod mesh;
+pub mod optics;
 pub mod progress;
 pub mod qh;
 mod registry;

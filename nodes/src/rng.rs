@@ -36,3 +36,14 @@ mod tests {
         assert_ne!(hash(1, &[2, 3]), hash(1, &[3, 2]));
     }
 }
+
+/// SplitMix64 (Steele, Lea & Flood 2014) as a stream.
+pub(crate) struct Stream(pub(crate) u64);
+
+impl Stream {
+    pub(crate) fn unit(&mut self) -> f64 {
+        let v = mix(self.0);
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        unit(v)
+    }
+}

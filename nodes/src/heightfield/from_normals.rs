@@ -597,10 +597,10 @@ mod tests {
 
     #[test]
     fn exact_normals_of_a_smooth_tile_give_its_heights() {
-        // The issue's bound: within 0.01 texel RMS. The fourth-order edge slope leaves
-        // (11/720)·ω⁴ of a wave's height, ω = 3·2π/48 for the finest term here: 4e-4 × 1.5
-        // texels, so 0.01 holds with room. Fourier is exact for a band-limited tile up to the f32
-        // normals (1e-7 relative) and FFT rounding: 1e-4.
+        // The fourth-order edge slope leaves (11/720)·ω⁴ of a wave's height, ω = 3·2π/48 for
+        // the finest term here: 4e-4 × 1.5 texels. Measured: 3.1e-4 (periodic), 1.0e-3 (free),
+        // and for Fourier, exact for a band-limited tile up to the f32 normals (1e-7 relative)
+        // and FFT rounding, 4.6e-8. Bounds about 3–4× those (the issue asked 0.01).
         let (hf, n) = smooth(64, 48);
         let (_, ls) = solve(
             n.clone(),
@@ -627,9 +627,9 @@ mod tests {
         println!(
             "smooth tile: least squares {ls:.2e} (free {free:.2e}), Fourier {fc:.2e} texels RMS"
         );
-        assert!(ls < 0.01, "least squares, periodic: {ls}");
-        assert!(free < 0.01, "least squares, free: {free}");
-        assert!(fc < 1e-4, "Frankot–Chellappa: {fc}");
+        assert!(ls < 1e-3, "least squares, periodic: {ls}");
+        assert!(free < 3e-3, "least squares, free: {free}");
+        assert!(fc < 2e-7, "Frankot–Chellappa: {fc}");
     }
 
     #[test]

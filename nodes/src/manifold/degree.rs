@@ -201,8 +201,9 @@ mod tests {
 
     #[test]
     fn follows_the_true_degree_of_the_sample() {
-        // The issue's bound: Spearman ρ ≥ 0.95 between the recovered and the true degree, on
-        // the built-in sample through the whole chain (capture → Ward fit → kNN → degree).
+        // Spearman ρ between the recovered and the true degree, on the built-in sample through
+        // the whole chain (capture → Ward fit → kNN → degree): 0.9985 through the graph at this
+        // size; the bound 0.994 is within 4× of that distance from 1 (the issue asked 0.95).
         let s = generate(&SampleParams {
             size: 32,
             ..SampleParams::default()
@@ -219,7 +220,7 @@ mod tests {
         let truth: Vec<f64> = s.degree.data.iter().map(|v| *v as f64).collect();
         let rho = spearman(&omega, &truth);
         eprintln!("Spearman ρ(recovered, true degree) = {rho:.4}");
-        assert!(rho >= 0.95, "{rho}");
+        assert!(rho >= 0.994, "{rho}");
         assert!(omega.iter().all(|w| (0.0..=1.0).contains(w)));
     }
 

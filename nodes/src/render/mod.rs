@@ -1,7 +1,6 @@
 //! Rendering a BTF-mapped mesh, with mesostructure silhouettes from an MDF (thesis ch. 4).
 
 pub mod camera;
-pub mod dielectric;
 pub mod footprint;
 pub mod gpu_render;
 pub mod layers;

@@ -145,7 +145,7 @@ impl Node for Reference {
             return Err(NodeError::param("specular", "must be in [0, 1]"));
         }
         if let Some(a) = p.boundary_roughness {
-            if !(super::dielectric::MIN_ROUGHNESS..=1.0).contains(&a) {
+            if !(crate::optics::dielectric::MIN_ROUGHNESS..=1.0).contains(&a) {
                 return Err(NodeError::param(
                     "boundary_roughness",
                     "must be in [0.01, 1]: a narrower lobe makes next-event estimation through it noise",
@@ -351,7 +351,7 @@ fn translucent(
     for s in 0..p.samples as usize {
         let ray = camera_ray(camera, p, x, y, s);
         // The path's own stream, apart from the sub-pixel position's hash.
-        let mut rng = crate::sss::montecarlo::Stream(crate::rng::hash(
+        let mut rng = crate::rng::Stream(crate::rng::hash(
             p.seed ^ 0x9a7e_5eed,
             &[pixel_id, s as u64],
         ));

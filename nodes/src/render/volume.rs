@@ -21,12 +21,14 @@
 //! rays estimate the medium's transmittance by tracking with the smallest extinction, each
 //! channel weighted by the rest (≤ 1), so they stop as soon as the light is out of reach.
 
-use super::dielectric::Boundary;
 use super::light::Light;
 use super::reference::Tracer;
+use crate::geometry::rotate;
 use crate::geometry::{add, dot, mul, V3};
-use crate::sss::diffusion::henyey_greenstein;
-use crate::sss::montecarlo::{rotate, sample_hg, Stream};
+use crate::optics::dielectric::Boundary;
+use crate::optics::phase::henyey_greenstein;
+use crate::optics::phase::sample_hg;
+use crate::rng::Stream;
 use crate::types::ScatteringMaterial;
 use std::f64::consts::PI;
 
@@ -457,7 +459,7 @@ mod tests {
                 let mean = sums.iter().map(|s| s.0[k]).sum::<f64>() / n;
                 let sq = sums.iter().map(|s| s.1[k]).sum::<f64>() / n;
                 let se = ((sq - mean * mean) / (n - 1.0)).sqrt();
-                let h = crate::sss::chandrasekhar::h_function(omega);
+                let h = crate::optics::chandrasekhar::h_function(omega);
                 let want = 2.0 * omega / (4.0 * PI) * mu0 / (mu + mu0) * h(mu) * h(mu0);
                 // Five standard errors, plus 0.5% for the H function's grid and the cube's
                 // finite size.

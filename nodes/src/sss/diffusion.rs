@@ -4,7 +4,8 @@
 //! dipole integrated along the refracted beam, plus the exact single-scattering term). Lengths
 //! in mm, coefficients in mm⁻¹, one channel at a time.
 
-use super::fresnel;
+use crate::optics::fresnel;
+use crate::optics::phase::henyey_greenstein;
 use std::f64::consts::PI;
 
 /// Depth samples along the beam, as Habel et al. suggest for a tabulated profile.
@@ -121,12 +122,6 @@ impl Medium {
     pub fn pbd(&self, r: f64) -> f64 {
         self.pbd_multiple(r) + self.pbd_single(r)
     }
-}
-
-/// Henyey–Greenstein phase function of the cosine between propagation directions, sr⁻¹.
-pub fn henyey_greenstein(cos: f64, g: f64) -> f64 {
-    let denom = 1.0 + g * g - 2.0 * g * cos;
-    (1.0 - g * g) / (4.0 * PI * denom * denom.sqrt())
 }
 
 #[cfg(test)]

@@ -1,10 +1,8 @@
 //! Subsurface scattering (seed 004, thesis ch. 5): materials, diffusion profiles.
 
-pub mod chandrasekhar;
 pub mod compare;
 pub mod diffusion;
 pub mod dipole;
-pub mod fresnel;
 pub mod material;
 pub mod montecarlo;
 pub mod octree;

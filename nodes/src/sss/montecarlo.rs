@@ -8,9 +8,12 @@
 //! every photon contributes. Deterministic: photons run in chunks of `CHUNK`, chunk c draws from
 //! SplitMix64 seeded by hash(seed, channel, c), and chunk tallies are added in chunk order.
 
-use super::fresnel;
+use crate::geometry::rotate;
+use crate::optics::fresnel;
+use crate::optics::phase::sample_hg;
 use crate::progress::Counter;
 use crate::rng;
+use crate::rng::Stream;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -92,38 +95,6 @@ impl Tally {
         let mean = self.reflected / n;
         ((self.reflected_sq / n - mean * mean).max(0.0) / (n - 1.0)).sqrt()
     }
-}
-
-/// SplitMix64 (Steele, Lea & Flood 2014) as a stream.
-pub(crate) struct Stream(pub(crate) u64);
-
-impl Stream {
-    pub(crate) fn unit(&mut self) -> f64 {
-        let v = rng::mix(self.0);
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        rng::unit(v)
-    }
-}
-
-/// Cosine of the scattering angle drawn from Henyey–Greenstein by inverting its CDF.
-pub(crate) fn sample_hg(g: f64, u: f64) -> f64 {
-    if g.abs() < 1e-6 {
-        return 2.0 * u - 1.0;
-    }
-    let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
-    ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
-}
-
-/// Turns `d` by the polar angle with cosine `cos` and azimuth `phi`.
-pub(crate) fn rotate(d: [f64; 3], cos: f64, phi: f64) -> [f64; 3] {
-    let sin = (1.0 - cos * cos).max(0.0).sqrt();
-    let (t, s) = crate::geometry::frame(d);
-    let (c, si) = (phi.cos() * sin, phi.sin() * sin);
-    [
-        c * t[0] + si * s[0] + cos * d[0],
-        c * t[1] + si * s[1] + cos * d[1],
-        c * t[2] + si * s[2] + cos * d[2],
-    ]
 }
 
 /// Bin of radius r among increasing `edges` (edges[0] = 0); None beyond the last.

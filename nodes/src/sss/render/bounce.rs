@@ -5,9 +5,10 @@
 //! its nearest sample's). Their diffuse transmittance 1 − Fdr lets it in, where it adds to the
 //! sample's own transmitted irradiance. Each bounce repeats this from the last one's light.
 
+use crate::geometry::rotate;
 use crate::geometry::{add, dot, mul, V3};
 use crate::render::reference::Tracer;
-use crate::sss::montecarlo::{rotate, Stream};
+use crate::rng::Stream;
 use crate::sss::points::SamplePoint;
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -15,8 +15,8 @@
 //! sample's tangent plane) is taken as arriving along the normal.
 
 use crate::geometry::{cross, dot, mul, normalize, sub, V3};
+use crate::optics::fresnel;
 use crate::render::light::Light;
-use crate::sss::fresnel;
 use crate::types::ScatteringMaterial;
 
 /// The model's constants per channel, and the light.

@@ -9,7 +9,7 @@
 //! reduced albedo (the similarity relation). Light arriving from other parts (`bounces`) is
 //! diffuse: its factor is the cosine-weighted mean over the hemisphere.
 
-use crate::sss::chandrasekhar::HalfSpace;
+use crate::optics::chandrasekhar::HalfSpace;
 use crate::types::{DiffusionProfile, ScatteringMaterial};
 use mesoflow_runtime::NodeError;
 
@@ -108,7 +108,7 @@ impl Scale {
 
 #[cfg(test)]
 mod tests {
-    use crate::sss::chandrasekhar::HalfSpace;
+    use crate::optics::chandrasekhar::HalfSpace;
     use crate::sss::profile::{self as prof, Model};
     use crate::types::ScatteringMaterial;
 

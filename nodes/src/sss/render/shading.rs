@@ -7,9 +7,9 @@ use super::setup::{irradiance, transmit_in, Setup};
 use super::single::Traced;
 use super::{Params, Weights};
 use crate::geometry::{dot, sub, V3};
+use crate::optics::phase::henyey_greenstein;
 use crate::render::light::Light;
 use crate::render::shade::ShadowMap;
-use crate::sss::diffusion::henyey_greenstein;
 use crate::types::{Image, ScatteringMaterial};
 
 /// Radiance and exitance images from the gathered sums.

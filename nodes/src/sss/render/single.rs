@@ -16,9 +16,9 @@
 
 use super::setup::transmit_in;
 use crate::geometry::{add, dot, mul, V3};
+use crate::optics::phase::henyey_greenstein;
 use crate::render::light::Light;
 use crate::render::reference::Tracer;
-use crate::sss::diffusion::henyey_greenstein;
 use crate::types::ScatteringMaterial;
 
 /// Points along the camera ray inside the object.

@@ -4,7 +4,7 @@ use super::setup::transmit_in;
 use super::shading::single_scattering;
 use super::*;
 use crate::mesh::primitive::{self, Shape};
-use crate::sss::fresnel;
+use crate::optics::fresnel;
 use crate::sss::profile::{self as prof, Model};
 use std::f64::consts::PI;
 

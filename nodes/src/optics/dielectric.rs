@@ -14,7 +14,7 @@
 //! no net factor of η².
 
 use crate::geometry::{add, cross, dot, frame, mul, normalize, V3};
-use crate::sss::fresnel::reflectance_inside;
+use crate::optics::fresnel::reflectance_inside;
 use std::f64::consts::PI;
 
 /// Smallest roughness accepted: below it the lobes are so narrow that next-event estimation
@@ -200,7 +200,7 @@ impl Boundary {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sss::montecarlo::Stream;
+    use crate::rng::Stream;
 
     fn unit_sphere(rng: &mut Stream) -> V3 {
         let z = 2.0 * rng.unit() - 1.0;
