@@ -238,8 +238,9 @@ fn isomap_graph_embeds_the_swiss_roll_as_f64_npy() {
 
 #[test]
 fn weathering_graph_recovers_the_degree_of_the_built_in_sample() {
-    // The issue's bound (Spearman ≥ 0.95 against the true degree), from the command line, on a
-    // 32² sample so the debug build stays quick; every pixel's fit converges.
+    // Spearman against the true degree, from the command line, on a 32² sample; every pixel's
+    // fit converges. Measured 0.9985 here (0.9983 at the graph's 64², the guide's 0.998); the
+    // bound 0.994 is within 4× of that distance from 1 (the issue asked 0.95).
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = Scratch::new();
     let out = s.path("o");
@@ -250,7 +251,7 @@ fn weathering_graph_recovers_the_degree_of_the_built_in_sample() {
         &["sample.size=32".to_string()],
     );
     let rho = metric(&rep, "degree", "spearman");
-    assert!(rho >= 0.95, "{rho}");
+    assert!(rho >= 0.994, "{rho}");
     assert_eq!(metric(&rep, "fit", "not_converged"), 0.0);
     assert!(out.join("degree_true_vs_recovered.png").exists());
     for dir in ["weathering", "deweathering"] {
@@ -341,7 +342,9 @@ fn weathering_graph_fits_a_bumpy_sample_with_photometric_normals() {
     // A relief tilting pixels up to 25° (sample.bumps): the photometric-stereo normals and the
     // joint refinement bring the fit back to the flat sample's accuracy (measured at 64²:
     // normal median 0.001°, parameter medians < 1e-6, Spearman 0.998; the flat fit on the same
-    // data: 19% / 26% / 59%, Spearman 0.957). Bounds: the issue's 1e-3 and 0.95, normals 0.05°.
+    // data: 19% / 26% / 59%, Spearman 0.957). At this test's 32²: 0.00104°, at most 2.0e-8 and
+    // 0.9985. Bounds within 4× of those: 0.004°, 1e-6 (the guide's figure), Spearman 0.994 (a
+    // quarter of the measured 0.0015 short of 1).
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = Scratch::new();
     let out = s.path("o");
@@ -355,11 +358,11 @@ fn weathering_graph_fits_a_bumpy_sample_with_photometric_normals() {
             "fit.normals=photometric".to_string(),
         ],
     );
-    assert!(metric(&rep, "fit", "error_normal_deg") < 0.05);
+    assert!(metric(&rep, "fit", "error_normal_deg") < 0.004);
     for m in ["error_rho_d", "error_rho_s", "error_alpha"] {
-        assert!(metric(&rep, "fit", m) < 1e-3, "{m}");
+        assert!(metric(&rep, "fit", m) < 1e-6, "{m}");
     }
-    assert!(metric(&rep, "degree", "spearman") >= 0.95);
+    assert!(metric(&rep, "degree", "spearman") >= 0.994);
     assert_eq!(metric(&rep, "fit", "normal_fallbacks"), 0.0);
 }
 

@@ -19,6 +19,17 @@ pub fn unit(h: u64) -> f64 {
     (h >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
+/// SplitMix64 (Steele, Lea & Flood 2014) as a stream.
+pub(crate) struct Stream(pub(crate) u64);
+
+impl Stream {
+    pub(crate) fn unit(&mut self) -> f64 {
+        let v = mix(self.0);
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        unit(v)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -34,16 +45,5 @@ mod tests {
         assert!((mean - 0.5).abs() < 0.005, "{mean}");
         assert!((var - 1.0 / 12.0).abs() < 0.002, "{var}");
         assert_ne!(hash(1, &[2, 3]), hash(1, &[3, 2]));
-    }
-}
-
-/// SplitMix64 (Steele, Lea & Flood 2014) as a stream.
-pub(crate) struct Stream(pub(crate) u64);
-
-impl Stream {
-    pub(crate) fn unit(&mut self) -> f64 {
-        let v = mix(self.0);
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        unit(v)
     }
 }
