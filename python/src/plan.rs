@@ -2,8 +2,8 @@
 //! same engine and cache as `Graph.run`. Returns the plan document (`plan.json`'s fields) and
 //! the planned graph's text; the Python layer makes them a `Plan` object.
 
-use crate::session::{device_mode, engine};
-use mesoflow_graph::{check, parse_override, GraphFile};
+use crate::session::{device_mode, engine, parse_with_sets};
+use mesoflow_graph::check;
 use mesoflow_plan::{plan_view, Budget, PlanError, Split};
 use mesoflow_runtime::RunOptions;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
@@ -31,18 +31,7 @@ pub fn plan(
     cache_dir: Option<String>,
     use_cache: bool,
 ) -> PyResult<(String, String)> {
-    let mut file = GraphFile::parse(text).map_err(|e| {
-        PyValueError::new_err(
-            e.iter()
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join("\n"),
-        )
-    })?;
-    for s in &sets {
-        let o = parse_override(s).map_err(|e| PyValueError::new_err(format!("set {e}")))?;
-        file.apply(&o).map_err(PyValueError::new_err)?;
-    }
+    let file = parse_with_sets(text, &sets)?;
     let split = match split {
         "joint" => Split::Joint,
         "equal" => Split::Equal,

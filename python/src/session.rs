@@ -207,6 +207,23 @@ pub(crate) fn device_mode(device: &str) -> PyResult<DeviceMode> {
     }
 }
 
+/// A graph file's text with `sets` ("id.param=value") applied; errors as `ValueError`.
+pub(crate) fn parse_with_sets(text: &str, sets: &[String]) -> PyResult<GraphFile> {
+    let mut file = GraphFile::parse(text).map_err(|e| {
+        PyValueError::new_err(
+            e.iter()
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join("\n"),
+        )
+    })?;
+    for s in sets {
+        let o = parse_override(s).map_err(|e| PyValueError::new_err(format!("set {e}")))?;
+        file.apply(&o).map_err(PyValueError::new_err)?;
+    }
+    Ok(file)
+}
+
 /// Runs a graph (its file text). Relative input paths resolve against `base_dir`, files are
 /// written under `out_dir` with `report.json`, exactly as `mesoflow run` writes them. Returns
 /// the report as JSON text and the requested values by "node.port" (every output of the sinks
@@ -229,18 +246,7 @@ pub fn run<'py>(
     verify_cache: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
-    let mut file = GraphFile::parse(text).map_err(|e| {
-        PyValueError::new_err(
-            e.iter()
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join("\n"),
-        )
-    })?;
-    for s in &sets {
-        let o = parse_override(s).map_err(|e| PyValueError::new_err(format!("set {e}")))?;
-        file.apply(&o).map_err(PyValueError::new_err)?;
-    }
+    let file = parse_with_sets(text, &sets)?;
     let engine = engine(cache_dir.as_deref());
     let graph = check(name, &file, engine.registry())
         .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
