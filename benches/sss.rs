@@ -11,8 +11,8 @@
 //!    force on the GPU; gather seconds and the octree's RMS error against brute force.
 
 use mesoflow_nodes::mesh::primitive;
-use mesoflow_nodes::render::camera::CameraParams;
-use mesoflow_nodes::render::light::LightParams;
+use mesoflow_nodes::raytrace::camera::CameraParams;
+use mesoflow_nodes::raytrace::light::LightParams;
 use mesoflow_nodes::sss::material::{self, Preset};
 use mesoflow_nodes::sss::montecarlo;
 use mesoflow_nodes::sss::profile::{self, Model};

@@ -114,25 +114,29 @@ pub fn compute_2d_sequence(
     }
     encoder.copy_buffer_to_buffer(&output_buf, 0, &staging, 0, out_bytes);
     gpu.queue.submit([encoder.finish()]);
-    let slice = staging.slice(..);
+    let bytes = read_back(gpu, &staging).map_err(|e| NodeError::Gpu(format!("{label}: {e}")))?;
+    Ok(bytemuck::cast_slice::<u8, f32>(&bytes).to_vec())
+}
+
+/// The bytes of a mappable buffer once the queue has finished with it.
+pub fn read_back(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, String> {
+    let slice = buffer.slice(..);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {
         let _ = tx.send(r);
     });
-    device
+    gpu.device
         .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| NodeError::Gpu(format!("{label}: {e}")))?;
+        .map_err(|e| format!("wait: {e}"))?;
     rx.recv()
-        .map_err(|e| NodeError::Gpu(format!("{label}: {e}")))?
-        .map_err(|e| NodeError::Gpu(format!("{label}: readback failed: {e}")))?;
-    let out = {
-        let view = slice
-            .get_mapped_range()
-            .map_err(|e| NodeError::Gpu(format!("{label}: cannot map the readback buffer: {e}")))?;
-        bytemuck::cast_slice::<u8, f32>(&view).to_vec()
-    };
-    staging.unmap();
-    Ok(out)
+        .map_err(|e| e.to_string())?
+        .map_err(|e| e.to_string())?;
+    let bytes = slice
+        .get_mapped_range()
+        .map_err(|e| format!("map: {e}"))?
+        .to_vec();
+    buffer.unmap();
+    Ok(bytes)
 }
 
 /// The end of a GPU agreement test: with `MESOFLOW_REQUIRE_GPU=1` (CI, on lavapipe) a test that
@@ -144,5 +148,34 @@ pub fn require_tested(tested: usize) {
             "MESOFLOW_REQUIRE_GPU",
             "no GPU adapter on any backend could run the GPU agreement test",
         );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every shader, as the nodes hand it to wgpu (shared parts joined in), parses and validates
+    /// with naga, the front end wgpu itself uses: on a machine without a GPU adapter the GPU
+    /// paths never build their pipelines, and a broken shader would pass every other test there.
+    #[test]
+    fn every_shader_is_valid_wgsl() {
+        let shaders = [
+            ("heightfield/normals", crate::heightfield::normals::WGSL),
+            ("mdf/mesh_tile", crate::mdf::mesh_tile::WGSL),
+            ("mdf/tabulate", crate::mdf::tabulate::WGSL),
+            ("render/peel", crate::render::gpu_render::PEEL_WGSL),
+            ("render/resolve", crate::render::gpu_render::RESOLVE_WGSL),
+            ("render/relief", crate::render::relief_gpu::RELIEF_WGSL),
+            ("sss/render/gather", crate::sss::render::gather::WGSL),
+        ];
+        for (name, source) in shaders {
+            let module = naga::front::wgsl::parse_str(source)
+                .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+            naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::all(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+        }
     }
 }

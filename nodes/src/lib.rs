@@ -16,6 +16,7 @@ pub mod mesh;
 pub mod optics;
 pub mod progress;
 pub mod qh;
+pub mod raytrace;
 mod registry;
 pub mod render;
 pub mod rng;

@@ -92,6 +92,46 @@ mod tests {
         ]
     }
 
+    /// The view parameters are declared once (`raytrace::view`): every kind that has one has
+    /// the same schema for it (type, range, documentation), its default aside. A kind that
+    /// declared `tiling` or `mm_per_unit` by hand again, with its own words or range, fails here.
+    #[test]
+    fn every_kind_with_a_view_parameter_shares_its_one_definition() {
+        let r = super::registry();
+        let mut first: std::collections::BTreeMap<&str, (String, Value)> = Default::default();
+        let mut seen = 0;
+        for sig in r.signatures() {
+            let Some(props) = sig.params["properties"].as_object() else {
+                continue;
+            };
+            // Kinds that see a scene: a `light` or `background` elsewhere (a manifold's light
+            // angles, `image.row`'s gap colour) is another parameter of the same name.
+            if !props.contains_key("camera") && !props.contains_key("tiling") {
+                continue;
+            }
+            for field in crate::raytrace::view::ALL {
+                let Some(schema) = props.get(field) else {
+                    continue;
+                };
+                let mut schema = schema.clone();
+                schema.as_object_mut().unwrap().remove("default");
+                seen += 1;
+                match first.get(field) {
+                    None => {
+                        first.insert(field, (sig.kind.clone(), schema));
+                    }
+                    Some((kind, other)) => assert_eq!(
+                        &schema, other,
+                        "`{field}` of {} differs from {kind}'s",
+                        sig.kind
+                    ),
+                }
+            }
+        }
+        // render.mesh, render.relief, render.reference, scene.footprint, sss.render, qh.render.
+        assert!(seen >= 30, "only {seen} view parameters found");
+    }
+
     #[test]
     fn the_schema_accepts_nothing_the_parameters_refuse() {
         // `validate` runs both the schema and the typed check, so a user never meets a value

@@ -12,8 +12,14 @@ use std::sync::Arc;
 /// The probe node's id in the probe graph (its texture probes are `plan_probe_texture<i>`).
 pub const PROBE: &str = "plan_probe";
 
-/// The view parameters the probe takes from the render node.
-const VIEW: [&str; 4] = ["camera", "tiling", "shell", "mm_per_unit"];
+/// The view parameters the probe takes from the render node: the shared view fields
+/// `scene.footprint` has (declared once, in `raytrace::view`), and the shell.
+fn view_fields() -> impl Iterator<Item = &'static str> {
+    mesoflow_nodes::render::scene_footprint::Params::VIEW_FIELDS
+        .iter()
+        .copied()
+        .chain(["shell"])
+}
 
 /// The nodes `id` depends on, and itself.
 fn ancestors(file: &GraphFile, id: &str) -> BTreeSet<String> {
@@ -52,7 +58,7 @@ pub fn probe_graph(
         .signature(&r.kind)
         .and_then(|s| s.params.get("properties").cloned());
     let mut params = Map::new();
-    for k in VIEW {
+    for k in view_fields() {
         let default = defaults
             .as_ref()
             .and_then(|p| p.get(k))

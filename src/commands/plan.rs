@@ -10,7 +10,7 @@ use crate::exit::invalid;
 use crate::load;
 use mesoflow_graph::NodeDecl;
 use mesoflow_nodes::image::flip;
-use mesoflow_nodes::render::camera::CameraParams;
+use mesoflow_nodes::raytrace::camera::CameraParams;
 use mesoflow_plan as plan;
 use mesoflow_runtime::RunOptions;
 use serde_json::{json, Map, Value};

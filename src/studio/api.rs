@@ -16,7 +16,21 @@ use tiny_http::{Header, Method, Request, Response, StatusCode};
 
 const PAGE: &str = include_str!("assets/index.html");
 const STYLE: &str = include_str!("assets/studio.css");
-const SCRIPT: &str = include_str!("assets/studio.js");
+/// The page's script: one plain JavaScript file served as `/studio.js`, written as one file a
+/// section (`assets/js/`, in order) and joined here at compile time: still no build step.
+const SCRIPT: &str = concat!(
+    include_str!("assets/js/00-page.js"),
+    include_str!("assets/js/01-server.js"),
+    include_str!("assets/js/02-helpers.js"),
+    include_str!("assets/js/03-state.js"),
+    include_str!("assets/js/04-graph.js"),
+    include_str!("assets/js/05-params.js"),
+    include_str!("assets/js/06-compose.js"),
+    include_str!("assets/js/07-previews.js"),
+    include_str!("assets/js/08-report.js"),
+    include_str!("assets/js/09-sweeps.js"),
+    include_str!("assets/js/10-start.js"),
+);
 /// The largest request body accepted (a graph edit is a few hundred bytes).
 const MAX_BODY: u64 = 4 << 20;
 

@@ -259,6 +259,7 @@ fn from_hsv(h: f64, s: f64, v: f64) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     fn maps() -> BrdfMap {
@@ -283,14 +284,8 @@ mod tests {
             inputs = inputs.with("mask", Arc::new(m));
         }
         Edit.check(p)?;
-        let out = Edit.run(&NodeContext::detached(None), p, &inputs)?;
-        Ok(out
-            .get("maps")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<BrdfMap>()
-            .unwrap()
-            .clone())
+        let out = mesoflow_testkit::node::run(&Edit, p, &inputs)?;
+        Ok(out.value::<BrdfMap>("maps").clone())
     }
 
     fn close(a: &[f64], b: &[f64]) -> bool {

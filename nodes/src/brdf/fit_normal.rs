@@ -3,8 +3,8 @@
 //! stays smooth for every normal facing the viewer). The Ward columns of the Jacobian are
 //! analytic (as in `fit_ward.rs`), the two slope columns central differences.
 
-use super::fit_ward::clamp_ward;
 use super::lm;
+use super::ward::clamp_ward;
 use super::ward::PairGeometry;
 use crate::types::{DirectionPair, WARD_PARAMS};
 use std::f64::consts::PI;

@@ -21,6 +21,7 @@ use super::kmeans::kmeans;
 use super::lm;
 use super::photometric::{angle_deg, photometric_normals, MIN_LIGHTS};
 use super::ward::PairGeometry;
+use super::ward::{clamp_ward, RHO_S_MAX};
 use crate::types::{BrdfMap, Btf, Image, NormalMap, PointSet, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -31,23 +32,6 @@ use std::f64::consts::PI;
 use std::time::Instant;
 
 const ALPHA_MIN: f64 = 0.005;
-const ALPHA_MAX: f64 = 2.0;
-
-/// The largest specular albedo: Ward's ρs is the lobe's share of the light it reflects, so
-/// above 1 it would create energy. Without the bound a pixel whose data no Ward lobe explains
-/// (a GGX capture's Fresnel rise at grazing angles) could run to ρs ≈ 1e48 at the narrowest α.
-const RHO_S_MAX: f64 = 1.0;
-
-/// The bounds of a Ward parameter vector (ρd RGB, ρs, α, …): reflectances not negative, ρs at
-/// most RHO_S_MAX, α in [alpha_min, ALPHA_MAX]; entries past α are left alone.
-pub(super) fn clamp_ward(x: &mut [f64], alpha_min: f64) {
-    for v in x.iter_mut().take(4) {
-        *v = v.max(0.0);
-    }
-    x[3] = x[3].min(RHO_S_MAX);
-    x[4] = x[4].clamp(alpha_min, ALPHA_MAX);
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum NormalSource {

@@ -122,6 +122,7 @@ fn stretch(a: &BrdfMap, w: usize, h: usize) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     #[test]
@@ -137,15 +138,8 @@ mod tests {
             let inputs = Inputs::new()
                 .with("maps", Arc::new(a.clone()))
                 .with("height", Arc::new(b.clone()));
-            let out = Transfer
-                .run(&NodeContext::detached(None), &Params { fit }, &inputs)
-                .unwrap();
-            out.get("maps")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<BrdfMap>()
-                .unwrap()
-                .clone()
+            let out = mesoflow_testkit::node::run(&Transfer, &Params { fit }, &inputs).unwrap();
+            out.value::<BrdfMap>("maps").clone()
         };
         let tiled = run(Fit::Tile);
         let rho: Vec<f64> = tiled.data.chunks(5).map(|p| p[0]).collect();

@@ -6,6 +6,24 @@
 use crate::types::DirectionPair;
 use std::f64::consts::PI;
 
+/// The widest Ward lobe a fit may reach.
+pub const ALPHA_MAX: f64 = 2.0;
+
+/// The largest specular albedo: Ward's ρs is the lobe's share of the light it reflects, so
+/// above 1 it would create energy. Without the bound a pixel whose data no Ward lobe explains
+/// (a GGX capture's Fresnel rise at grazing angles) could run to ρs ≈ 1e48 at the narrowest α.
+pub const RHO_S_MAX: f64 = 1.0;
+
+/// The bounds of a Ward parameter vector (ρd RGB, ρs, α, …): reflectances not negative, ρs at
+/// most RHO_S_MAX, α in [alpha_min, ALPHA_MAX]; entries past α are left alone.
+pub fn clamp_ward(x: &mut [f64], alpha_min: f64) {
+    for v in x.iter_mut().take(4) {
+        *v = v.max(0.0);
+    }
+    x[3] = x[3].min(RHO_S_MAX);
+    x[4] = x[4].clamp(alpha_min, ALPHA_MAX);
+}
+
 /// What a direction pair contributes to every pixel's model.
 #[derive(Clone, Copy, Debug)]
 pub struct PairGeometry {

@@ -410,6 +410,7 @@ impl<'a> Scene<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::f64::consts::PI;
 
     fn field(n: usize, f: impl Fn(usize, usize) -> f32) -> HeightField {
@@ -423,14 +424,8 @@ mod tests {
         }
         // As the engine does: the parameter checks, then the run.
         Capture.check(p)?;
-        let out = Capture.run(&NodeContext::detached(None), p, &inputs)?;
-        Ok(out
-            .get("btf")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Btf>()
-            .unwrap()
-            .clone())
+        let out = mesoflow_testkit::node::run(&Capture, p, &inputs)?;
+        Ok(out.value::<Btf>("btf").clone())
     }
 
     fn at(b: &Btf, pair: usize, c: usize, x: usize, y: usize) -> f64 {
@@ -520,15 +515,8 @@ mod tests {
         let inputs = Inputs::new()
             .with("height", std::sync::Arc::new(field(n, |_, _| 1.0)))
             .with("maps", std::sync::Arc::new(maps));
-        let out = Capture
-            .run(&NodeContext::detached(None), &p, &inputs)
-            .unwrap();
-        let b = out
-            .get("btf")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Btf>()
-            .unwrap();
+        let out = mesoflow_testkit::node::run(&Capture, &p, &inputs).unwrap();
+        let b = out.value::<Btf>("btf");
         for (k, pair) in b.pairs.iter().enumerate() {
             for x in [1, 2, 5, 6] {
                 let m = mat(x);

@@ -462,6 +462,7 @@ mod tests {
     use crate::types::HeightField;
     use faer::Mat;
     use mesoflow_runtime::ValueRef;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     /// A small captured BTF: `n`² texels, `views` × `lights` pairs.
@@ -487,26 +488,20 @@ mod tests {
             brdf: crate::btf::brdf::Model::Ward,
             ..Default::default()
         };
-        let out = Capture
-            .run(
-                &NodeContext::detached(None),
-                &params,
-                &Inputs::new().with("height", Arc::new(hf)),
-            )
-            .unwrap();
-        out.get("btf")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Btf>()
-            .unwrap()
-            .clone()
+        let out = mesoflow_testkit::node::run(
+            &Capture,
+            &params,
+            &Inputs::new().with("height", Arc::new(hf)),
+        )
+        .unwrap();
+        out.value::<Btf>("btf").clone()
     }
 
     fn pca(btf: &Btf, p: Params) -> Result<Outputs, NodeError> {
         // As the engine does: the parameter checks, then the run.
         Pca.check(&p)?;
-        Pca.run(
-            &NodeContext::detached(None),
+        mesoflow_testkit::node::run(
+            &Pca,
             &p,
             &Inputs::new().with("btf", Arc::new(btf.clone()) as ValueRef),
         )
@@ -584,15 +579,14 @@ mod tests {
                 // The reconstruction's measured error is the reported one. Tolerance: coefficients
                 // and basis are stored as f32, adding ~1e-7 relative to each reconstructed value.
                 let rec = crate::btf::reconstruct::reconstruct(basis);
-                let cmp = crate::btf::compare::Compare
-                    .run(
-                        &NodeContext::detached(None),
-                        &crate::btf::compare::Params::default(),
-                        &Inputs::new()
-                            .with("reference", Arc::new(btf.clone()))
-                            .with("btf", Arc::new(rec)),
-                    )
-                    .unwrap();
+                let cmp = mesoflow_testkit::node::run(
+                    &crate::btf::compare::Compare,
+                    &crate::btf::compare::Params::default(),
+                    &Inputs::new()
+                        .with("reference", Arc::new(btf.clone()))
+                        .with("btf", Arc::new(rec)),
+                )
+                .unwrap();
                 let measured = scalar(&cmp, "rmse");
                 // Below the floor the reconstruction's own f32 rounding (≈ 6e-8 of each value)
                 // dominates: compare against that instead.
@@ -701,12 +695,7 @@ mod tests {
     }
 
     fn basis_of(o: &Outputs) -> BtfBasis {
-        o.get("basis")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<BtfBasis>()
-            .unwrap()
-            .clone()
+        o.value::<BtfBasis>("basis").clone()
     }
 
     /// RMSE of the reconstruction, computed here from the samples (independent of the node's

@@ -117,6 +117,7 @@ mod tests {
     use super::*;
     use crate::btf::read_ubo2003::{self, ReadUbo2003};
     use crate::types::{Direction, DirectionPair};
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     fn sample_btf() -> Btf {
@@ -143,19 +144,13 @@ mod tests {
     }
 
     fn write(btf: &Btf, p: Params, dir: &std::path::Path) {
-        let out = WriteUbo2003
-            .run(
-                &NodeContext::detached(None),
-                &p,
-                &Inputs::new().with("btf", Arc::new(btf.clone())),
-            )
-            .unwrap();
-        let files = out
-            .get("files")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Artifacts>()
-            .unwrap();
+        let out = mesoflow_testkit::node::run(
+            &WriteUbo2003,
+            &p,
+            &Inputs::new().with("btf", Arc::new(btf.clone())),
+        )
+        .unwrap();
+        let files = out.value::<Artifacts>("files");
         for f in &files.files {
             let path = dir.join(&f.path);
             std::fs::create_dir_all(path.parent().unwrap()).unwrap();
@@ -165,14 +160,8 @@ mod tests {
 
     fn read(dir: &std::path::Path, p: read_ubo2003::Params) -> Result<Btf, NodeError> {
         let ctx = NodeContext::detached(None).with_base(dir.to_path_buf());
-        ReadUbo2003.run(&ctx, &p, &Inputs::new()).map(|o| {
-            o.get("btf")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Btf>()
-                .unwrap()
-                .clone()
-        })
+        mesoflow_testkit::node::run_in(&ctx, &ReadUbo2003, &p, &Inputs::new())
+            .map(|o| o.value::<Btf>("btf").clone())
     }
 
     fn params(path: &str) -> read_ubo2003::Params {

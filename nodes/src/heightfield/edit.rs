@@ -155,6 +155,7 @@ pub fn resample(tile: &HeightField, w: usize, h: usize) -> Vec<f32> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     fn run(
@@ -167,14 +168,8 @@ mod tests {
             inputs = inputs.with("other", Arc::new(o));
         }
         Edit.check(&p)?;
-        let out = Edit.run(&NodeContext::detached(None), &p, &inputs)?;
-        Ok(out
-            .get("height")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<HeightField>()
-            .unwrap()
-            .clone())
+        let out = mesoflow_testkit::node::run(&Edit, &p, &inputs)?;
+        Ok(out.value::<HeightField>("height").clone())
     }
 
     #[test]

@@ -524,6 +524,7 @@ pub fn rms_difference(a: &HeightField, b: &HeightField) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     /// A smooth periodic tile and its exact gradient, in closed form.
@@ -573,17 +574,9 @@ mod tests {
             inputs = inputs.with("truth", Arc::new(t));
         }
         FromNormals.check(p)?;
-        let out = FromNormals.run(&NodeContext::detached(None), p, &inputs)?;
-        let hf = out
-            .get("height")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<HeightField>()
-            .unwrap()
-            .clone();
-        let err = out
-            .get("error_texels")
-            .map(|v| v.as_any().downcast_ref::<Scalar>().unwrap().0);
+        let out = mesoflow_testkit::node::run(&FromNormals, p, &inputs)?;
+        let hf = out.value::<HeightField>("height").clone();
+        let err = out.try_value::<Scalar>("error_texels").map(|s| s.0);
         Ok((hf, err))
     }
 

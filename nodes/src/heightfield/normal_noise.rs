@@ -159,6 +159,7 @@ fn tangents(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     #[test]
@@ -172,20 +173,13 @@ mod tests {
             data: [0.0f32, 0.0, 1.0].repeat(40_000),
         };
         let run = |p: Params| {
-            let out = NormalNoise
-                .run(
-                    &NodeContext::detached(None),
-                    &p,
-                    &Inputs::new().with("normals", Arc::new(flat.clone())),
-                )
-                .unwrap();
-            out.get("error_deg")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Image>()
-                .unwrap()
-                .data
-                .clone()
+            let out = mesoflow_testkit::node::run(
+                &NormalNoise,
+                &p,
+                &Inputs::new().with("normals", Arc::new(flat.clone())),
+            )
+            .unwrap();
+            out.value::<Image>("error_deg").data.clone()
         };
         let e = run(Params {
             sigma_deg: 3.0,

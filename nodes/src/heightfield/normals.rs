@@ -9,6 +9,9 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+/// The normals shader.
+pub(crate) const WGSL: &str = include_str!("normals.wgsl");
+
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
@@ -99,7 +102,7 @@ fn normals_gpu(
     params.extend_from_slice(&0f32.to_le_bytes());
     let pass = crate::gpu::Pass2d {
         label: "heightfield.normals",
-        shader: include_str!("normals.wgsl"),
+        shader: WGSL,
         entry: "main",
         params: &params,
         input: &hf.data,

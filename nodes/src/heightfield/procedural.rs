@@ -341,7 +341,8 @@ mod tests {
             size: 16,
             ..Params::default()
         };
-        let err = Procedural.run(&ctx, &p, &Inputs::new()).unwrap_err();
+        let err =
+            mesoflow_testkit::node::run_in(&ctx, &Procedural, &p, &Inputs::new()).unwrap_err();
         assert!(
             matches!(err, NodeError::Param { ref param, .. } if param == "count"),
             "{err}"

@@ -87,6 +87,7 @@ impl Node for Colorize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     #[test]
@@ -98,20 +99,13 @@ mod tests {
             data: vec![0.0, 0.25, 1.5],
         };
         let run = |p: Params| {
-            let out = Colorize
-                .run(
-                    &NodeContext::detached(None),
-                    &p,
-                    &Inputs::new().with("image", Arc::new(img.clone())),
-                )
-                .unwrap();
-            out.get("image")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Image>()
-                .unwrap()
-                .data
-                .clone()
+            let out = mesoflow_testkit::node::run(
+                &Colorize,
+                &p,
+                &Inputs::new().with("image", Arc::new(img.clone())),
+            )
+            .unwrap();
+            out.value::<Image>("image").data.clone()
         };
         let p = Params {
             low: [0.0, 0.2, 1.0],

@@ -96,6 +96,7 @@ impl Node for Difference {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     #[test]
@@ -107,8 +108,8 @@ mod tests {
             data,
         };
         let run = |a, b, p: &Params| {
-            Difference.run(
-                &NodeContext::detached(None),
+            mesoflow_testkit::node::run(
+                &Difference,
                 p,
                 &Inputs::new()
                     .with("reference", Arc::new(img(a)))
@@ -117,28 +118,24 @@ mod tests {
         };
         let p = Params { scale: Some(0.5) };
         let out = run(vec![1.0, 1.0, 1.0], vec![1.25, 0.0, 1.0], &p).unwrap();
-        let d = out
-            .get("image")
-            .and_then(|v| v.as_any().downcast_ref::<Image>())
-            .unwrap();
+        let d = out.try_value::<Image>("image").unwrap();
         assert_eq!(d.data, vec![0.5, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]);
-        let bad = Difference
-            .run(
-                &NodeContext::detached(None),
-                &p,
-                &Inputs::new()
-                    .with("reference", Arc::new(img(vec![1.0; 3])))
-                    .with(
-                        "image",
-                        Arc::new(Image {
-                            width: 1,
-                            height: 1,
-                            channels: 1,
-                            data: vec![1.0],
-                        }),
-                    ),
-            )
-            .unwrap_err();
+        let bad = mesoflow_testkit::node::run(
+            &Difference,
+            &p,
+            &Inputs::new()
+                .with("reference", Arc::new(img(vec![1.0; 3])))
+                .with(
+                    "image",
+                    Arc::new(Image {
+                        width: 1,
+                        height: 1,
+                        channels: 1,
+                        data: vec![1.0],
+                    }),
+                ),
+        )
+        .unwrap_err();
         assert!(bad.to_string().contains("image"), "{bad}");
         assert!(Difference.check(&Params { scale: Some(0.0) }).is_err());
     }

@@ -105,6 +105,7 @@ impl Node for Ramp {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
 
     #[test]
     fn vertical_ramp_runs_top_to_bottom() {
@@ -115,16 +116,8 @@ mod tests {
             to: 0.6,
             ..Params::default()
         };
-        let out = Ramp
-            .run(&NodeContext::detached(None), &p, &Inputs::new())
-            .unwrap();
-        let img = out
-            .get("image")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Image>()
-            .unwrap()
-            .clone();
+        let out = mesoflow_testkit::node::run(&Ramp, &p, &Inputs::new()).unwrap();
+        let img = out.value::<Image>("image").clone();
         // Rows 0 … 4 at 0.2 + 0.4 · y / 4 (closed form), the same across a row.
         for y in 0..5 {
             for x in 0..3 {

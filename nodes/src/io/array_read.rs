@@ -231,6 +231,7 @@ impl Node for PointsArray {
 mod tests {
     use super::*;
     use crate::io::formats::encode_npy;
+    use mesoflow_testkit::node::OutputsExt;
 
     fn run<N: Node>(node: &N, params: serde_json::Value, dir: &Path) -> Result<Outputs, NodeError> {
         let p: N::Params = serde_json::from_value(params).unwrap();
@@ -257,12 +258,7 @@ mod tests {
             dir.path(),
         )
         .unwrap();
-        let v = out
-            .get("image")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Image>()
-            .unwrap();
+        let v = out.value::<Image>("image");
         assert_eq!((v.width, v.height, v.channels), (3, 2, 1));
         assert_eq!(v.data[3 + 2], 12.0);
 
@@ -279,12 +275,7 @@ mod tests {
             dir.path(),
         )
         .unwrap();
-        let b = out
-            .get("btf")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Btf>()
-            .unwrap();
+        let b = out.value::<Btf>("btf");
         assert_eq!((b.width, b.height, b.pairs.len()), (2, 2, 2));
         assert!((b.pairs[0].light.phi - std::f64::consts::FRAC_PI_2).abs() < 1e-12);
         // Three pairs declared for two planes: refused, naming both.

@@ -92,8 +92,7 @@ mod tests {
         let p = Params {
             path: "nan.exr".into(),
         };
-        let e = ImageRead
-            .run(&ctx, &p, &Inputs::new())
+        let e = mesoflow_testkit::node::run_in(&ctx, &ImageRead, &p, &Inputs::new())
             .err()
             .unwrap()
             .to_string();

@@ -250,7 +250,7 @@ mod tests {
         let inputs = Inputs::new()
             .with("points", std::sync::Arc::new(points))
             .with("graph", std::sync::Arc::new(graph));
-        Degree.run(&NodeContext::detached(None), &p, &inputs)
+        mesoflow_testkit::node::run(&Degree, &p, &inputs)
     }
 
     #[test]

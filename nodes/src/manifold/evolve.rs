@@ -255,6 +255,7 @@ pub fn relight(maps: &BrdfMap, geo: &PairGeometry, exposure: f64) -> Image {
 mod tests {
     use super::*;
     use crate::weathering::sample::{generate, path, Params as SampleParams};
+    use mesoflow_testkit::node::OutputsExt;
 
     fn sample() -> (BrdfMap, Vec<f64>) {
         let s = generate(&SampleParams {
@@ -315,11 +316,8 @@ mod tests {
             frames: 4,
             ..Params::default()
         };
-        let out = Evolve
-            .run(&NodeContext::detached(None), &p, &inputs)
-            .unwrap();
-        let files = out.get("files").unwrap();
-        let files = files.as_any().downcast_ref::<Artifacts>().unwrap();
+        let out = mesoflow_testkit::node::run(&Evolve, &p, &inputs).unwrap();
+        let files = out.value::<Artifacts>("files");
         let names: Vec<&str> = files.files.iter().map(|f| f.path.as_str()).collect();
         assert_eq!(
             names,
@@ -333,8 +331,7 @@ mod tests {
         );
         assert_eq!(&files.files[4].bytes[..6], b"GIF89a");
         let mean0 = omega.iter().sum::<f64>() / omega.len() as f64;
-        let last = out.get("mean_degree").unwrap();
-        let last = last.as_any().downcast_ref::<Scalar>().unwrap().0;
+        let last = out.value::<Scalar>("mean_degree").0;
         assert!(last > mean0 + 0.2, "{last} vs {mean0}");
     }
 }

@@ -182,6 +182,7 @@ impl Node for Transfer {
 mod tests {
     use super::*;
     use crate::weathering::sample::{generate, path as true_path, Params as SampleParams};
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     fn sample() -> (BrdfMap, Image) {
@@ -193,16 +194,11 @@ mod tests {
     }
 
     fn run(p: &Params, inputs: Inputs) -> Result<Outputs, NodeError> {
-        Transfer.run(&NodeContext::detached(None), p, &inputs)
+        mesoflow_testkit::node::run(&Transfer, p, &inputs)
     }
 
     fn maps_of(out: &Outputs) -> BrdfMap {
-        out.get("maps")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<BrdfMap>()
-            .unwrap()
-            .clone()
+        out.value::<BrdfMap>("maps").clone()
     }
 
     #[test]

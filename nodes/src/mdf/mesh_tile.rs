@@ -6,10 +6,16 @@
 //! through holes — get +∞. CPU path on rayon (f64), GPU path in `mesh_tile.wgsl` (f32); they
 //! agree to 1e-3 texel (tested).
 
-use crate::render::layers::intersect;
+use crate::raytrace::layers::intersect;
 use crate::types::{Direction, Mesh};
 use mesoflow_runtime::{Gpu, NodeContext, NodeError};
 use rayon::prelude::*;
+
+/// The shader: the shared ray–triangle test, then the tile walk.
+pub(crate) const WGSL: &str = concat!(
+    include_str!("../raytrace/triangle.wgsl"),
+    include_str!("mesh_tile.wgsl")
+);
 
 pub struct MeshTile {
     /// Triangles (corners in tile units) with their xy bounds, for a cheap rejection.
@@ -204,7 +210,7 @@ pub fn tabulate_gpu(
     let rows = height * views.len();
     let pass = crate::gpu::Pass2d {
         label: "mdf.tabulate (mesh tile)",
-        shader: include_str!("mesh_tile.wgsl"),
+        shader: WGSL,
         entry: "main",
         params: &params,
         input: &input,

@@ -1,5 +1,5 @@
 // mdf.tabulate of a mesh tile: one invocation per (texel, view), the periodic tile walk and
-// Möller–Trumbore test of mesh_tile.rs in f32 (see there for the geometry).
+// Möller–Trumbore test (raytrace/triangle.wgsl) of mesh_tile.rs in f32 (see there for the geometry).
 
 struct Params {
     ntris: u32, width: u32, height: u32, views: u32,
@@ -15,31 +15,6 @@ struct Params {
 fn corner(t: u32, k: u32) -> vec3<f32> {
     let b = 13u * t + 3u * k;
     return vec3<f32>(input[b], input[b + 1u], input[b + 2u]);
-}
-
-// Distance along d to the triangle, or -1.
-fn intersect(o: vec3<f32>, d: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>) -> f32 {
-    let e1 = p1 - p0;
-    let e2 = p2 - p0;
-    let pv = cross(d, e2);
-    let det = dot(e1, pv);
-    let scale = length(e1) * length(e2);
-    if (scale == 0.0 || abs(det) <= 1e-12 * scale) {
-        return -1.0;
-    }
-    let inv = 1.0 / det;
-    let s = o - p0;
-    let b1 = dot(s, pv) * inv;
-    if (b1 < 0.0 || b1 > 1.0) {
-        return -1.0;
-    }
-    let q = cross(s, e1);
-    let b2 = dot(d, q) * inv;
-    if (b2 < 0.0 || b1 + b2 > 1.0) {
-        return -1.0;
-    }
-    let t = dot(e2, q) * inv;
-    return select(-1.0, t, t > 0.0);
 }
 
 fn boundary(c: i32, s: i32, o: f32, d: f32) -> f32 {
@@ -77,8 +52,8 @@ fn walk(o: vec3<f32>, d: vec3<f32>) -> f32 {
                 || max(ya, yb) < input[b + 2u] - 1e-6 || min(ya, yb) > input[b + 3u] + 1e-6) {
                 continue;
             }
-            let s = intersect(local, d, corner(k, 0u), corner(k, 1u), corner(k, 2u));
-            if (s >= 0.0 && s >= ta - 1e-6 && s <= tb + 1e-6) {
+            let s = ray_triangle(local, d, corner(k, 0u), corner(k, 1u), corner(k, 2u));
+            if (s > 0.0 && s >= ta - 1e-6 && s <= tb + 1e-6) {
                 best = min(best, s);
             }
         }

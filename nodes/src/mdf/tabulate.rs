@@ -21,6 +21,9 @@ use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
+/// The tabulation shader.
+pub(crate) const WGSL: &str = include_str!("tabulate.wgsl");
+
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
@@ -305,7 +308,7 @@ fn tabulate_gpu(gpu: &Gpu, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, Node
     }
     let pass = crate::gpu::Pass2d {
         label: "mdf.tabulate",
-        shader: include_str!("tabulate.wgsl"),
+        shader: WGSL,
         entry: "main",
         params: &params,
         input: &input,
@@ -319,22 +322,18 @@ fn tabulate_gpu(gpu: &Gpu, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, Node
 mod tests {
     use super::*;
     use crate::btf::directions::DirectionSet;
+    use mesoflow_testkit::node::OutputsExt;
 
     fn run_cpu(hf: &HeightField, p: &Params) -> Mdf {
         let ctx = NodeContext::detached(None);
-        let out = Tabulate
-            .run(
-                &ctx,
-                p,
-                &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
-            )
-            .unwrap();
-        out.get("mdf")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Mdf>()
-            .unwrap()
-            .clone()
+        let out = mesoflow_testkit::node::run_in(
+            &ctx,
+            &Tabulate,
+            p,
+            &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
+        )
+        .unwrap();
+        out.value::<Mdf>("mdf").clone()
     }
 
     fn views(list: &[[f64; 2]]) -> DirectionSet {
@@ -444,14 +443,14 @@ mod tests {
             depth: Some(1.0),
             ..Default::default()
         };
-        let e = Tabulate
-            .run(
-                &ctx,
-                &p,
-                &Inputs::new().with("height", std::sync::Arc::new(hf)),
-            )
-            .unwrap_err()
-            .to_string();
+        let e = mesoflow_testkit::node::run_in(
+            &ctx,
+            &Tabulate,
+            &p,
+            &Inputs::new().with("height", std::sync::Arc::new(hf)),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("depth"), "{e}");
     }
 
@@ -477,17 +476,22 @@ mod tests {
             ..Default::default()
         };
         let plate = std::sync::Arc::new(plate);
-        let out = Tabulate
-            .run(&ctx, &p, &Inputs::new().with("mesh", plate.clone()))
-            .unwrap();
+        let out = mesoflow_testkit::node::run_in(
+            &ctx,
+            &Tabulate,
+            &p,
+            &Inputs::new().with("mesh", plate.clone()),
+        )
+        .unwrap();
         // 4×4 of the 8×8 texel centres lie on the plate.
         assert_eq!(out.get("miss_fraction").unwrap().as_scalar(), Some(0.75));
         let hf = std::sync::Arc::new(HeightField::from_fn(4, 4, |_, _| 0.0));
         let both = Inputs::new().with("mesh", plate).with("height", hf);
-        let e = Tabulate.run(&ctx, &p, &both).unwrap_err().to_string();
+        let e = mesoflow_testkit::node::run_in(&ctx, &Tabulate, &p, &both)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("not both"), "{e}");
-        let e = Tabulate
-            .run(&ctx, &p, &Inputs::new())
+        let e = mesoflow_testkit::node::run_in(&ctx, &Tabulate, &p, &Inputs::new())
             .unwrap_err()
             .to_string();
         assert!(e.contains("height") && e.contains("mesh"), "{e}");

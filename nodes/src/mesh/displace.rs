@@ -25,35 +25,24 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    /// Texture tiles per unit of texture coordinate, [along u, along v] (as `render.mesh`'s).
-    pub tiling: [f64; 2],
-    /// Shell thickness in world units (as `render.mesh`'s): the depth the height range maps to.
-    #[schemars(range(min = 0.0))]
-    pub shell: f64,
-    /// Shell thickness in height-field texels, measured from the lowest sample (as
-    /// `mdf.tabulate`'s `depth`); default the height range, the tightest shell.
-    #[schemars(range(min = 0.0, max = 1e6))]
-    pub depth: Option<f64>,
-    /// Vertices per texel along the longest triangle edge (0.25 to 16).
-    #[schemars(range(min = 0.25, max = 16.0))]
-    pub density: f64,
-    /// Refuse to make more triangles than this.
-    #[schemars(range(min = 1, max = 200000000))]
-    pub max_triangles: u64,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            tiling: [4.0, 4.0],
-            shell: 0.05,
-            depth: None,
-            density: 1.0,
-            max_triangles: 20_000_000,
-        }
+crate::view_params! {
+    #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct Params {
+        view { tiling }
+        /// Shell thickness in world units (as `render.mesh`'s): the depth the height range maps to.
+        #[schemars(range(min = 0.0))]
+        pub shell: f64 = 0.05,
+        /// Shell thickness in height-field texels, measured from the lowest sample (as
+        /// `mdf.tabulate`'s `depth`); default the height range, the tightest shell.
+        #[schemars(range(min = 0.0, max = 1e6))]
+        pub depth: Option<f64> = None,
+        /// Vertices per texel along the longest triangle edge (0.25 to 16).
+        #[schemars(range(min = 0.25, max = 16.0))]
+        pub density: f64 = 1.0,
+        /// Refuse to make more triangles than this.
+        #[schemars(range(min = 1, max = 200000000))]
+        pub max_triangles: u64 = 20_000_000,
     }
 }
 
@@ -313,25 +302,24 @@ fn welded_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
 mod tests {
     use super::*;
     use crate::mesh::primitive::{self, Shape};
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     fn run(mesh: Mesh, hf: HeightField, p: &Params) -> Result<(Mesh, f64), NodeError> {
         Displace.check(p)?;
-        let out = Displace.run(
-            &NodeContext::detached(None),
+        let out = mesoflow_testkit::node::run(
+            &Displace,
             p,
             &Inputs::new()
                 .with("mesh", Arc::new(mesh))
                 .with("height", Arc::new(hf)),
         )?;
         let m = out
-            .get("mesh")
-            .and_then(|v| v.as_any().downcast_ref::<Mesh>())
+            .try_value::<Mesh>("mesh")
             .cloned()
             .ok_or_else(|| NodeError::Failed("no mesh".into()))?;
         let n = out
-            .get("subdivision")
-            .and_then(|v| v.as_any().downcast_ref::<Scalar>())
+            .try_value::<Scalar>("subdivision")
             .map_or(f64::NAN, |s| s.0);
         Ok((m, n))
     }

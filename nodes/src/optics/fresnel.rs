@@ -43,6 +43,12 @@ fn simpson(f: impl Fn(f64) -> f64, a: f64, b: f64, n: usize) -> f64 {
     s * h / 3.0
 }
 
+/// Transmittance into a medium of relative index η from outside, at cosine `cos` (1 − Fr seen
+/// from outside).
+pub fn transmit_in(cos: f64, eta: f64) -> f64 {
+    1.0 - reflectance_inside(cos, 1.0 / eta)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

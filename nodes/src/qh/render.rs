@@ -21,12 +21,12 @@
 use crate::geometry::{dot, V3};
 use crate::heightfield::raycast::Caster;
 use crate::progress::Counter;
-use crate::render::camera::CameraParams;
-use crate::render::footprint;
-use crate::render::layers::Frag;
-use crate::render::light::{Light, LightParams};
+use crate::raytrace::footprint;
+use crate::raytrace::layers::Frag;
+use crate::raytrace::light::Light;
+use crate::raytrace::shadow::ShadowMap;
 use crate::render::material::{texel_taps, Material, Source};
-use crate::render::shade::{Scene, ShadowMap, Surface};
+use crate::render::shade::{Scene, Surface};
 use crate::sss::render::{self as sss_render, Weights};
 use crate::types::{Btf, BtfBasis, DiffusionProfile, HeightField, Image, Mesh, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
@@ -34,58 +34,25 @@ use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    /// Pinhole or orthographic camera (as `render.mesh`).
-    pub camera: CameraParams,
-    /// The directional light.
-    pub light: LightParams,
-    /// Texture tiles per unit of texture coordinate, [along u, along v].
-    pub tiling: [f64; 2],
-    /// Millimetres per world unit of the mesh (10⁻⁹ to 10⁹: beyond, areas in mm² overflow the
-    /// f32 the GPU sums in).
-    #[schemars(range(min = 1e-9, max = 1e9))]
-    pub mm_per_unit: f64,
-    /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
-    pub spacing: Option<f64>,
-    /// Most irradiance samples.
-    #[schemars(range(min = 64))]
-    pub max_points: u32,
-    /// Octree criterion ΔA/d² (CPU); 0 = brute force.
-    #[schemars(range(min = 0.0))]
-    pub threshold: f64,
-    /// Shadow-map the light, so that surface not lit directly receives only light transmitted through the material.
-    pub shadows: bool,
-    /// Shadow map size in texels (square).
-    #[schemars(range(min = 1, max = 16384))]
-    pub shadow_resolution: u32,
-    /// Linear RGB where the mesh is not hit.
-    pub background: [f64; 3],
-    /// Seed of the sample points.
-    pub seed: u64,
-    /// The global term: `diffusion` (gathered profile) or `brdf` (its total reflectance, local;
-    /// for views where light scatters less far than a pixel covers).
-    pub mode: sss_render::Mode,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        let r = sss_render::Params::default();
-        Params {
-            camera: r.camera,
-            light: r.light,
-            tiling: [4.0, 4.0],
-            mm_per_unit: r.mm_per_unit,
-            spacing: r.spacing,
-            max_points: r.max_points,
-            threshold: r.threshold,
-            shadows: r.shadows,
-            shadow_resolution: r.shadow_resolution,
-            background: r.background,
-            seed: r.seed,
-            mode: r.mode,
-        }
+crate::view_params! {
+    #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct Params {
+        view { camera, light, tiling, mm_per_unit, shadows = true, shadow_resolution, background }
+        // The gather's own parameters default to `sss.render`'s.
+        /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
+        pub spacing: Option<f64> = sss_render::Params::default().spacing,
+        /// Most irradiance samples.
+        #[schemars(range(min = 64))]
+        pub max_points: u32 = sss_render::Params::default().max_points,
+        /// Octree criterion ΔA/d² (CPU); 0 = brute force.
+        #[schemars(range(min = 0.0))]
+        pub threshold: f64 = sss_render::Params::default().threshold,
+        /// Seed of the sample points.
+        pub seed: u64 = sss_render::Params::default().seed,
+        /// The global term: `diffusion` (gathered profile) or `brdf` (its total reflectance, local;
+        /// for views where light scatters less far than a pixel covers).
+        pub mode: sss_render::Mode = sss_render::Params::default().mode,
     }
 }
 
@@ -365,6 +332,8 @@ impl Weights for Qh<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::raytrace::camera::CameraParams;
+    use crate::raytrace::light::LightParams;
     use crate::mesh::primitive::{self, Shape};
     use crate::sss::profile;
     use crate::types::{Direction, DirectionPair};

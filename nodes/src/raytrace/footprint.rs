@@ -256,7 +256,7 @@ fn surface_scale(mesh: &Mesh, f: &Frag, texture: Option<Texture>) -> (V3, Option
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
-    use crate::render::camera::CameraParams;
+    use crate::raytrace::camera::CameraParams;
 
     /// A unit square in z = 0 facing +z, texture coordinates = (x, y) + 0.5.
     pub(crate) fn square() -> Mesh {

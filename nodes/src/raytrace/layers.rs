@@ -186,7 +186,7 @@ fn peel(hits: &[(Frag, bool)], count: usize) -> Vec<(Option<Frag>, Option<Frag>)
 mod tests {
     use super::*;
     use crate::mesh::primitive::{build, Params, Shape};
-    use crate::render::camera::CameraParams;
+    use crate::raytrace::camera::CameraParams;
 
     #[test]
     fn a_sphere_has_one_layer_whose_depths_are_the_chord() {

@@ -3,13 +3,22 @@
 //! (`resolve.wgsl`). Shadows run the same two steps from the light first, into a depth buffer
 //! that stays on the GPU. Data layout and rules are those of the CPU path.
 
-use super::camera::Camera;
 use super::material::{Material, Source};
 use super::shade::Scene;
 use crate::geometry::{bounding_sphere, dot, sub};
+use crate::gpu::read_back;
+use crate::raytrace::camera::Camera;
 use crate::types::{Centring, ColorSpace};
 use mesoflow_runtime::{Gpu, NodeError};
 use wgpu::util::DeviceExt;
+
+/// The depth-peeling shader: the shared rasteriser, then the peel.
+pub(crate) const PEEL_WGSL: &str = concat!(include_str!("raster.wgsl"), include_str!("peel.wgsl"));
+/// The resolve shader: the shared ray–triangle test, then the shell test and shading.
+pub(crate) const RESOLVE_WGSL: &str = concat!(
+    include_str!("../raytrace/triangle.wgsl"),
+    include_str!("resolve.wgsl")
+);
 
 const NONE: u32 = u32::MAX;
 
@@ -60,25 +69,44 @@ pub(crate) fn raster_pipeline(
     })
 }
 
-/// The bytes of a mappable buffer once the queue has finished with it.
-pub(crate) fn read_back(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, String> {
-    let slice = buffer.slice(..);
-    let (tx, rx) = std::sync::mpsc::channel();
-    slice.map_async(wgpu::MapMode::Read, move |r| {
-        let _ = tx.send(r);
-    });
-    gpu.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| format!("wait: {e}"))?;
-    rx.recv()
-        .map_err(|e| e.to_string())?
-        .map_err(|e| e.to_string())?;
-    let bytes = slice
-        .get_mapped_range()
-        .map_err(|e| format!("map: {e}"))?
-        .to_vec();
-    buffer.unmap();
-    Ok(bytes)
+/// A render pass into one colour target cleared to `clear` and a depth target cleared to 1
+/// (both stored), writing `stamps` where the adapter has timestamp queries.
+pub(crate) fn raster_pass<'e>(
+    enc: &'e mut wgpu::CommandEncoder,
+    label: &str,
+    view: &wgpu::TextureView,
+    depth_view: &wgpu::TextureView,
+    clear: [f64; 4],
+    stamps: Option<wgpu::RenderPassTimestampWrites>,
+) -> wgpu::RenderPass<'e> {
+    enc.begin_render_pass(&wgpu::RenderPassDescriptor {
+        label: Some(label),
+        color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: None,
+            ops: wgpu::Operations {
+                load: wgpu::LoadOp::Clear(wgpu::Color {
+                    r: clear[0],
+                    g: clear[1],
+                    b: clear[2],
+                    a: clear[3],
+                }),
+                store: wgpu::StoreOp::Store,
+            },
+        })],
+        depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+            view: depth_view,
+            depth_ops: Some(wgpu::Operations {
+                load: wgpu::LoadOp::Clear(1.0),
+                store: wgpu::StoreOp::Store,
+            }),
+            stencil_ops: None,
+        }),
+        timestamp_writes: stamps,
+        occlusion_query_set: None,
+        multiview_mask: None,
+    })
 }
 
 /// Camera as the shaders' `Cam`: eye (w = ortho), fwd (w = half), right (w = aspect), up,
@@ -205,9 +233,7 @@ impl<'a> GpuRenderer<'a> {
         };
         let peel = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("peel"),
-            source: wgpu::ShaderSource::Wgsl(
-                concat!(include_str!("raster.wgsl"), include_str!("peel.wgsl")).into(),
-            ),
+            source: wgpu::ShaderSource::Wgsl(PEEL_WGSL.into()),
         });
         let peel_pipeline = |cull| raster_pipeline(device, &peel, "peel", cull);
         // OpenGL ES adapters may lack float render targets: a validation error, caught and
@@ -223,7 +249,7 @@ impl<'a> GpuRenderer<'a> {
         }
         let resolve_module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("resolve"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("resolve.wgsl").into()),
+            source: wgpu::ShaderSource::Wgsl(RESOLVE_WGSL.into()),
         });
         let resolve = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some("resolve"),
@@ -389,40 +415,23 @@ impl<'a> GpuRenderer<'a> {
                 ],
             });
             let view = target.create_view(&Default::default());
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("peel"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: -1.0,
-                            g: 0.0,
-                            b: 0.0,
-                            a: 0.0,
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: self.stamps.as_ref().filter(|_| stamp_start && i == 0).map(
-                    |query_set| wgpu::RenderPassTimestampWrites {
-                        query_set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: None,
-                    },
-                ),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let stamp = self
+                .stamps
+                .as_ref()
+                .filter(|_| stamp_start && i == 0)
+                .map(|query_set| wgpu::RenderPassTimestampWrites {
+                    query_set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: None,
+                });
+            let mut pass = raster_pass(
+                enc,
+                "peel",
+                &view,
+                &depth_view,
+                [-1.0, 0.0, 0.0, 0.0],
+                stamp,
+            );
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.draw(0..3 * self.triangles, 0..1);

@@ -471,13 +471,14 @@ impl<'a> MdfLookup<'a> {
 mod tests {
     use super::*;
     use crate::types::DirectionPair;
+    use mesoflow_testkit::node::OutputsExt;
 
     /// The truth scene's tile (64² bumps 6 texels high) and its MDF at the truth graph's 10 × 24
     /// views.
     fn bumps_and_mdf() -> (crate::types::HeightField, Mdf) {
         use crate::btf::directions::DirectionSet;
         use crate::heightfield::procedural::{generate, Params as HfParams, Pattern};
-        use mesoflow_runtime::{Inputs, Node, NodeContext};
+        use mesoflow_runtime::{Inputs, NodeContext};
         let ctx = NodeContext::detached(None);
         let hp = HfParams {
             pattern: Pattern::Bumps,
@@ -496,20 +497,14 @@ mod tests {
             views,
             ..Default::default()
         };
-        let out = crate::mdf::tabulate::Tabulate
-            .run(
-                &ctx,
-                &p,
-                &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
-            )
-            .unwrap();
-        let mdf = out
-            .get("mdf")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Mdf>()
-            .unwrap()
-            .clone();
+        let out = mesoflow_testkit::node::run_in(
+            &ctx,
+            &crate::mdf::tabulate::Tabulate,
+            &p,
+            &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
+        )
+        .unwrap();
+        let mdf = out.value::<Mdf>("mdf").clone();
         (hf, mdf)
     }
 
@@ -572,7 +567,7 @@ mod tests {
         // version) was 2.5× too bright at 82–90°; the power law alone +36% at 82° and +107%
         // at 86°.
         use crate::btf::directions::{DirectionSet, Named};
-        use mesoflow_runtime::{Inputs, Node, NodeContext};
+        use mesoflow_runtime::{Inputs, NodeContext};
         let (hf, mdf) = bumps_and_mdf();
         let ctx = NodeContext::detached(None);
         let cap = |views: DirectionSet, lights: DirectionSet| {
@@ -582,19 +577,14 @@ mod tests {
                 albedo: [0.7; 3],
                 ..Default::default()
             };
-            let out = crate::btf::capture::Capture
-                .run(
-                    &ctx,
-                    &p,
-                    &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
-                )
-                .unwrap();
-            out.get("btf")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Btf>()
-                .unwrap()
-                .clone()
+            let out = mesoflow_testkit::node::run_in(
+                &ctx,
+                &crate::btf::capture::Capture,
+                &p,
+                &Inputs::new().with("height", std::sync::Arc::new(hf.clone())),
+            )
+            .unwrap();
+            out.value::<Btf>("btf").clone()
         };
         let full = cap(
             DirectionSet::Named(Named::Ubo81),

@@ -1,10 +1,6 @@
 //! Rendering a BTF-mapped mesh, with mesostructure silhouettes from an MDF (thesis ch. 4).
 
-pub mod camera;
-pub mod footprint;
 pub mod gpu_render;
-pub mod layers;
-pub mod light;
 pub mod material;
 pub mod reference;
 pub mod relief;

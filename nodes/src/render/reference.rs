@@ -20,80 +20,50 @@
 //! samples (even and odd sample indices: two seeds of the same hash), so a comparison against
 //! the truth can say how much of its difference is the truth's noise.
 
-use super::camera::{Camera, CameraParams};
-use super::light::{Light, LightParams};
 use super::material::texel_taps;
 use super::volume::{self, Medium};
 use crate::btf::brdf::{self, Model};
 use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
+use crate::raytrace::camera::Camera;
+use crate::raytrace::light::Light;
+use crate::raytrace::tracer::{Hit, Tracer};
 use crate::types::{Image, Mesh, NormalMap, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
-use obvhs::cwbvh::CwBvh;
-use obvhs::ray::{Ray, RayHit};
-use obvhs::triangle::Triangle;
 use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    /// Pinhole (`fov`) or orthographic camera (as `render.mesh`'s).
-    pub camera: CameraParams,
-    /// A directional light, or a point light with `position` (as `render.mesh`'s).
-    pub light: LightParams,
-    /// Reflectance model (as `btf.capture`'s).
-    pub brdf: Model,
-    /// Diffuse albedo (linear RGB) when no `albedo` image is connected.
-    pub albedo: [f64; 3],
-    /// Ward specular albedo ρs.
-    #[schemars(range(min = 0.0, max = 1.0))]
-    pub specular: f64,
-    /// Ward roughness α.
-    #[schemars(range(min = 0.001, max = 1.0))]
-    pub roughness: f64,
-    /// Tiles per unit of texture coordinate of the `albedo` image, [u, v].
-    pub tiling: [f64; 2],
-    /// Samples per pixel (1 to 65536); a square number is stratified.
-    #[schemars(range(min = 1, max = 65536))]
-    pub samples: u32,
-    /// Linear RGB where the mesh is not hit.
-    pub background: [f64; 3],
-    /// Seed of the sub-pixel positions (and of the paths, with a medium).
-    pub seed: u64,
-    /// Millimetres per world unit of the mesh: the scale of the `medium`'s coefficients (mm⁻¹).
-    #[schemars(range(min = 1e-9, max = 1e9))]
-    pub mm_per_unit: f64,
-    /// GGX roughness α (0.01 to 1) of the `medium`'s boundary where its η ≠ 1 (required there,
-    /// ignored at η = 1): a rough dielectric, because light through a smooth one from a
-    /// directional light cannot be sampled.
-    #[schemars(range(min = 0.01, max = 1.0))]
-    pub boundary_roughness: Option<f64>,
-    /// With a medium at η ≠ 1: keep the light the boundary reflects where the camera first meets
-    /// it (a glossy highlight). False keeps only what crossed into the medium, the part
-    /// `sss.render` draws.
-    pub surface_reflection: bool,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            camera: CameraParams::default(),
-            light: LightParams::default(),
-            brdf: Model::Lambert,
-            albedo: [0.6, 0.6, 0.6],
-            specular: 0.05,
-            roughness: 0.2,
-            tiling: [4.0, 4.0],
-            samples: 16,
-            background: [0.0; 3],
-            seed: 1,
-            mm_per_unit: 10.0,
-            boundary_roughness: None,
-            surface_reflection: true,
-        }
+crate::view_params! {
+    #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct Params {
+        view { camera, light, tiling, background, mm_per_unit }
+        /// Reflectance model (as `btf.capture`'s).
+        pub brdf: Model = Model::Lambert,
+        /// Diffuse albedo (linear RGB) when no `albedo` image is connected.
+        pub albedo: [f64; 3] = [0.6, 0.6, 0.6],
+        /// Ward specular albedo ρs.
+        #[schemars(range(min = 0.0, max = 1.0))]
+        pub specular: f64 = 0.05,
+        /// Ward roughness α.
+        #[schemars(range(min = 0.001, max = 1.0))]
+        pub roughness: f64 = 0.2,
+        /// Samples per pixel (1 to 65536); a square number is stratified.
+        #[schemars(range(min = 1, max = 65536))]
+        pub samples: u32 = 16,
+        /// Seed of the sub-pixel positions (and of the paths, with a medium).
+        pub seed: u64 = 1,
+        /// GGX roughness α (0.01 to 1) of the `medium`'s boundary where its η ≠ 1 (required there,
+        /// ignored at η = 1): a rough dielectric, because light through a smooth one from a
+        /// directional light cannot be sampled.
+        #[schemars(range(min = 0.01, max = 1.0))]
+        pub boundary_roughness: Option<f64> = None,
+        /// With a medium at η ≠ 1: keep the light the boundary reflects where the camera first meets
+        /// it (a glossy highlight). False keeps only what crossed into the medium, the part
+        /// `sss.render` draws.
+        pub surface_reflection: bool = true,
     }
 }
 
@@ -484,160 +454,28 @@ fn sample(img: &Image, u: f64, v: f64) -> [f64; 3] {
     out
 }
 
-pub struct Hit {
-    pub tri: usize,
-    pub t: f64,
-    pub b1: f64,
-    pub b2: f64,
-}
-
-/// How far behind its origin a ray enters the BVH (world units). obvhs culls every box the ray
-/// leaves within 10⁻⁴ (an absolute `EPSILON` in its node test), so without it a surface closer
-/// than that to the origin is missed: 3% of the shadow rays from inside a dense medium. Which
-/// hits count is decided in f64 from the true origin (`intersect`: t > 0).
-const BACK_OFF: f64 = 1e-3;
-
-/// The mesh and its BVH.
-pub struct Tracer<'a> {
-    pub mesh: &'a Mesh,
-    bvh: CwBvh,
-    /// Shadow-ray offset along the geometric normal: a millionth of the scene's size.
-    pub epsilon: f64,
-}
-
-impl<'a> Tracer<'a> {
-    pub fn new(mesh: &'a Mesh) -> Self {
-        let v = |i: usize| {
-            let q = mesh.positions[i];
-            glam::Vec3A::new(q[0], q[1], q[2])
-        };
-        let tris: Vec<Triangle> = (0..mesh.triangles())
-            .map(|t| {
-                let [a, b, c] = mesh.corners(t);
-                Triangle {
-                    v0: v(a),
-                    v1: v(b),
-                    v2: v(c),
-                }
-            })
-            .collect();
-        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
-            &tris,
-            obvhs::BvhBuildParams::medium_build(),
-            &mut std::time::Duration::default(),
-        );
-        let (lo, hi) = mesh.bounds();
-        let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
-        Tracer {
-            mesh,
-            bvh,
-            epsilon: 1e-6 * size.max(1e-30),
-        }
-    }
-
-    /// Triangle `t`'s corners' positions' plane: a point and the unit geometric normal (the
-    /// winding's).
-    pub fn triangle(&self, t: usize) -> (V3, V3) {
-        let [a, b, c] = self
-            .mesh
-            .corners(t)
-            .map(|i| self.mesh.positions[i].map(|x| x as f64));
-        (
-            a,
-            normalize(cross(sub(b, a), sub(c, a))).unwrap_or([0.0, 0.0, 1.0]),
-        )
-    }
-
-    /// Möller–Trumbore in f64 (the CPU ray caster's): distance and barycentrics (of corners
-    /// 1 and 2).
-    fn intersect(&self, t: usize, o: V3, d: V3) -> Option<(f64, f64, f64)> {
-        let [a, b, c] = self
-            .mesh
-            .corners(t)
-            .map(|i| self.mesh.positions[i].map(|x| x as f64));
-        super::layers::intersect(o, d, a, b, c).map(|(dist, b1, b2, _)| (dist, b1, b2))
-    }
-
-    /// The BVH's ray: started [`BACK_OFF`] behind `o`, so that the traversal's t is the
-    /// distance from `o` plus `BACK_OFF`.
-    fn ray(o: V3, d: V3, tmax: f64) -> Ray {
-        let f = |v: V3| glam::Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32);
-        let back = add(o, mul(d, -BACK_OFF));
-        Ray::new(
-            f(back),
-            f(d),
-            0.0,
-            (tmax + BACK_OFF).min(f32::MAX as f64) as f32,
-        )
-    }
-
-    /// The nearest hit along the ray from `o` in unit direction `d`. Ties go to the lower
-    /// triangle index, so the answer does not depend on the traversal order.
-    pub fn closest(&self, o: V3, d: V3) -> Option<Hit> {
-        let mut best: Option<Hit> = None;
-        let mut hit = RayHit::none();
-        self.bvh
-            .ray_traverse(Self::ray(o, d, f64::INFINITY), &mut hit, |_, id| {
-                let t = self.bvh.primitive_indices[id] as usize;
-                let Some((dist, b1, b2)) = self.intersect(t, o, d) else {
-                    return f32::INFINITY;
-                };
-                let better = best
-                    .as_ref()
-                    .is_none_or(|h| dist < h.t || (dist == h.t && t < h.tri));
-                if better {
-                    best = Some(Hit {
-                        tri: t,
-                        t: dist,
-                        b1,
-                        b2,
-                    });
-                }
-                // Widened a little so that an f32 rounding never prunes an equal-distance tie.
-                ((dist + BACK_OFF) * (1.0 + 1e-6)) as f32
-            });
-        best
-    }
-
-    /// Whether anything lies along the ray from `o` in direction `d` closer than `reach`.
-    pub fn occluded(&self, o: V3, d: V3, reach: f64) -> bool {
-        !self.bvh.ray_traverse_miss(Self::ray(o, d, reach), |_, id| {
-            let t = self.bvh.primitive_indices[id] as usize;
-            match self.intersect(t, o, d) {
-                // Any value below the ray's end is a hit: the f64 test has decided.
-                Some((dist, ..)) if dist < reach => 0.0,
-                _ => f32::INFINITY,
-            }
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::raytrace::camera::CameraParams;
+    use crate::raytrace::light::LightParams;
     use crate::mesh::primitive::{self, Shape};
+    use mesoflow_testkit::node::OutputsExt;
     use std::f64::consts::PI;
     use std::sync::Arc;
 
     fn render(mesh: Mesh, p: &Params) -> (Image, Image, f64) {
         Reference.check(p).unwrap();
-        let out = Reference
-            .run(
-                &NodeContext::detached(None),
-                p,
-                &Inputs::new().with("mesh", Arc::new(mesh)),
-            )
-            .unwrap();
+        let out =
+            mesoflow_testkit::node::run(&Reference, p, &Inputs::new().with("mesh", Arc::new(mesh)))
+                .unwrap();
         let img = |k: &str| {
             out.get(k)
                 .and_then(|v| v.as_any().downcast_ref::<Image>())
                 .cloned()
                 .unwrap()
         };
-        let covered = out
-            .get("covered")
-            .and_then(|v| v.as_any().downcast_ref::<Scalar>())
-            .map_or(f64::NAN, |s| s.0);
+        let covered = out.try_value::<Scalar>("covered").map_or(f64::NAN, |s| s.0);
         (img("image"), img("coverage"), covered)
     }
 
@@ -729,19 +567,15 @@ mod tests {
                 samples: 1,
                 ..Default::default()
             };
-            let out = Reference
-                .run(
-                    &NodeContext::detached(None),
-                    &p,
-                    &Inputs::new()
-                        .with("mesh", Arc::new(plane()))
-                        .with("normals", Arc::new(map.clone())),
-                )
-                .unwrap();
-            let img = out
-                .get("image")
-                .and_then(|v| v.as_any().downcast_ref::<Image>())
-                .unwrap();
+            let out = mesoflow_testkit::node::run(
+                &Reference,
+                &p,
+                &Inputs::new()
+                    .with("mesh", Arc::new(plane()))
+                    .with("normals", Arc::new(map.clone())),
+            )
+            .unwrap();
+            let img = out.try_value::<Image>("image").unwrap();
             let want = 2.0 * 0.5 / PI * cos;
             assert!(
                 (img.data[0] as f64 - want).abs() < 1e-5,

@@ -13,14 +13,14 @@
 //! or steeper bumps as the geometry says. Values are radiance for the light's irradiance:
 //! E·f(ωi, ωo)·max(0, n·ωi)·visibility, as `btf.capture` measures.
 
-use super::camera::{Camera, CameraParams};
-use super::layers::{self, Frag};
-use super::light::{Light, LightParams};
 use super::relief_gpu;
 use super::shade::{surface_at, Surface};
 use crate::btf::brdf::{self, Model};
 use crate::geometry::{dot, mul, normalize, V3};
 use crate::progress::Counter;
+use crate::raytrace::camera::Camera;
+use crate::raytrace::layers::{self, Frag};
+use crate::raytrace::light::Light;
 use crate::types::{BrdfMap, HeightField, Image, Mesh, NormalMap, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -29,46 +29,25 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    /// Pinhole (`fov`) or orthographic camera, looking from `eye` at `target`.
-    pub camera: CameraParams,
-    /// A directional light, or a point light with `position`.
-    pub light: LightParams,
-    /// Texture tiles per unit of texture coordinate, [along u, along v].
-    pub tiling: [f64; 2],
-    /// World depth of the height field's range (max − min texels), as `render.mesh`'s shell.
-    #[schemars(range(min = 0.0, max = 1e9))]
-    pub shell: f64,
-    /// Linear-search steps down through the relief (and towards the light for shadows).
-    #[schemars(range(min = 1, max = 4096))]
-    pub linear_steps: u32,
-    /// Binary-search halvings after the linear search.
-    #[schemars(range(min = 0, max = 32))]
-    pub binary_steps: u32,
-    /// Self-shadowing by a search towards the light.
-    pub shadows: bool,
-    /// Linear RGB where the mesh is not hit.
-    pub background: [f64; 3],
-    /// Frames rendered for the timing metrics (the image is the last one).
-    #[schemars(range(min = 1, max = 1000))]
-    pub frames: u32,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            camera: CameraParams::default(),
-            light: LightParams::default(),
-            tiling: [1.0, 1.0],
-            shell: 0.05,
-            linear_steps: 16,
-            binary_steps: 6,
-            shadows: true,
-            background: [0.0; 3],
-            frames: 1,
-        }
+crate::view_params! {
+    #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct Params {
+        // A relief is one height field over the texture space: one tile unless the graph says
+        // otherwise; its shadows come from the height field itself, so they are cheap and on.
+        view { camera, light, tiling = [1.0, 1.0], shadows = true, background }
+        /// World depth of the height field's range (max − min texels), as `render.mesh`'s shell.
+        #[schemars(range(min = 0.0, max = 1e9))]
+        pub shell: f64 = 0.05,
+        /// Linear-search steps down through the relief (and towards the light for shadows).
+        #[schemars(range(min = 1, max = 4096))]
+        pub linear_steps: u32 = 16,
+        /// Binary-search halvings after the linear search.
+        #[schemars(range(min = 0, max = 32))]
+        pub binary_steps: u32 = 6,
+        /// Frames rendered for the timing metrics (the image is the last one).
+        #[schemars(range(min = 1, max = 1000))]
+        pub frames: u32 = 1,
     }
 }
 
@@ -476,9 +455,12 @@ pub fn render_cpu(scene: &Relief, cam: &Camera, watch: &Counter) -> (Vec<f32>, V
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::raytrace::camera::CameraParams;
+    use crate::raytrace::light::LightParams;
     use crate::btf::capture::{self, Capture};
     use crate::btf::directions::DirectionSet;
     use crate::types::Btf;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     /// A unit plane facing +z, uv (0..1) along +x and +y.
@@ -528,15 +510,9 @@ mod tests {
             .with("height", Arc::new(hf.clone()))
             .with("maps", Arc::new(maps.clone()));
         RenderRelief.check(p)?;
-        let out = RenderRelief.run(&NodeContext::detached(gpu), p, &inputs)?;
-        Ok(out
-            .get("image")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Image>()
-            .unwrap()
-            .data
-            .clone())
+        let out =
+            mesoflow_testkit::node::run_in(&NodeContext::detached(gpu), &RenderRelief, p, &inputs)?;
+        Ok(out.value::<Image>("image").data.clone())
     }
 
     fn bumps(n: usize) -> HeightField {
@@ -591,21 +567,15 @@ mod tests {
                 brdf: Model::Ward,
                 ..capture::Params::default()
             };
-            let out = Capture
-                .run(
-                    &NodeContext::detached(None),
-                    &cp,
-                    &Inputs::new()
-                        .with("height", Arc::new(hf.clone()))
-                        .with("maps", Arc::new(m.clone())),
-                )
-                .unwrap();
-            let b = out
-                .get("btf")
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Btf>()
-                .unwrap();
+            let out = mesoflow_testkit::node::run(
+                &Capture,
+                &cp,
+                &Inputs::new()
+                    .with("height", Arc::new(hf.clone()))
+                    .with("maps", Arc::new(m.clone())),
+            )
+            .unwrap();
+            let b = out.value::<Btf>("btf");
             let (mut off, mut worst) = (0, 0f32);
             for y in 0..n {
                 for x in 0..n {

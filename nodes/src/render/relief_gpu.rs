@@ -1,12 +1,17 @@
 //! The GPU path of `render.relief` (wgpu): one render pass whose fragment stage does the relief
 //! search and shading (`relief.wgsl`), into a float target read back as the image and mask.
 
-use super::camera::Camera;
-use super::gpu_render::{cam_block, raster_pipeline, read_back};
+use super::gpu_render::{cam_block, raster_pass, raster_pipeline};
 use super::relief::Relief;
 use crate::geometry::bounding_sphere;
+use crate::gpu::read_back;
+use crate::raytrace::camera::Camera;
 use mesoflow_runtime::{Gpu, NodeError};
 use wgpu::util::DeviceExt;
+
+/// The relief shader: the shared rasteriser, then the relief march.
+pub(crate) const RELIEF_WGSL: &str =
+    concat!(include_str!("raster.wgsl"), include_str!("relief.wgsl"));
 
 fn gpu_err(what: &'static str) -> impl Fn(String) -> NodeError {
     move |e| NodeError::Gpu(format!("render.relief: {what}: {e}"))
@@ -107,9 +112,7 @@ pub fn render(
     );
     let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some("relief"),
-        source: wgpu::ShaderSource::Wgsl(
-            concat!(include_str!("raster.wgsl"), include_str!("relief.wgsl")).into(),
-        ),
+        source: wgpu::ShaderSource::Wgsl(RELIEF_WGSL.into()),
     });
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let pipeline = raster_pipeline(device, &module, "relief", wgpu::Face::Back);
@@ -194,40 +197,21 @@ pub fn render(
         let last = frame + 1 == frames;
         let mut enc = device.create_command_encoder(&Default::default());
         {
-            let mut pass = enc.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("relief"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color {
-                            r: bg[0],
-                            g: bg[1],
-                            b: bg[2],
-                            a: 0.0,
-                        }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(1.0),
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: stamps.as_ref().map(|query_set| {
-                    wgpu::RenderPassTimestampWrites {
-                        query_set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    }
-                }),
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let stamp = stamps
+                .as_ref()
+                .map(|query_set| wgpu::RenderPassTimestampWrites {
+                    query_set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                });
+            let mut pass = raster_pass(
+                &mut enc,
+                "relief",
+                &view,
+                &depth_view,
+                [bg[0], bg[1], bg[2], 0.0],
+                stamp,
+            );
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.draw(0..3 * m.triangles() as u32, 0..1);

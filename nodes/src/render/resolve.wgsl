@@ -589,29 +589,6 @@ struct Hit {
     depth: vec2<f32>,
 };
 
-// Möller–Trumbore: the distance along (o, d) to triangle p0 p1 p2, or -1.
-fn tri_hit(o: vec3<f32>, d: vec3<f32>, p0: vec3<f32>, p1: vec3<f32>, p2: vec3<f32>) -> f32 {
-    let e1 = p1 - p0;
-    let e2 = p2 - p0;
-    let pv = cross(d, e2);
-    let det = dot(e1, pv);
-    if (abs(det) <= 1e-12 * length(e1) * length(e2)) {
-        return -1.0;
-    }
-    let inv = 1.0 / det;
-    let s = o - p0;
-    let b1 = dot(s, pv) * inv;
-    if (b1 < 0.0 || b1 > 1.0) {
-        return -1.0;
-    }
-    let q = cross(s, e1);
-    let b2 = dot(d, q) * inv;
-    if (b2 < 0.0 || b1 + b2 > 1.0) {
-        return -1.0;
-    }
-    return dot(e2, q) * inv;
-}
-
 fn corner(o: u32, k: u32) -> vec3<f32> {
     let i = o + 3u * k;
     return vec3<f32>(mesh[i], mesh[i + 1u], mesh[i + 2u]);
@@ -626,11 +603,11 @@ fn side_exit(o: vec3<f32>, d: vec3<f32>, after: f32) -> f32 {
         let b = corner(base, 1u);
         let c = corner(base, 2u);
         let e = corner(base, 3u);
-        let t1 = tri_hit(o, d, a, b, c);
+        let t1 = ray_triangle(o, d, a, b, c);
         if (t1 > after && t1 < best) {
             best = t1;
         }
-        let t2 = tri_hit(o, d, a, c, e);
+        let t2 = ray_triangle(o, d, a, c, e);
         if (t2 > after && t2 < best) {
             best = t2;
         }
@@ -661,11 +638,11 @@ fn wall_inward(base: u32) -> vec3<f32> {
 
 fn wall_crossing(base: u32, o: vec3<f32>, d: vec3<f32>, after: f32) -> f32 {
     var best = inf();
-    let t1 = tri_hit(o, d, corner(base, 0u), corner(base, 1u), corner(base, 2u));
+    let t1 = ray_triangle(o, d, corner(base, 0u), corner(base, 1u), corner(base, 2u));
     if (t1 > after && t1 < best) {
         best = t1;
     }
-    let t2 = tri_hit(o, d, corner(base, 0u), corner(base, 2u), corner(base, 3u));
+    let t2 = ray_triangle(o, d, corner(base, 0u), corner(base, 2u), corner(base, 3u));
     if (t2 > after && t2 < best) {
         best = t2;
     }

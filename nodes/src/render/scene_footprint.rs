@@ -6,41 +6,25 @@
 //! per degree.
 //! The planner runs it to decide each stage's model; users run it to see a view's scale.
 
-use super::camera::{Camera, CameraParams};
-use super::footprint::{footprint, Texture};
 use crate::image::flip::Viewer;
+use crate::raytrace::camera::Camera;
+use crate::raytrace::footprint::{footprint, Texture};
 use crate::types::{Btf, BtfBasis, DiffusionProfile, HeightField, Image, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    /// The renderer's camera.
-    pub camera: CameraParams,
-    /// Texture tiles per unit of texture coordinate, [u, v] (as the renderer's).
-    pub tiling: [f64; 2],
-    /// Mesostructure shell thickness, world units (as `render.mesh`'s).
-    #[schemars(range(min = 0.0))]
-    pub shell: f64,
-    /// Millimetres per world unit (10⁻⁹ to 10⁹).
-    #[schemars(range(min = 1e-9, max = 1e9))]
-    pub mm_per_unit: f64,
-    /// Who looks at the image: gives the pixels per degree output.
-    pub viewer: Option<Viewer>,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            camera: CameraParams::default(),
-            tiling: [4.0, 4.0],
-            shell: 0.0,
-            mm_per_unit: 10.0,
-            viewer: None,
-        }
+crate::view_params! {
+    #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct Params {
+        view { camera, tiling, mm_per_unit }
+        /// Mesostructure shell thickness, world units (as `render.mesh`'s).
+        #[schemars(range(min = 0.0))]
+        pub shell: f64 = 0.0,
+        /// Who looks at the image: gives the pixels per degree output.
+        pub viewer: Option<Viewer> = None,
     }
 }
 
@@ -166,7 +150,7 @@ impl Node for SceneFootprint {
         let profile = inputs.opt::<DiffusionProfile>("profile")?;
         let mfp_mm = profile.map(scattering_length);
         let fp = footprint(mesh, &camera, texture, p.mm_per_unit);
-        let inside = crate::render::footprint::contains(mesh, camera.eye);
+        let inside = crate::raytrace::footprint::contains(mesh, camera.eye);
         let mut out = Outputs::new()
             .with("camera_inside", Scalar(inside as u8 as f64))
             .with(
@@ -242,7 +226,8 @@ pub fn scattering_length(p: &DiffusionProfile) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::footprint::tests::square;
+    use crate::raytrace::camera::CameraParams;
+    use crate::raytrace::footprint::tests::square;
     use std::sync::Arc;
 
     fn run(inputs: Inputs) -> Outputs {
@@ -256,9 +241,7 @@ mod tests {
             },
             ..Default::default()
         };
-        SceneFootprint
-            .run(&NodeContext::detached(None), &p, &inputs)
-            .unwrap()
+        mesoflow_testkit::node::run(&SceneFootprint, &p, &inputs).unwrap()
     }
 
     fn scalar(o: &Outputs, k: &str) -> f64 {

@@ -39,21 +39,14 @@
 //! receiver's reference surface point (x, t_f): a caster shadows it only if it lies in front of
 //! the receiver's shell, so shadows between parts of the mesh and from silhouette mesostructure
 //! appear, while the self-shadowing inside a tile, already in the BTF, is not applied twice.
-use super::camera::Camera;
-use super::layers::{Frag, Layers};
-use super::light::Light;
 use super::material::{Material, MdfLookup};
 use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
+use crate::raytrace::camera::Camera;
+use crate::raytrace::layers::{Frag, Layers};
+use crate::raytrace::light::Light;
+use crate::raytrace::shadow::{shadow_bias, ShadowMap};
 use crate::types::{Mdf, Mesh};
 use rayon::prelude::*;
-
-/// A shadow map: distance along the light camera's ray to the displaced surface per texel.
-pub struct ShadowMap {
-    pub camera: Camera,
-    pub depth: Vec<f64>,
-    /// Depth bias, world units (two texels' footprint at the scene).
-    pub bias: f64,
-}
 
 pub struct Scene<'a> {
     pub mesh: &'a Mesh,
@@ -155,7 +148,7 @@ impl Side {
         let q = &self.q;
         let mut best = f64::INFINITY;
         for (p0, p1, p2) in [(q[0], q[1], q[2]), (q[0], q[2], q[3])] {
-            if let Some((t, ..)) = super::layers::intersect(o, d, p0, p1, p2) {
+            if let Some((t, ..)) = crate::raytrace::layers::intersect(o, d, p0, p1, p2) {
                 if t > after && t < best {
                     best = t;
                 }
@@ -608,11 +601,6 @@ fn local_up(v: V3) -> V3 {
     [v[0] / h * s, v[1] / h * s, 1e-4]
 }
 
-/// Two shadow-map texels' footprint across the scene: enough for the slopes a texel spans.
-pub fn shadow_bias(radius: f64, size: u32) -> f64 {
-    2.0 * (2.0 * radius / size as f64)
-}
-
 impl ShadowMap {
     pub fn build(scene: &Scene, camera: Camera, layers: &Layers, radius: f64) -> ShadowMap {
         let (w, h) = (camera.width, camera.height);
@@ -628,19 +616,5 @@ impl ShadowMap {
             camera,
             depth,
         }
-    }
-
-    /// Whether the light sees `p` (nearest shadow-map texel, biased comparison). The bias grows
-    /// as the light grazes the surface (`cos_light`, local), where one texel spans more depth.
-    pub fn lit(&self, p: V3, cos_light: f64) -> bool {
-        let Some((x, y, t)) = self.camera.project(p) else {
-            return true;
-        };
-        let (w, h) = (self.camera.width as f64, self.camera.height as f64);
-        if !(0.0..w).contains(&x) || !(0.0..h).contains(&y) {
-            return true;
-        }
-        let i = y as usize * self.camera.width as usize + x as usize;
-        t <= self.depth[i] + self.bias / cos_light.max(0.1)
     }
 }

@@ -21,13 +21,13 @@
 //! rays estimate the medium's transmittance by tracking with the smallest extinction, each
 //! channel weighted by the rest (≤ 1), so they stop as soon as the light is out of reach.
 
-use super::light::Light;
-use super::reference::Tracer;
 use crate::geometry::rotate;
 use crate::geometry::{add, dot, mul, V3};
 use crate::optics::dielectric::Boundary;
 use crate::optics::phase::henyey_greenstein;
 use crate::optics::phase::sample_hg;
+use crate::raytrace::light::Light;
+use crate::raytrace::tracer::Tracer;
 use crate::rng::Stream;
 use crate::types::ScatteringMaterial;
 use std::f64::consts::PI;
@@ -383,7 +383,7 @@ fn transmittance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::light::LightParams;
+    use crate::raytrace::light::LightParams;
     use rayon::prelude::*;
 
     #[test]

@@ -364,6 +364,7 @@ fn features(ex: &Image, guide: Option<&Image>, scale: f32) -> Plane {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
 
     fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> f32) -> Image {
@@ -376,25 +377,15 @@ mod tests {
     }
 
     fn run(p: &Params, inputs: Inputs) -> Result<Outputs, NodeError> {
-        Texture.run(&NodeContext::detached(None), p, &inputs)
+        mesoflow_testkit::node::run(&Texture, p, &inputs)
     }
 
     fn scalar(out: &Outputs, name: &str) -> f64 {
-        out.get(name)
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Scalar>()
-            .unwrap()
-            .0
+        out.scalar(name)
     }
 
     fn img(out: &Outputs, name: &str) -> Image {
-        out.get(name)
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Image>()
-            .unwrap()
-            .clone()
+        out.take::<Image>(name)
     }
 
     /// Soft diagonal stripes of period 12, a texture whose every patch is easy to tell apart from

@@ -40,8 +40,8 @@
 use super::directional::refracted;
 use super::geometry::flux_kernel;
 use crate::geometry::{add, dot, mul, sub, V3};
-use crate::render::light::Light;
-use crate::render::reference::Tracer;
+use crate::raytrace::light::Light;
+use crate::raytrace::tracer::Tracer;
 use crate::sss::dipole::Dipole;
 use crate::sss::octree::Octree;
 use crate::types::ScatteringMaterial;
@@ -476,7 +476,7 @@ impl Collision {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::light::LightParams;
+    use crate::raytrace::light::LightParams;
 
     fn marble() -> ScatteringMaterial {
         ScatteringMaterial {

@@ -7,7 +7,7 @@
 
 use crate::geometry::rotate;
 use crate::geometry::{add, dot, mul, V3};
-use crate::render::reference::Tracer;
+use crate::raytrace::tracer::Tracer;
 use crate::rng::Stream;
 use crate::sss::points::SamplePoint;
 use rayon::prelude::*;

@@ -16,7 +16,7 @@
 
 use crate::geometry::{cross, dot, mul, normalize, sub, V3};
 use crate::optics::fresnel;
-use crate::render::light::Light;
+use crate::raytrace::light::Light;
 use crate::types::ScatteringMaterial;
 
 /// The model's constants per channel, and the light.
@@ -144,7 +144,7 @@ pub(super) fn refracted(light: &Light, unit: f64, eta: f64, xi: V3, ni: V3) -> V
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::light::LightParams;
+    use crate::raytrace::light::LightParams;
 
     fn skin() -> ScatteringMaterial {
         ScatteringMaterial {

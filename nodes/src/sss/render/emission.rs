@@ -18,9 +18,9 @@
 //! with the deep field's H(μ). Exact in both limits, at η = 1 only; g ≠ 0 through the reduced
 //! albedo.
 
-use super::setup::transmit_in;
 use crate::optics::chandrasekhar::h_function;
 use crate::optics::fresnel;
+use crate::optics::fresnel::transmit_in;
 use crate::types::ScatteringMaterial;
 use mesoflow_runtime::NodeError;
 use schemars::JsonSchema;

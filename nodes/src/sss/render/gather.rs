@@ -4,12 +4,15 @@
 use super::setup::Setup;
 use crate::geometry::{normalize, V3};
 use crate::progress::Counter;
-use crate::render::camera::Camera;
-use crate::render::layers::{self, Frag};
-use crate::render::reference::Tracer;
+use crate::raytrace::camera::Camera;
+use crate::raytrace::layers::{self, Frag};
+use crate::raytrace::tracer::Tracer;
 use crate::types::Mesh;
 use mesoflow_runtime::NodeError;
 use rayon::prelude::*;
+
+/// The gather shader.
+pub(crate) const WGSL: &str = include_str!("render.wgsl");
 
 /// The shading point of each pixel: position (world), normal, view direction; and the share of
 /// the pixel the object covers.
@@ -224,7 +227,7 @@ pub(super) fn gather_gpu(
         gpu,
         &crate::gpu::Pass2d {
             label: "sss.render",
-            shader: include_str!("render.wgsl"),
+            shader: WGSL,
             entry: "main",
             params: &[], // one set per dispatch, below
             input: &input,

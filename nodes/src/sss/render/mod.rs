@@ -34,11 +34,11 @@
 
 use crate::geometry::V3;
 use crate::progress::Counter;
-use crate::render::camera::{Camera, CameraParams};
-use crate::render::footprint::{self, Footprint};
-use crate::render::layers::Frag;
-use crate::render::light::{Light, LightParams};
-use crate::render::reference::Tracer;
+use crate::raytrace::camera::Camera;
+use crate::raytrace::footprint::{self, Footprint};
+use crate::raytrace::layers::Frag;
+use crate::raytrace::light::Light;
+use crate::raytrace::tracer::Tracer;
 use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -53,7 +53,7 @@ mod bounce;
 mod directional;
 mod emission;
 mod energy;
-mod gather;
+pub(crate) mod gather;
 mod geometry;
 mod setup;
 mod shading;
@@ -70,82 +70,70 @@ pub use setup::shadow_map;
 use setup::Setup;
 use shading::finish;
 
-#[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
-#[serde(default, deny_unknown_fields)]
-pub struct Params {
-    /// Pinhole or orthographic camera (as `render.mesh`).
-    pub camera: CameraParams,
-    /// The directional light.
-    pub light: LightParams,
-    /// Millimetres per world unit of the mesh (10⁻⁹ to 10⁹: beyond, areas in mm² overflow the
-    /// f32 the GPU sums in).
-    #[schemars(range(min = 1e-9, max = 1e9))]
-    pub mm_per_unit: f64,
-    /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
-    pub spacing: Option<f64>,
-    /// Most irradiance samples (the spacing grows to respect it, with a warning).
-    #[schemars(range(min = 64))]
-    pub max_points: u32,
-    /// Octree criterion ΔA/d² under which a node is one source (CPU); 0 = brute force.
-    #[schemars(range(min = 0.0))]
-    pub threshold: f64,
-    /// Add single scattering (needs the material's σs, g).
-    pub single_scattering: bool,
-    /// Where single scattering happens: `half_space` (default; Hanrahan & Krueger's flat
-    /// semi-infinite medium under each point) or `traced` (along the camera ray inside the mesh
-    /// itself, the light attenuated by the real distance it travels inside: exact at η = 1; at
-    /// η ≠ 1 directions are not bent inside).
-    pub single_scattering_shape: SingleShape,
-    /// Shadow-map the light, so that surface not lit directly receives only light transmitted through the material.
-    pub shadows: bool,
-    /// Shadow map size in texels (square).
-    #[schemars(range(min = 1, max = 16384))]
-    pub shadow_resolution: u32,
-    /// Linear RGB where the mesh is not hit.
-    pub background: [f64; 3],
-    /// Seed of the sample points.
-    pub seed: u64,
-    /// Bounces of light leaving one part of the object and entering another (0 to 8): what a
-    /// concave object's inner sides send each other.
-    #[schemars(range(min = 0, max = 8))]
-    pub bounces: u32,
-    /// `planar` (default): the profile at the straight distance, as on a flat half-space.
-    /// `exit_normal`: scaled by the dipole's flux through the shaded point's own normal, so that
-    /// light passes through thin and curved parts. `directional`: scaled by the directional
-    /// dipole (Frisvad et al. 2014) over its value on a plane lit straight down, for the
-    /// light's incident direction and the shape. `body`: `exit_normal` plus the light the
-    /// object's own boundary lets out elsewhere, from the diffusion equation solved on a grid
-    /// inside the mesh (the mesh must be closed; against a wide slab's closed form it is exact,
-    /// where `exit_normal` transmits 38% too little). All but `planar` run the gather on the
-    /// CPU.
-    pub geometry: Geometry,
-    /// `diffusion` (default): the profile gathered over irradiance samples. `brdf`: the
-    /// profile's total reflectance as a diffuse lobe with the Fresnel transmittances in and out,
-    /// no samples and no gather: right where light scatters less far than a pixel covers.
-    pub mode: Mode,
-    /// `profile` (default): the profile's own total reflectance at every angle. `half_space`:
-    /// each sample's light scaled so that the profile returns what a semi-infinite medium of
-    /// the material reflects at that angle of incidence (Chandrasekhar's H function: exact for
-    /// isotropic scattering behind an index-matched boundary, so η = 1 only; g ≠ 0 through the
-    /// reduced albedo); the multiple scattering alone when `single_scattering` adds the first.
-    pub energy: Energy,
-    /// How the diffuse exitance leaves in angle: `diffuse` (default; Jensen & Buhler's
-    /// Ft(θo)·M/(π(1 − Fdr))), `p1` (diffusion theory's own radiance at the boundary,
-    /// 1 + 3μ′/(2A) inside, refracted out, the same exitance: at η = 1, 1.25× face-on and 0.5×
-    /// at grazing, as the exact half-space's 1.26× and 0.43×) or `half_space` (η = 1 only:
-    /// Chandrasekhar's exact shapes, the pixel's own light as a half-space lit at its incidence,
-    /// the rest as the deep field; the multiple scattering's when `single_scattering` adds the
-    /// first).
-    pub emission: Emission,
-    /// Where the light entering at each sample starts to diffuse: `point` (default; Jensen et
-    /// al. 2001's one source a reduced mean free path under the sample, whatever the light's
-    /// angle) or `beam` (along the refracted light, where its second collisions happen:
-    /// oblique light scatters shallower and sends its multiple scattering less far, as
-    /// transport does; each beam ends where its ray leaves the mesh; the profile still sets
-    /// how much, `beam.rs`). `beam` needs `geometry:
-    /// exit_normal` or `body`, and is meant with a profile of multiple scattering alone
-    /// (`pbd_multiple`) and `single_scattering`.
-    pub sources: Sources,
+crate::view_params! {
+    #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
+    #[serde(default, deny_unknown_fields)]
+    pub struct Params {
+        view { camera, light, mm_per_unit, shadows = true, shadow_resolution, background }
+        /// Irradiance sample spacing in mm; default a quarter of the smallest 1/σtr.
+        pub spacing: Option<f64> = None,
+        /// Most irradiance samples (the spacing grows to respect it, with a warning).
+        #[schemars(range(min = 64))]
+        pub max_points: u32 = 200_000,
+        /// Octree criterion ΔA/d² under which a node is one source (CPU); 0 = brute force.
+        #[schemars(range(min = 0.0))]
+        pub threshold: f64 = 0.05,
+        /// Add single scattering (needs the material's σs, g).
+        pub single_scattering: bool = false,
+        /// Where single scattering happens: `half_space` (default; Hanrahan & Krueger's flat
+        /// semi-infinite medium under each point) or `traced` (along the camera ray inside the mesh
+        /// itself, the light attenuated by the real distance it travels inside: exact at η = 1; at
+        /// η ≠ 1 directions are not bent inside).
+        pub single_scattering_shape: SingleShape = SingleShape::HalfSpace,
+        /// Seed of the sample points.
+        pub seed: u64 = 1,
+        /// Bounces of light leaving one part of the object and entering another (0 to 8): what a
+        /// concave object's inner sides send each other.
+        #[schemars(range(min = 0, max = 8))]
+        pub bounces: u32 = 0,
+        /// `planar` (default): the profile at the straight distance, as on a flat half-space.
+        /// `exit_normal`: scaled by the dipole's flux through the shaded point's own normal, so that
+        /// light passes through thin and curved parts. `directional`: scaled by the directional
+        /// dipole (Frisvad et al. 2014) over its value on a plane lit straight down, for the
+        /// light's incident direction and the shape. `body`: `exit_normal` plus the light the
+        /// object's own boundary lets out elsewhere, from the diffusion equation solved on a grid
+        /// inside the mesh (the mesh must be closed; against a wide slab's closed form it is exact,
+        /// where `exit_normal` transmits 38% too little). All but `planar` run the gather on the
+        /// CPU.
+        pub geometry: Geometry = Geometry::Planar,
+        /// `diffusion` (default): the profile gathered over irradiance samples. `brdf`: the
+        /// profile's total reflectance as a diffuse lobe with the Fresnel transmittances in and out,
+        /// no samples and no gather: right where light scatters less far than a pixel covers.
+        pub mode: Mode = Mode::Diffusion,
+        /// `profile` (default): the profile's own total reflectance at every angle. `half_space`:
+        /// each sample's light scaled so that the profile returns what a semi-infinite medium of
+        /// the material reflects at that angle of incidence (Chandrasekhar's H function: exact for
+        /// isotropic scattering behind an index-matched boundary, so η = 1 only; g ≠ 0 through the
+        /// reduced albedo); the multiple scattering alone when `single_scattering` adds the first.
+        pub energy: Energy = Energy::Profile,
+        /// How the diffuse exitance leaves in angle: `diffuse` (default; Jensen & Buhler's
+        /// Ft(θo)·M/(π(1 − Fdr))), `p1` (diffusion theory's own radiance at the boundary,
+        /// 1 + 3μ′/(2A) inside, refracted out, the same exitance: at η = 1, 1.25× face-on and 0.5×
+        /// at grazing, as the exact half-space's 1.26× and 0.43×) or `half_space` (η = 1 only:
+        /// Chandrasekhar's exact shapes, the pixel's own light as a half-space lit at its incidence,
+        /// the rest as the deep field; the multiple scattering's when `single_scattering` adds the
+        /// first).
+        pub emission: Emission = Emission::Diffuse,
+        /// Where the light entering at each sample starts to diffuse: `point` (default; Jensen et
+        /// al. 2001's one source a reduced mean free path under the sample, whatever the light's
+        /// angle) or `beam` (along the refracted light, where its second collisions happen:
+        /// oblique light scatters shallower and sends its multiple scattering less far, as
+        /// transport does; each beam ends where its ray leaves the mesh; the profile still sets
+        /// how much, `beam.rs`). `beam` needs `geometry:
+        /// exit_normal` or `body`, and is meant with a profile of multiple scattering alone
+        /// (`pbd_multiple`) and `single_scattering`.
+        pub sources: Sources = Sources::Point,
+    }
 }
 
 /// Where the light entering at a sample starts to diffuse.
@@ -179,31 +167,6 @@ pub enum Mode {
     Diffusion,
     /// The profile's total diffuse reflectance, local to each point.
     Brdf,
-}
-
-impl Default for Params {
-    fn default() -> Self {
-        Params {
-            camera: CameraParams::default(),
-            light: LightParams::default(),
-            mm_per_unit: 10.0,
-            spacing: None,
-            max_points: 200_000,
-            threshold: 0.05,
-            single_scattering: false,
-            single_scattering_shape: SingleShape::HalfSpace,
-            shadows: true,
-            shadow_resolution: 1024,
-            background: [0.0; 3],
-            seed: 1,
-            geometry: Geometry::Planar,
-            bounces: 0,
-            mode: Mode::Diffusion,
-            energy: Energy::Profile,
-            emission: Emission::Diffuse,
-            sources: Sources::Point,
-        }
-    }
 }
 
 /// Samples per mesh at least, whatever the spacing.

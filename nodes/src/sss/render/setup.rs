@@ -10,12 +10,13 @@ use super::geometry::{ExitNormal, Geometry};
 use super::{Params, Sources, Weights, MIN_POINTS};
 use crate::geometry::{bounding_sphere, dot, normalize, sub, V3};
 use crate::optics::fresnel;
+use crate::optics::fresnel::transmit_in;
 use crate::progress::Counter;
-use crate::render::camera::Camera;
-use crate::render::layers::{self, Frag};
-use crate::render::light::Light;
-use crate::render::reference::Tracer;
-use crate::render::shade::{shadow_bias, ShadowMap};
+use crate::raytrace::camera::Camera;
+use crate::raytrace::layers::{self, Frag};
+use crate::raytrace::light::Light;
+use crate::raytrace::shadow::{shadow_bias, ShadowMap};
+use crate::raytrace::tracer::Tracer;
 use crate::sss::octree::{Octree, Source};
 use crate::sss::points::{self, SamplePoint};
 use crate::types::{DiffusionProfile, Mesh, ScatteringMaterial};
@@ -156,11 +157,6 @@ pub(super) struct Setup {
     pub(super) exit: Exit,
     /// With `bounces`, the light between parts.
     pub(super) bounced: Option<Bounced>,
-}
-
-/// Transmittance into the medium from outside at cosine `cos` (1 − Fr seen from outside).
-pub(super) fn transmit_in(cos: f64, eta: f64) -> f64 {
-    1.0 - fresnel::reflectance_inside(cos, 1.0 / eta)
 }
 
 impl Setup {

@@ -3,13 +3,14 @@
 
 use super::emission::Local;
 use super::gather::View;
-use super::setup::{irradiance, transmit_in, Setup};
+use super::setup::{irradiance, Setup};
 use super::single::Traced;
 use super::{Params, Weights};
 use crate::geometry::{dot, sub, V3};
+use crate::optics::fresnel::transmit_in;
 use crate::optics::phase::henyey_greenstein;
-use crate::render::light::Light;
-use crate::render::shade::ShadowMap;
+use crate::raytrace::light::Light;
+use crate::raytrace::shadow::ShadowMap;
 use crate::types::{Image, ScatteringMaterial};
 
 /// Radiance and exitance images from the gathered sums.

@@ -14,11 +14,11 @@
 //! distributed as e^(−σt,min t) on [0, T]: deterministic, and no channel's weight exceeds
 //! σs/σt,min.
 
-use super::setup::transmit_in;
 use crate::geometry::{add, dot, mul, V3};
+use crate::optics::fresnel::transmit_in;
 use crate::optics::phase::henyey_greenstein;
-use crate::render::light::Light;
-use crate::render::reference::Tracer;
+use crate::raytrace::light::Light;
+use crate::raytrace::tracer::Tracer;
 use crate::types::ScatteringMaterial;
 
 /// Points along the camera ray inside the object.

@@ -11,7 +11,7 @@
 
 use super::Geometry;
 use crate::geometry::{add, dot, mul, V3};
-use crate::render::reference::Tracer;
+use crate::raytrace::tracer::Tracer;
 use crate::sss::octree::Source;
 use crate::types::ScatteringMaterial;
 

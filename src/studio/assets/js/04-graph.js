@@ -1,0 +1,161 @@
+// ---- rendering --------------------------------------------------------------------------
+function renderAll() {
+  const st = S.state;
+  $("#graph-name").textContent = st.graph + (st.dirty ? " (edited, not saved)" : "");
+  $("#save-button").disabled = !st.dirty;
+  $("#save-button").classList.toggle("primary", st.dirty);
+  const errs = $("#errors");
+  const msgs = [st.load_error, ...st.errors.map(e => e.message)].filter(Boolean);
+  errs.hidden = msgs.length === 0;
+  errs.textContent = [...new Set(msgs)].join("\n");
+  if (msgs.length) setRunState(`${msgs.length} error${msgs.length > 1 ? "s" : ""}`, "invalid");
+  else if (st.running) setRunState("running…", "running");
+  else if (st.report) setRunState(st.report.ok ? "ok" : "failed", st.report.ok ? "ok" : "failed");
+  drawGraph();
+  renderNode();
+  renderCompose();
+  renderSweepForm();
+  renderReport();
+  refreshPreview();
+}
+
+// Layers by longest path from the sources, ordered within a layer by their parents' positions.
+function layout(nodes) {
+  const depth = {}, byId = Object.fromEntries(nodes.map(n => [n.id, n]));
+  const visit = (id, seen = new Set()) => {
+    if (depth[id] !== undefined) return depth[id];
+    if (seen.has(id)) return 0;
+    seen.add(id);
+    const n = byId[id];
+    let d = 0;
+    for (const src of Object.values(n ? n.inputs : {})) {
+      const p = src.split(".")[0];
+      if (byId[p]) d = Math.max(d, visit(p, seen) + 1);
+    }
+    return (depth[id] = d);
+  };
+  nodes.forEach(n => visit(n.id));
+  const layers = [];
+  nodes.forEach(n => (layers[depth[n.id]] = layers[depth[n.id]] || []).push(n));
+  const pos = {}, W = 210, GAP = 70;
+  layers.forEach((layer, li) => {
+    layer.forEach((n, i) => {
+      const parents = Object.values(n.inputs).map(s => pos[s.split(".")[0]]).filter(Boolean);
+      n._order = parents.length ? parents.reduce((a, p) => a + p.y, 0) / parents.length : i * 100;
+    });
+    layer.sort((a, b) => a._order - b._order);
+    let y = 0;
+    for (const n of layer) {
+      const h = 68 + 15 * Math.max(n.ports.length, n.outputs.length);
+      pos[n.id] = { x: li * (W + GAP), y, w: W, h };
+      y += h + 22;
+    }
+  });
+  return pos;
+}
+
+function statusOf(id) {
+  if (S.live[id]) return S.live[id];
+  const r = reportOf(id);
+  if (r) return r.status;
+  const rep = S.state && S.state.report;
+  return rep && rep.skipped.includes(id) ? "skipped" : "stale";
+}
+
+function drawGraph() {
+  if (!S.state) return;
+  const vp = $("#viewport");
+  vp.replaceChildren();
+  const nodes = S.state.nodes;
+  const pos = layout(nodes);
+  S.positions = pos;
+  const portY = (p, i) => p.y + 64 + 15 * i;
+  for (const n of nodes) {
+    n.ports.forEach((port, i) => {
+      const src = n.inputs[port.name];
+      if (!src) return;
+      const [sid, sport] = src.split(".");
+      const s = node(sid), sp = pos[sid];
+      if (!s || !sp) return;
+      const oi = Math.max(0, s.outputs.findIndex(o => o.name === sport));
+      const x1 = sp.x + sp.w, y1 = portY(sp, oi), x2 = pos[n.id].x, y2 = portY(pos[n.id], i);
+      const dx = Math.max(40, (x2 - x1) / 2);
+      vp.append(sv("path", { class: "edge" + (S.selected === n.id || S.selected === sid ? " hot" : ""),
+        d: `M${x1},${y1} C${x1 + dx},${y1} ${x2 - dx},${y2} ${x2},${y2}` }));
+    });
+  }
+  for (const n of nodes) {
+    const p = pos[n.id], status = statusOf(n.id), r = reportOf(n.id);
+    const hasError = S.state.errors.some(e => e.node === n.id);
+    const g = sv("g", { class: `node ${status}${S.selected === n.id ? " selected" : ""}${hasError ? " failed" : ""}`,
+      "data-id": n.id, "data-status": status, transform: `translate(${p.x},${p.y})`,
+      onclick: ev => { ev.stopPropagation(); select(n.id); } });
+    g.append(sv("rect", { class: "body", width: p.w, height: p.h, rx: 6 }));
+    g.append(sv("text", { class: "title", x: 10, y: 18 }, n.id));
+    g.append(sv("text", { class: "kind", x: 10, y: 32 }, n.kind));
+    const stats = r ? `${status} · ${secs(r.seconds)} · ${bytes(r.bytes)}` :
+      status === "skipped" ? "not needed: its dependants were cached" : "not run yet";
+    g.append(sv("text", { class: "stats", x: 10, y: 45 }, stats));
+    n.ports.forEach((port, i) => {
+      g.append(sv("circle", { class: "pin", cx: 0, cy: 64 + 15 * i, r: 3.5 }));
+      g.append(sv("text", { class: "port", x: 8, y: 68 + 15 * i }, port.name));
+    });
+    n.outputs.forEach((o, i) => {
+      g.append(sv("circle", { class: "pin", cx: p.w, cy: 64 + 15 * i, r: 3.5 }));
+      g.append(sv("text", { class: "port", x: p.w - 8, y: 68 + 15 * i, "text-anchor": "end" }, o.name));
+    });
+    if (status === "running") {
+      const f = S.progress[n.id] || 0;
+      g.append(sv("rect", { class: "bar-bg", x: 8, y: p.h - 7, width: p.w - 16, height: 3 }));
+      g.append(sv("rect", { class: "bar", x: 8, y: p.h - 7, width: (p.w - 16) * f, height: 3 }));
+    }
+    vp.append(g);
+  }
+  if (!S.fitted) fitView();
+  applyView();
+}
+// Scales and moves the graph so that all of it is in sight (at most life size).
+function fitView() {
+  const box = $("#graph").getBoundingClientRect(), ps = Object.values(S.positions || {});
+  if (!ps.length || !box.width) return;
+  const w = Math.max(...ps.map(p => p.x + p.w)), h = Math.max(...ps.map(p => p.y + p.h));
+  const k = Math.min(1, (box.width - 40) / w, (box.height - 50) / h);
+  S.view = { k, x: 20, y: 20 };
+  S.fitted = true;
+}
+function applyView() {
+  $("#viewport").setAttribute("transform", `translate(${S.view.x},${S.view.y}) scale(${S.view.k})`);
+}
+function setupPanZoom() {
+  const svg = $("#graph");
+  let drag = null;
+  svg.addEventListener("mousedown", e => { drag = { x: e.clientX, y: e.clientY, vx: S.view.x, vy: S.view.y }; svg.classList.add("panning"); });
+  window.addEventListener("mousemove", e => {
+    if (!drag) return;
+    S.view.x = drag.vx + e.clientX - drag.x; S.view.y = drag.vy + e.clientY - drag.y; applyView();
+  });
+  window.addEventListener("mouseup", () => { drag = null; svg.classList.remove("panning"); });
+  svg.addEventListener("wheel", e => {
+    e.preventDefault();
+    const r = svg.getBoundingClientRect(), mx = e.clientX - r.left, my = e.clientY - r.top;
+    const k = Math.min(3, Math.max(0.2, S.view.k * Math.exp(-e.deltaY * 0.0015)));
+    S.view.x = mx - (mx - S.view.x) * k / S.view.k; S.view.y = my - (my - S.view.y) * k / S.view.k;
+    S.view.k = k; applyView();
+  }, { passive: false });
+  svg.addEventListener("dblclick", () => { fitView(); applyView(); });
+}
+
+function select(id) {
+  if (S.selected !== id) { S.preview.port = null; S.preview.pair = null; }
+  S.selected = id;
+  drawGraph();
+  renderNode();
+  refreshPreview();
+}
+
+function showTab(name) {
+  S.tab = name;
+  document.querySelectorAll("#tabs button").forEach(b => b.classList.toggle("active", b.dataset.tab === name));
+  document.querySelectorAll(".tab").forEach(t => t.classList.toggle("active", t.id === "tab-" + name));
+  if (name === "preview") refreshPreview();
+}
