@@ -332,9 +332,9 @@ impl Weights for Qh<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::primitive::{self, Shape};
     use crate::raytrace::camera::CameraParams;
     use crate::raytrace::light::LightParams;
-    use crate::mesh::primitive::{self, Shape};
     use crate::sss::profile;
     use crate::types::{Direction, DirectionPair};
 

@@ -457,9 +457,9 @@ fn sample(img: &Image, u: f64, v: f64) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::primitive::{self, Shape};
     use crate::raytrace::camera::CameraParams;
     use crate::raytrace::light::LightParams;
-    use crate::mesh::primitive::{self, Shape};
     use mesoflow_testkit::node::OutputsExt;
     use std::f64::consts::PI;
     use std::sync::Arc;

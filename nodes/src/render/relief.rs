@@ -455,10 +455,10 @@ pub fn render_cpu(scene: &Relief, cam: &Camera, watch: &Counter) -> (Vec<f32>, V
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raytrace::camera::CameraParams;
-    use crate::raytrace::light::LightParams;
     use crate::btf::capture::{self, Capture};
     use crate::btf::directions::DirectionSet;
+    use crate::raytrace::camera::CameraParams;
+    use crate::raytrace::light::LightParams;
     use crate::types::Btf;
     use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;

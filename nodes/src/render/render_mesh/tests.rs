@@ -1,10 +1,10 @@
 //! Tests of `render_mesh`.
 
 use super::*;
-use crate::raytrace::camera::CameraParams;
-use crate::raytrace::light::LightParams;
 use crate::btf::directions::DirectionSet;
 use crate::mesh::primitive::{build, Params as MeshParams, Shape};
+use crate::raytrace::camera::CameraParams;
+use crate::raytrace::light::LightParams;
 use crate::types::{Direction, DirectionPair, HeightField};
 use mesoflow_testkit::node::OutputsExt;
 use std::sync::Arc;

@@ -2,11 +2,11 @@
 
 use super::shading::single_scattering;
 use super::*;
-use crate::raytrace::camera::CameraParams;
-use crate::raytrace::light::LightParams;
 use crate::mesh::primitive::{self, Shape};
 use crate::optics::fresnel;
 use crate::optics::fresnel::transmit_in;
+use crate::raytrace::camera::CameraParams;
+use crate::raytrace::light::LightParams;
 use crate::sss::profile::{self as prof, Model};
 use std::f64::consts::PI;
 
