@@ -76,6 +76,8 @@ fn nan_exr() -> Vec<u8> {
 
 struct Outcome {
     code: Option<i32>,
+    /// The signal that ended the process, where one did (an abort, a crash).
+    signal: Option<i32>,
     output: String,
     hung: bool,
 }
@@ -127,6 +129,10 @@ fn run_case(dir: &Path, name: &str, text: &str, env: &serde_json::Map<String, Va
     }
     Outcome {
         code: status.and_then(|s| s.code()),
+        signal: status.and_then(|s| {
+            use std::os::unix::process::ExitStatusExt;
+            s.signal()
+        }),
         output,
         hung: status.is_none(),
     }
@@ -161,8 +167,8 @@ fn every_hostile_input_gets_its_clear_error() {
         } else if panicked || o.code.is_none() {
             panics += 1;
             wrong.push(format!(
-                "{name}: panic or abort ({:?}): {}",
-                o.code, o.output
+                "{name}: panic or abort (exit {:?}, signal {:?}): {}",
+                o.code, o.signal, o.output
             ));
         } else if o.code != Some(want_code) || !o.output.contains(want) {
             wrong.push(format!(

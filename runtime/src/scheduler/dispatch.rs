@@ -59,6 +59,11 @@ pub(crate) fn run_all(
     let mut ready: BTreeSet<usize> = (0..n).filter(|&i| compute[i] && waiting[i] == 0).collect();
     let (tx, rx) = mpsc::channel::<Done>();
     let gpu_lane = Arc::new(Mutex::new(()));
+    // Joined before the run returns: a GPU thread still dropping its task (and with it a handle
+    // on the device) after the run has reported would race the process's exit and the driver's
+    // exit handlers (CI once saw `mesoflow run` die of a signal after a complete report, on
+    // lavapipe).
+    let mut gpu_threads = Vec::new();
     let mut running = 0usize;
     loop {
         while !opts.cancel.load(Ordering::Relaxed) {
@@ -150,10 +155,10 @@ pub(crate) fn run_all(
                 // The GPU lane: GPU nodes submit to the one device one at a time, off the rayon
                 // pool so CPU nodes keep running beside them.
                 let lane = gpu_lane.clone();
-                std::thread::spawn(move || {
+                gpu_threads.push(std::thread::spawn(move || {
                     let _guard = lane.lock().unwrap_or_else(|e| e.into_inner());
                     task.run();
-                });
+                }));
             } else {
                 rayon::spawn(move || task.run());
             }
@@ -224,6 +229,11 @@ pub(crate) fn run_all(
         if let Some(slot) = slots[i].as_mut() {
             slot.report = Some(report);
         }
+    }
+    for t in gpu_threads {
+        // A panic inside a node was caught and reported by `Task::run`; one in the thread's own
+        // tear-down has nothing left to report.
+        let _ = t.join();
     }
     Executed { files, adapter }
 }
