@@ -159,6 +159,21 @@ mod tests {
     }
 
     #[test]
+    fn pbd_counts_too_much_light_without_absorption() {
+        // Without absorption and with a matched boundary every photon that enters leaves through
+        // the surface: the exact total diffuse reflectance is 1 (energy conservation, not a
+        // figure of this code). PBD's κ does not remove all the single scattering it counts
+        // twice; the guide quotes its total as 1.09. Bounds: ±0.01 around it, the quoted
+        // figure's rounding (the quadrature above is good to a few 1e-3).
+        let m = Medium::new(1.0, 0.0, 0.0, 1.0);
+        let total = integrate(|r| m.pbd(r));
+        assert!(
+            (total - 1.09).abs() < 0.01,
+            "PBD total at α′ = 1, η = 1: {total}"
+        );
+    }
+
+    #[test]
     fn low_index_and_no_absorption_stay_finite() {
         for eta in [0.7, 1.0, 1.3, 2.0] {
             for (s, a) in [(1.0, 0.0), (1e-9, 1.0), (1.0, 1e-12)] {
