@@ -212,27 +212,9 @@ fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
     let g = root.join("graphs/quickstart.json");
     let cache = s.path("cache");
     let go = |out: &str, device: &str| {
-        let out_dir = s.path(out);
-        let r = mesoflow(
-            &[
-                "run",
-                g.to_str().unwrap(),
-                "--quiet",
-                "--set",
-                "surface.size=16",
-                "--device",
-                device,
-                "--output",
-                "normals.rms_slope",
-                "--cache-dir",
-                cache.to_str().unwrap(),
-                "--out-dir",
-                out_dir.to_str().unwrap(),
-            ],
-            root,
-        );
-        assert_eq!(r.code, 0, "{}", r.stderr);
-        report(&out_dir)
+        let (code, stderr, rep) = normals_on(&s, &g, &cache, out, device);
+        assert_eq!(code, 0, "{stderr}");
+        rep
     };
     let cpu = go("cpu", "cpu");
     let cpu_again = go("cpu2", "cpu");
@@ -245,13 +227,14 @@ fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
         assert_eq!(statuses(&auto)["normals"], "disk");
     }
     // `--device gpu`, not `auto`: auto passes over a software adapter such as CI's lavapipe.
-    let Some(gpu) = go_gpu(&s, &g, &cache) else {
+    let (code, _, gpu) = normals_on(&s, &g, &cache, "gpu", "gpu");
+    if code != 0 {
         mesoflow_testkit::skip_unless_required(
             "MESOFLOW_REQUIRE_GPU",
             "no GPU adapter: the GPU half (its own key) did not run",
         );
         return;
-    };
+    }
     assert_eq!(per_node(&gpu, "device")["normals"], "gpu", "{gpu}");
     assert_ne!(keys(&cpu)["normals"], keys(&gpu)["normals"]);
     assert_eq!(statuses(&gpu)["normals"], "computed");
@@ -259,9 +242,15 @@ fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
     assert_eq!(statuses(&gpu)["surface"], "disk");
 }
 
-/// The quickstart's normals on the GPU into `cache`, or `None` where no adapter exists.
-fn go_gpu(s: &Scratch, g: &Path, cache: &Path) -> Option<serde_json::Value> {
-    let out_dir = s.path("gpu");
+/// The quickstart's normals on `device` into `cache`: the exit code, stderr and the report.
+fn normals_on(
+    s: &Scratch,
+    g: &Path,
+    cache: &Path,
+    out: &str,
+    device: &str,
+) -> (i32, String, serde_json::Value) {
+    let out_dir = s.path(out);
     let r = mesoflow(
         &[
             "run",
@@ -270,7 +259,7 @@ fn go_gpu(s: &Scratch, g: &Path, cache: &Path) -> Option<serde_json::Value> {
             "--set",
             "surface.size=16",
             "--device",
-            "gpu",
+            device,
             "--output",
             "normals.rms_slope",
             "--cache-dir",
@@ -280,7 +269,12 @@ fn go_gpu(s: &Scratch, g: &Path, cache: &Path) -> Option<serde_json::Value> {
         ],
         Path::new(env!("CARGO_MANIFEST_DIR")),
     );
-    (r.code == 0).then(|| report(&out_dir))
+    let rep = if r.code == 0 {
+        report(&out_dir)
+    } else {
+        serde_json::Value::Null
+    };
+    (r.code, r.stderr, rep)
 }
 
 #[test]

@@ -31,6 +31,9 @@ pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyho
     loop {
         let last_code;
         let mut watched = vec![args.graph.clone()];
+        // The graph's state as loaded: an edit saved while the run is under way is then seen
+        // as a change afterwards instead of becoming the baseline.
+        let mut before = fingerprint(&watched);
         match load::load(&args.graph, &args.set, runner.engine.registry()) {
             Ok(graph) => {
                 let report = runner.run_once(&graph, &runner.base.out_dir)?;
@@ -50,7 +53,9 @@ pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyho
                         reran.join(", ")
                     }
                 );
-                watched.extend(report.read.iter().map(PathBuf::from));
+                let read: Vec<PathBuf> = report.read.iter().map(PathBuf::from).collect();
+                before.extend(fingerprint(&read));
+                watched.extend(read);
             }
             Err(e) => {
                 last_code = crate::exit::code_of(&e);
@@ -65,7 +70,6 @@ pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyho
             "[watch] waiting for changes to {} files (Ctrl-C to stop)",
             watched.len()
         );
-        let before = fingerprint(&watched);
         loop {
             std::thread::sleep(Duration::from_millis(interval_ms));
             if runner.base.cancel.load(Ordering::Relaxed) {

@@ -105,10 +105,13 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
     Ok(crate::exit::CANCELLED)
 }
 
-/// Reloads the graph when an editor changes its file (as `watch` does, by content).
+/// Reloads the graph when an editor changes its file (as `watch` does, by content). It starts
+/// from the text the studio loaded, not from a first read of its own: an edit made between the
+/// load and this thread's first turn (the URL is printed, a client may already write) would
+/// otherwise become the baseline and never be picked up.
 fn watch_file(studio: Arc<Studio>, interval: Duration) {
     let quit = crate::interrupt::cancel_flag();
-    let mut last = std::fs::read(&studio.graph_path).ok();
+    let mut last = Some(studio.doc().disk_text.clone().into_bytes());
     while !quit.load(Ordering::Relaxed) {
         std::thread::sleep(interval);
         let now = std::fs::read(&studio.graph_path).ok();
