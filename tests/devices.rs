@@ -207,3 +207,83 @@ fn auto_passes_over_a_software_vulkan_adapter_and_device_gpu_takes_it() {
         "{w:?}"
     );
 }
+
+/// A warm run keys its GPU nodes from the probe remembered in the disk cache
+/// (`gpu-probe.json`) instead of loading a driver, and a remembered probe that no longer holds
+/// is caught before anything is computed under it: the graph is keyed again from the live one.
+#[test]
+fn a_warm_run_keys_gpu_nodes_from_the_remembered_probe_and_a_stale_one_is_caught() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let cache = s.path("cache");
+    let memo = cache.join("gpu-probe.json");
+    let go = |out: &str, device: &str| {
+        let (r, rep) = run(
+            &s,
+            &g,
+            out,
+            &[
+                "--cache-dir",
+                cache.to_str().unwrap(),
+                "--device",
+                device,
+                "--output",
+                "normals.rms_slope",
+            ],
+        );
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        rep
+    };
+    let node = |rep: &serde_json::Value, field: &str| per_node(rep, field)["normals"].clone();
+    // The first auto run probes and remembers what it found.
+    let first = go("first", "auto");
+    let written: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&memo).expect("the probe is remembered")).unwrap();
+    let live = written["found"].clone();
+    let plant = |found: serde_json::Value| {
+        let mut m = written.clone();
+        m["found"] = found;
+        std::fs::write(&memo, m.to_string()).unwrap();
+    };
+
+    // A remembered probe that no longer holds, naming the path the live one does not take:
+    // the normals would be computed under that path's key, so the live probe is asked first,
+    // disagrees, and the run is keyed again.
+    let imagined_gpu = serde_json::json!({ "hardware": "an imagined GPU, Vulkan" });
+    let imagined_software = serde_json::json!({ "software": "an imagined software adapter" });
+    plant(if live.get("hardware").is_some() {
+        imagined_software.clone()
+    } else {
+        imagined_gpu
+    });
+    let stale = go("stale", "auto");
+    let after: serde_json::Value = serde_json::from_slice(&std::fs::read(&memo).unwrap()).unwrap();
+    assert_eq!(
+        after["found"], live,
+        "the memo is rewritten from the live probe"
+    );
+    let w = stale["warnings"].as_array().unwrap();
+    assert!(
+        w.iter()
+            .any(|w| w["message"].as_str().unwrap().contains("no longer holds")),
+        "{w:?}"
+    );
+    // Keyed from the live probe, the run is the first run again, served from the cache.
+    assert_eq!(node(&stale, "key"), node(&first, "key"));
+    assert_eq!(node(&stale, "status"), "disk");
+
+    // A remembered software adapter keys the CPU path, which `--device cpu` has cached: the
+    // value is served and the memo is left as planted, so nothing probed the driver.
+    let cpu = go("cpu", "cpu");
+    plant(imagined_software.clone());
+    let warm = go("warm", "auto");
+    assert_eq!(node(&warm, "status"), "disk");
+    assert_eq!(node(&warm, "device"), "cpu");
+    assert_eq!(node(&warm, "key"), node(&cpu, "key"));
+    let after: serde_json::Value = serde_json::from_slice(&std::fs::read(&memo).unwrap()).unwrap();
+    assert_eq!(
+        after["found"], imagined_software,
+        "the remembered probe was not used"
+    );
+}

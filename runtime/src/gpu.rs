@@ -1,6 +1,8 @@
 //! The wgpu device shared by a run (and by every run of one engine), created on first use so a
 //! graph without GPU nodes never touches the GPU.
 
+use crate::gpu_memo::{self, Found};
+use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
 pub struct Gpu {
@@ -104,5 +106,31 @@ impl GpuProvider {
         self.cell
             .get_or_init(|| Gpu::create().map(Arc::new))
             .clone()
+    }
+
+    /// What the live probe finds (creating the device on first call).
+    pub fn found_live(&self) -> Found {
+        match self.get() {
+            Ok(g) if g.is_software() => Found::Software(g.describe()),
+            Ok(g) => Found::Hardware(g.describe()),
+            Err(e) => Found::Missing(e),
+        }
+    }
+
+    /// What a GPU node can count on, and whether it is remembered rather than probed: the live
+    /// device once this engine has one, else the memo in `memo_dir` while it holds (no driver
+    /// is loaded), else the live probe, remembered there for the next run.
+    pub fn found(&self, memo_dir: Option<&Path>) -> (Found, bool) {
+        if self.cell.get().is_some() {
+            return (self.found_live(), false);
+        }
+        if let Some(found) = memo_dir.and_then(gpu_memo::read) {
+            return (found, true);
+        }
+        let found = self.found_live();
+        if let Some(dir) = memo_dir {
+            gpu_memo::write(dir, &found);
+        }
+        (found, false)
     }
 }

@@ -8,6 +8,7 @@ pub mod cache;
 pub mod codec;
 pub mod engine;
 pub mod gpu;
+pub mod gpu_memo;
 pub mod key;
 pub mod node;
 pub mod producer;

@@ -7,21 +7,23 @@
 //! node that finds no adapter at all fail instead of falling back.
 
 use crate::engine::{DeviceMode, Engine, RunOptions};
-use crate::gpu::Gpu;
+use crate::gpu_memo::Found;
 use mesoflow_graph::DevicePreference;
-use std::sync::Arc;
 
 pub(crate) struct Choice {
-    /// `Some` to run on the GPU lane, `None` for the CPU path.
-    pub gpu: Option<Arc<Gpu>>,
+    /// The GPU lane (the device is taken from the engine when the node runs), or the CPU path.
+    pub gpu: bool,
     /// Why a GPU node took its CPU path (a warning for the report).
     pub fallback: Option<String>,
+    /// The remembered probe it was chosen from (the disk cache's memo, not a live device): the
+    /// scheduler confirms it before computing such a node (see [`crate::gpu_memo`]).
+    pub remembered: Option<Found>,
 }
 
 impl Choice {
     /// `"gpu"` or `"cpu"`: the path taken, as keys and reports name it.
     pub fn path(&self) -> &'static str {
-        if self.gpu.is_some() {
+        if self.gpu {
             "gpu"
         } else {
             "cpu"
@@ -37,36 +39,64 @@ fn planned(pref: DevicePreference, mode: DeviceMode) -> DevicePreference {
     }
 }
 
+/// Where the probe is remembered: the disk cache, when this run uses it.
+pub(crate) fn memo_dir<'a>(engine: &'a Engine, opts: &RunOptions) -> Option<&'a std::path::Path> {
+    engine
+        .disk
+        .as_ref()
+        .filter(|_| opts.use_cache)
+        .map(|d| d.dir())
+}
+
 /// `Err` when a GPU was required (`--device gpu`, `MESOFLOW_REQUIRE_GPU=1`) and none can be had.
 pub(crate) fn choose(
     engine: &Engine,
     pref: DevicePreference,
     opts: &RunOptions,
 ) -> Result<Choice, String> {
-    let cpu = |fallback| Choice {
-        gpu: None,
-        fallback,
-    };
     if planned(pref, opts.device) == DevicePreference::Cpu {
-        return Ok(cpu(None));
-    }
-    match engine.gpu.get() {
-        Ok(gpu) if opts.device == DeviceMode::Auto && gpu.is_software() => {
-            let why = format!(
-                "the only GPU adapter is {}: a software adapter runs this node slower than the CPU \
-                 path; ran the CPU path (--device gpu forces it)",
-                gpu.describe()
-            );
-            Ok(cpu(Some(why)))
-        }
-        Ok(gpu) => Ok(Choice {
-            gpu: Some(gpu),
+        return Ok(Choice {
+            gpu: false,
             fallback: None,
-        }),
-        Err(e) if opts.device == DeviceMode::Gpu => Err(format!("{e} (--device gpu)")),
-        Err(e) if opts.require_gpu => Err(format!(
+            remembered: None,
+        });
+    }
+    let (found, remembered) = engine.gpu.found(memo_dir(engine, opts));
+    let choice = |gpu, fallback| Choice {
+        gpu,
+        fallback,
+        remembered: remembered.then(|| found.clone()),
+    };
+    match found.clone() {
+        Found::Software(adapter) if opts.device == DeviceMode::Auto => {
+            let why = format!(
+                "the only GPU adapter is {adapter}: a software adapter runs this node slower than \
+                 the CPU path; ran the CPU path (--device gpu forces it)"
+            );
+            Ok(choice(false, Some(why)))
+        }
+        Found::Software(_) | Found::Hardware(_) => Ok(choice(true, None)),
+        Found::Missing(e) if opts.device == DeviceMode::Gpu => Err(format!("{e} (--device gpu)")),
+        Found::Missing(e) if opts.require_gpu => Err(format!(
             "{e} (MESOFLOW_REQUIRE_GPU=1 forbids the CPU fallback)"
         )),
-        Err(_) => Ok(cpu(Some("no GPU adapter; ran the CPU path".into()))),
+        Found::Missing(_) => Ok(choice(
+            false,
+            Some("no GPU adapter; ran the CPU path".into()),
+        )),
     }
+}
+
+/// Before a GPU node chosen from a remembered probe is computed: does the live probe agree?
+/// When it does not, the memo is rewritten and the caller keys the graph again (now from the
+/// live device), so no value is computed under a path its key does not name.
+pub(crate) fn confirm(engine: &Engine, opts: &RunOptions, remembered: &Found) -> bool {
+    let live = engine.gpu.found_live();
+    if *remembered == live {
+        return true;
+    }
+    if let Some(dir) = memo_dir(engine, opts) {
+        crate::gpu_memo::write(dir, &live);
+    }
+    false
 }

@@ -115,7 +115,10 @@ pub(crate) fn run_all(
                 sink.push(&cn.id, why);
             }
             let device = choice.as_ref().map_or("cpu", |c| c.path());
-            let gpu = choice.and_then(|c| c.gpu);
+            // The device itself is created here, at the first GPU node that computes: a run
+            // whose GPU nodes are all cached never loads a driver. The path came from this same
+            // device or from a remembered probe confirmed before dispatch, so it is there.
+            let gpu = (device == "gpu").then(|| engine.gpu.get().ok()).flatten();
             if let Some(g) = &gpu {
                 adapter.get_or_insert_with(|| g.describe());
             }

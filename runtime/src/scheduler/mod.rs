@@ -142,9 +142,30 @@ pub(crate) fn execute(
     let plan = plan::Plan::new(graph, opts);
     let keying::Keyed {
         mut slots,
-        read_files,
+        mut read_files,
     } = keying::key_all(engine, graph, &plan, opts);
-    let compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
+    let mut compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
+    // A GPU node keyed from the probe remembered in the disk cache and about to be computed:
+    // the live probe must agree first, or the graph is keyed again from the live device.
+    let remembered = (0..slots.len()).find_map(|i| {
+        let choice = slots[i].as_ref()?.device.as_ref()?;
+        compute[i]
+            .then(|| choice.remembered.clone().map(|f| (i, f)))
+            .flatten()
+    });
+    if let Some((i, found)) = remembered {
+        if !device::confirm(engine, opts, &found) {
+            sink.push(
+                &graph.nodes[i].id,
+                format!(
+                    "the GPU probe remembered in the cache ({found:?}) no longer holds: keyed \
+                     again from the live one"
+                ),
+            );
+            keying::Keyed { slots, read_files } = keying::key_all(engine, graph, &plan, opts);
+            compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
+        }
+    }
 
     // Cache hits write their files now; a hit whose files cannot be written fails like a node.
     let mut files = Vec::new();
