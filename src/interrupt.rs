@@ -77,8 +77,7 @@ fn write_abandoned_report() {
         read: Vec::new(),
     };
     if let Ok(text) = serde_json::to_string_pretty(&report) {
-        let _ = std::fs::create_dir_all(&run.out_dir);
-        let _ = std::fs::write(run.out_dir.join("report.json"), text + "\n");
+        let _ = mesoflow_runtime::write_atomic(&run.out_dir.join("report.json"), text + "\n");
     }
 }
 

@@ -202,7 +202,7 @@ fn write_csv(
         cells.push(r.ok.to_string());
         writeln!(out, "{}", cells.join(",")).map_err(std::io::Error::other)?;
     }
-    std::fs::write(path, out)?;
+    mesoflow_runtime::write_atomic(path, out)?;
     Ok(())
 }
 

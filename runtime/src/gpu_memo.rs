@@ -139,13 +139,7 @@ pub fn write(dir: &Path, found: &Found) {
     let Ok(text) = serde_json::to_vec_pretty(&memo) else {
         return;
     };
-    if std::fs::create_dir_all(dir).is_err() {
-        return;
-    }
-    let tmp = dir.join(format!("{FILE}.{}.tmp", std::process::id()));
-    if std::fs::write(&tmp, text).is_ok() && std::fs::rename(&tmp, dir.join(FILE)).is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
+    let _ = crate::atomic_file::write_atomic(&dir.join(FILE), text);
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@
 //! The runtime knows no algorithm and no domain type: values reach it as [`Value`] trait objects
 //! that report their type name and size and encode themselves for the disk cache.
 
+pub mod atomic_file;
 pub mod cache;
 pub mod codec;
 pub mod engine;
@@ -18,6 +19,7 @@ pub mod report;
 mod scheduler;
 pub mod value;
 
+pub use atomic_file::write_atomic;
 pub use engine::{
     DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, RunOutcome, SilentObserver,
     NOT_IN_CACHE,

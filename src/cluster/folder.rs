@@ -55,18 +55,7 @@ pub struct Folder {
     pub dir: PathBuf,
 }
 
-/// Writes through a temporary file and a rename, so a reader sees the whole file or none.
-pub fn write_atomic(path: &Path, text: &str) -> std::io::Result<()> {
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent)?;
-    }
-    let tmp = path.with_extension(format!(
-        "{}.tmp",
-        mesoflow_runtime::producer::unique_suffix(0)
-    ));
-    std::fs::write(&tmp, text)?;
-    std::fs::rename(&tmp, path)
-}
+pub use mesoflow_runtime::write_atomic;
 
 fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Option<T> {
     let text = std::fs::read_to_string(path).ok()?;

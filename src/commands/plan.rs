@@ -167,8 +167,6 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
 }
 
 fn write(path: &std::path::Path, text: &str) -> anyhow::Result<()> {
-    if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)?;
-    }
-    std::fs::write(path, text).map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))
+    mesoflow_runtime::write_atomic(path, text)
+        .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))
 }

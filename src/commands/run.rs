@@ -247,7 +247,8 @@ pub fn write_report(report: &RunReport, out_dir: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
     let path = out_dir.join("report.json");
     let text = serde_json::to_string_pretty(report)?;
-    std::fs::write(&path, text + "\n").with_context(|| format!("writing {}", path.display()))?;
+    mesoflow_runtime::write_atomic(&path, text + "\n")
+        .with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
 

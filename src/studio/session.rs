@@ -343,9 +343,7 @@ impl Studio {
         let text = mesoflow_graph::source_edit::rewrite(&doc.disk_text, disk, &doc.file);
         let changed = text != doc.disk_text;
         if changed {
-            let tmp = self.graph_path.with_extension("json.studio-tmp");
-            std::fs::write(&tmp, &text)
-                .and_then(|()| std::fs::rename(&tmp, &self.graph_path))
+            mesoflow_runtime::write_atomic(&self.graph_path, &text)
                 .map_err(|e| format!("cannot write {}: {e}", self.graph_path.display()))?;
         }
         doc.disk = Some(doc.file.clone());

@@ -30,28 +30,12 @@ pub(crate) fn write_artifacts(outputs: &Outputs, out_dir: &Path) -> Result<Vec<S
             .is_ok_and(|m| m.is_file() && m.len() == a.bytes.len() as u64)
             && std::fs::read(&path).is_ok_and(|b| b == a.bytes);
         if !unchanged {
-            write_atomically(&path, &a.bytes)
+            crate::atomic_file::write_atomic(&path, &a.bytes)
                 .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
         }
         written.push(path.display().to_string());
     }
     Ok(written)
-}
-
-fn write_atomically(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    if let Some(parent) = path.parent() {
-        std::fs::create_dir_all(parent)?;
-    }
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    let result = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 #[cfg(test)]
