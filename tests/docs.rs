@@ -117,16 +117,19 @@ fn every_relative_link_of_the_readme_and_the_guide_leads_to_a_file() {
     }
 }
 
-/// The `mesoflow …` command lines of a page's `sh` blocks, continuation lines joined.
+/// The `mesoflow …` command lines of a page's `sh` blocks, continuation lines joined, comments
+/// and what the shell adds (`> file`, `| other`) cut off, spaces made single.
 fn commands(text: &str) -> Vec<String> {
     let mut out = Vec::new();
     for block in text.split("```sh\n").skip(1) {
         let block = block.split("```").next().unwrap_or("");
         let joined = block.replace("\\\n", " ");
         for line in joined.lines() {
-            let line = line.split(" #").next().unwrap_or("").trim();
-            if let Some(rest) = line.strip_prefix("mesoflow ") {
-                out.push(rest.to_string());
+            let line = line.split(" #").next().unwrap_or("");
+            let line = line.split(['>', '|']).next().unwrap_or("");
+            let words: Vec<&str> = line.split_whitespace().collect();
+            if words.first() == Some(&"mesoflow") {
+                out.push(words[1..].join(" "));
             }
         }
     }
@@ -208,4 +211,323 @@ fn every_command_the_guide_shows_names_a_subcommand_and_graphs_that_validate() {
         checked >= 10,
         "only {checked} commands with a shipped graph were checked"
     );
+}
+
+/// How the guide's test runs a command the guide shows.
+enum How {
+    /// As written, in a scratch folder holding a copy of `graphs/` and `my.json` (the
+    /// quickstart, as getting-started.md says), every page's commands in the page's order.
+    AsWritten,
+    /// As written, in the slow tier: it takes minutes here (the time measured, in the reason).
+    Slow(&'static str),
+    /// As written with these arguments added, for the reason given.
+    With(&'static [&'static str], &'static str),
+    /// `mesoflow serve` as written plus `--port 0`: it must start and serve the page.
+    Serve,
+    /// Not run here, for the reason given; the named test runs what it shows.
+    By(&'static str, &'static str),
+}
+
+/// Every command the README and the guide show, as `commands` reads them, and how it is run.
+/// A command missing here fails the test, and so does an entry the pages no longer show.
+const GUIDE_COMMANDS: &[(&str, How)] = &[
+    ("run graphs/btf_compress.json", How::AsWritten),
+    (
+        "run graphs/btf_compress.json --set pca.rank=4",
+        How::AsWritten,
+    ),
+    (
+        "run graphs/btf_compress.json --output pca.rmse",
+        How::AsWritten,
+    ),
+    (
+        "sweep graphs/btf_compress.json --vary pca.rank=1,2,4,8 --measure pca.rmse",
+        How::AsWritten,
+    ),
+    (
+        "plan graphs/mdf_render.json --render torus_mdf --budget flip=0.05",
+        How::AsWritten,
+    ),
+    (
+        "sweep graphs/btf_compress.json --set surface.size=128 --vary pca.rank=1,2,4,8,16 \
+         --vary pca.solver=exact,randomized --vary pca.layout=texels,per_view --measure pca.rmse \
+         --measure pca.compression_ratio --out-dir docs/sweeps/btf_pca",
+        How::AsWritten,
+    ),
+    (
+        "sweep graphs/btf_compress.json --vary pca.rank=1,2,4,8,16,32 --measure pca.rmse \
+         --engine slurm --cache-dir /shared/mesoflow-cache --sbatch-args '--partition gpu \
+         --gres gpu:1 --time 30' --max-queued 32 --retries 2",
+        How::By(
+            "slurm::a_sweep_on_two_workers_writes_what_a_local_sweep_writes",
+            "needs a Slurm cluster with a shared /shared folder",
+        ),
+    ),
+    (
+        "status out/btf_compress-sweep/cluster",
+        How::By(
+            "slurm::status_follows_a_run_and_cancel_stops_it",
+            "follows a cluster run, which needs Slurm",
+        ),
+    ),
+    (
+        "cancel out/btf_compress-sweep/cluster",
+        How::By(
+            "slurm::status_follows_a_run_and_cancel_stops_it",
+            "stops a cluster run, which needs Slurm",
+        ),
+    ),
+    (
+        "cache gc --cache-dir /shared/mesoflow-cache --max-bytes 500G --older-than 30d",
+        How::By(
+            "cache::cache_gc_keeps_what_was_used_recently_and_fits_the_budget",
+            "would act on this machine's /shared, never a test's to touch",
+        ),
+    ),
+    ("nodes", How::AsWritten),
+    ("validate my.json", How::AsWritten),
+    (
+        "run my.json --set surface.size=512 --output normals.rms_slope",
+        How::AsWritten,
+    ),
+    (
+        "watch my.json",
+        How::With(&["--max-runs", "1"], "it re-runs until Ctrl-C"),
+    ),
+    ("serve my.json", How::Serve),
+    (
+        "sweep my.json --vary normals.scale=0.5,1,2,4 --vary surface.pattern=noise,cells \
+         --measure normals.rms_slope",
+        How::AsWritten,
+    ),
+    ("dot my.json --report out/my/report.json", How::AsWritten),
+    ("schema", How::AsWritten),
+    ("cache stats", How::AsWritten),
+    ("cache gc --max-bytes 20G --older-than 30d", How::AsWritten),
+    ("cache clear", How::AsWritten),
+    (
+        "sweep graphs/mdf_render.json --vary pca.rank=4,8,16,32 --vary lod.level=0,2 \
+         --vary torus_mdf.use_mdf=false,true --set torus_mdf.frames=5 --measure error.rmse \
+         --measure torus_mdf.frame_ms --measure torus_reference.frame_ms \
+         --versus torus_mdf.frame_ms --out-dir out/mdf_sweep",
+        How::Slow("16 renders of the torus with their references, 97 s here"),
+    ),
+    (
+        "plan graphs/plan_verify.json --render btf_view --budget flip=0.05 -o out/plan/step.json",
+        How::AsWritten,
+    ),
+    (
+        "plan out/plan/step.json --render sss_view --budget flip=0.05 -o out/plan/planned.json",
+        How::AsWritten,
+    ),
+    ("run out/plan/planned.json", How::AsWritten),
+    ("serve graphs/mdf_render.json", How::Serve),
+    (
+        "sweep graphs/sss_models.json --vary material.preset=apple,chicken1,chicken2,cream,\
+         ketchup,marble,potato,skimmilk,skin1,skin2,spectralon,wholemilk --vary \
+         profile.model=dipole,better_dipole,pbd --measure error.total_error_r --measure \
+         error.total_error_b --measure error.l1 --out-dir out/sss_models_sweep",
+        How::With(
+            &["--set", "reference.photons=20000"],
+            "the Monte Carlo reference at 2% of its photons: as written it traces 10^6 a \
+             channel for each of the 12 materials, 570 s here; the same code, fewer photons",
+        ),
+    ),
+    (
+        "sweep graphs/sss_models.json --set material.preset=skin1 --vary \
+         profile.points=16,32,64,128,256,1024,4096 --vary profile.model=dipole,better_dipole,pbd \
+         --measure error.l1 --measure profile.seconds --versus profile.seconds --out-dir \
+         out/sss_cost_sweep",
+        How::AsWritten,
+    ),
+    (
+        "sweep graphs/sss_render.json --vary marble.threshold=1,0.5,0.2,0.1,0.05,0.02,0.01 \
+         --measure marble_error.rmse --measure marble.gather_seconds --versus \
+         marble.gather_seconds --device cpu --out-dir out/sss_render_sweep",
+        How::AsWritten,
+    ),
+];
+
+/// Every page's commands in order, each with its entry in [`GUIDE_COMMANDS`]; fails on a
+/// command without one and on an entry no page shows.
+fn guide_commands() -> Vec<(String, &'static How)> {
+    let mut pages = vec![root().join("README.md")];
+    for name in md_files(&root().join("docs/guide")).keys() {
+        pages.push(root().join("docs/guide").join(name));
+    }
+    let normal = |c: &str| c.split_whitespace().collect::<Vec<_>>().join(" ");
+    let table: Vec<(String, &How)> = GUIDE_COMMANDS.iter().map(|(c, h)| (normal(c), h)).collect();
+    let mut shown = Vec::new();
+    let mut missing = Vec::new();
+    for page in pages {
+        for cmd in commands(&std::fs::read_to_string(&page).unwrap()) {
+            match table.iter().find(|(c, _)| *c == cmd) {
+                Some((_, how)) => shown.push((cmd, *how)),
+                None => missing.push(format!("{}: `mesoflow {cmd}`", page.display())),
+            }
+        }
+    }
+    assert!(
+        missing.is_empty(),
+        "commands the guide shows that tests/docs.rs does not run (add each to GUIDE_COMMANDS):\n{}",
+        missing.join("\n")
+    );
+    let gone: Vec<&String> = table
+        .iter()
+        .map(|(c, _)| c)
+        .filter(|c| !shown.iter().any(|(s, _)| s == *c))
+        .collect();
+    assert!(
+        gone.is_empty(),
+        "GUIDE_COMMANDS entries no page shows: {gone:?}"
+    );
+    shown
+}
+
+/// Splits a command as the shell would (single quotes group words).
+fn shell_words(cmd: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut word = String::new();
+    let mut quoted = false;
+    let mut any = false;
+    for ch in cmd.chars() {
+        match ch {
+            '\'' => {
+                quoted = !quoted;
+                any = true;
+            }
+            c if c.is_whitespace() && !quoted => {
+                if any {
+                    out.push(std::mem::take(&mut word));
+                    any = false;
+                }
+            }
+            c => {
+                word.push(c);
+                any = true;
+            }
+        }
+    }
+    if any {
+        out.push(word);
+    }
+    out
+}
+
+/// Runs the guide's commands of one tier in a scratch folder as a user would after
+/// `cp graphs/quickstart.json my.json`; every one must exit 0.
+fn run_guide_commands(slow: bool) {
+    let s = Scratch::new();
+    let copy = std::process::Command::new("cp")
+        .arg("-r")
+        .arg(root().join("graphs"))
+        .arg(s.dir.path())
+        .status()
+        .unwrap();
+    assert!(copy.success());
+    let _ = std::fs::remove_dir_all(s.path("graphs/.mesoflow"));
+    std::fs::copy(root().join("graphs/quickstart.json"), s.path("my.json")).unwrap();
+    let mut failed = Vec::new();
+    let mut ran = 0;
+    for (cmd, how) in guide_commands() {
+        let mut words = shell_words(&cmd);
+        match (how, slow) {
+            (How::AsWritten | How::With(..) | How::Serve, false) | (How::Slow(_), true) => {}
+            (How::By(test, why), false) => {
+                eprintln!("`mesoflow {cmd}` is run by {test}: this one {why}");
+                let (file, name) = test.split_once("::").unwrap();
+                let text = std::fs::read_to_string(root().join(format!("tests/{file}.rs")))
+                    .unwrap_or_default();
+                assert!(
+                    text.contains(&format!("fn {name}(")),
+                    "`mesoflow {cmd}` is said to be run by {test}, which does not exist"
+                );
+                continue;
+            }
+            _ => continue,
+        }
+        match how {
+            How::With(extra, why) => {
+                eprintln!("`mesoflow {cmd}` with {extra:?} added: {why}");
+                words.extend(extra.iter().map(|w| w.to_string()));
+            }
+            How::Slow(why) => eprintln!("`mesoflow {cmd}` (slow: {why})"),
+            _ => {}
+        }
+        ran += 1;
+        if let How::Serve = how {
+            words.extend(["--port".into(), "0".into()]);
+            if let Err(e) = serve_once(&words, s.dir.path()) {
+                failed.push(format!("`mesoflow {cmd}`: {e}"));
+            }
+            continue;
+        }
+        let args: Vec<&str> = words.iter().map(String::as_str).collect();
+        let r = mesoflow(&args, s.dir.path());
+        if r.code != 0 {
+            failed.push(format!(
+                "`mesoflow {cmd}` exited {}: {}",
+                r.code,
+                r.stderr.trim()
+            ));
+        }
+    }
+    assert!(failed.is_empty(), "{}", failed.join("\n"));
+    assert!(ran > 0, "no command of this tier ran");
+}
+
+/// Starts `mesoflow serve …`, reads the URL it prints and fetches the page with its token.
+fn serve_once(words: &[String], cwd: &Path) -> Result<(), String> {
+    use std::io::{BufRead, BufReader, Read, Write};
+    let mut child = bin()
+        .args(words)
+        .current_dir(cwd)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .map_err(|e| e.to_string())?;
+    let result = (|| {
+        let mut lines = BufReader::new(child.stdout.take().ok_or("no stdout")?);
+        let mut line = String::new();
+        while !line.contains("http://") {
+            line.clear();
+            if lines.read_line(&mut line).map_err(|e| e.to_string())? == 0 {
+                return Err("exited without printing its URL".to_string());
+            }
+        }
+        let url = line[line.find("http://").unwrap()..].trim().to_string();
+        let rest = url.trim_start_matches("http://");
+        let (addr, query) = rest.split_once('/').ok_or("no path in the URL")?;
+        let mut tcp = std::net::TcpStream::connect(addr).map_err(|e| e.to_string())?;
+        tcp.set_read_timeout(Some(std::time::Duration::from_secs(60)))
+            .ok();
+        write!(
+            tcp,
+            "GET /{query} HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+        )
+        .map_err(|e| e.to_string())?;
+        let mut reply = String::new();
+        tcp.read_to_string(&mut reply).map_err(|e| e.to_string())?;
+        if !reply.starts_with("HTTP/1.1 200") || !reply.contains("<html") {
+            return Err(format!(
+                "the page was not served: {}",
+                reply.lines().next().unwrap_or("")
+            ));
+        }
+        Ok(())
+    })();
+    let _ = child.kill();
+    let _ = child.wait();
+    result
+}
+
+#[test]
+fn every_command_the_guide_shows_runs() {
+    run_guide_commands(false);
+}
+
+#[test]
+#[ignore = "slow: the guide's commands that take minutes (GUIDE_COMMANDS' How::Slow)"]
+fn every_slow_command_the_guide_shows_runs() {
+    run_guide_commands(true);
 }
