@@ -1,7 +1,7 @@
 //! The documentation against the code: the node reference is what `mesoflow docs` generates
 //! today, the README stays a newcomer's page, every relative link of the README and the guide
-//! leads to a file, and every `mesoflow` command the guide shows names a real subcommand and
-//! graph files that validate with the `--set`s it gives.
+//! leads to a file, and every `mesoflow` command the README and the guide show names a real
+//! subcommand, validates, and runs (`GUIDE_COMMANDS` says how each is run).
 
 use crate::common::*;
 use std::collections::BTreeMap;
