@@ -32,3 +32,15 @@ def cli() -> Path:
 @pytest.fixture
 def cache(tmp_path: Path) -> Path:
     return tmp_path / "cache"
+
+
+@pytest.fixture
+def ctrl_c():
+    """Python's own Ctrl-C handler for the test: a process started in the background by a
+    non-interactive shell (`scripts/test &`, nohup) inherits SIGINT ignored, and Python then
+    installs no handler, so the Ctrl-C tests would wait for an interrupt that never comes."""
+    import signal
+
+    before = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, before)

@@ -49,7 +49,7 @@ def sleeper(tmp_path, ms):
     return g
 
 
-def test_ctrl_c_cancels_the_run(tmp_path, cache):
+def test_ctrl_c_cancels_the_run(tmp_path, cache, ctrl_c):
     g = sleeper(tmp_path, 20_000)
     timer = threading.Timer(0.5, os.kill, (os.getpid(), signal.SIGINT))
     t0 = time.monotonic()
@@ -116,7 +116,7 @@ def test_the_command_line_runs_in_process(repo, tmp_path, capfd):
     assert "size" in capfd.readouterr().err
 
 
-def test_ctrl_c_stops_an_in_process_watch(repo, tmp_path):
+def test_ctrl_c_stops_an_in_process_watch(repo, tmp_path, ctrl_c):
     graph = repo / "graphs" / "quickstart.json"
     timer = threading.Timer(1.5, os.kill, (os.getpid(), signal.SIGINT))
     timer.start()
