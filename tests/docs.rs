@@ -148,7 +148,7 @@ fn every_command_the_guide_shows_names_a_subcommand_and_graphs_that_validate() {
     }
     for page in pages {
         let text = std::fs::read_to_string(&page).unwrap();
-        for cmd in commands(&text) {
+        for cmd in commands(&text).into_iter().chain(inline_commands(&text)) {
             let words: Vec<&str> = cmd.split_whitespace().collect();
             let sub = words[0];
             if !subcommands.contains(&format!("  {sub} ")) {
@@ -211,6 +211,27 @@ fn every_command_the_guide_shows_names_a_subcommand_and_graphs_that_validate() {
         checked >= 10,
         "only {checked} commands with a shipped graph were checked"
     );
+}
+
+/// The `mesoflow …` commands quoted in a page's prose (single-backtick spans, which may wrap
+/// across lines), outside the `sh` blocks; validated, not run: several take minutes (a 9-run
+/// sweep of `graphs/btf_edit.json`, 256-sample truths).
+fn inline_commands(text: &str) -> Vec<String> {
+    let mut prose = String::new();
+    for (i, part) in text.split("```").enumerate() {
+        if i % 2 == 0 {
+            prose.push_str(part);
+        }
+    }
+    prose
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .filter_map(|span| {
+            let words: Vec<&str> = span.split_whitespace().collect();
+            (words.first() == Some(&"mesoflow") && words.len() > 1).then(|| words[1..].join(" "))
+        })
+        .collect()
 }
 
 /// How the guide's test runs a command the guide shows.
