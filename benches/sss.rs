@@ -133,7 +133,10 @@ fn renders(counts: &[usize], width: u32, height: u32, gpu: Option<&Gpu>) {
     .expect("skin1");
     let prof = profile::tabulate(
         &m,
-        &profile::Params::default(),
+        &profile::Params {
+            model: profile::Model::Dipole,
+            ..Default::default()
+        },
         &mesoflow_nodes::progress::Counter::none(),
     )
     .profile;
@@ -158,7 +161,8 @@ fn renders(counts: &[usize], width: u32, height: u32, gpu: Option<&Gpu>) {
             spacing: Some(1e-4),
             max_points: n as u32,
             threshold,
-            ..Default::default()
+            // The gather alone, as Jensen & Buhler render it (the GPU gathers the planar profile).
+            ..render::Params::classic()
         };
         let octree = render::render(None, &torus, &m, &prof, &p(0.05)).expect("octree");
         let brute = render::render(None, &torus, &m, &prof, &p(0.0)).expect("brute");

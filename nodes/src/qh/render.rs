@@ -53,6 +53,16 @@ crate::view_params! {
         /// The global term: `diffusion` (gathered profile) or `brdf` (its total reflectance, local;
         /// for views where light scatters less far than a pixel covers).
         pub mode: sss_render::Mode = sss_render::Params::default().mode,
+        /// The global term's geometry, as `sss.render`'s (default `auto`: `body` on a closed
+        /// mesh, `exit_normal` on an open one).
+        pub geometry: sss_render::Geometry = sss_render::Params::default().geometry,
+        /// Where the entering light starts to diffuse, as `sss.render`'s (default `beam`).
+        pub sources: sss_render::Sources = sss_render::Params::default().sources,
+        /// The diffuse exitance's angular shape, as `sss.render`'s (default `p1`).
+        pub emission: sss_render::Emission = sss_render::Params::default().emission,
+        /// Bounces between parts of the object, as `sss.render`'s (default 2).
+        #[schemars(range(min = 0, max = 8))]
+        pub bounces: u32 = sss_render::Params::default().bounces,
     }
 }
 
@@ -72,12 +82,12 @@ impl Params {
             shadow_resolution: self.shadow_resolution,
             background: self.background,
             seed: self.seed,
-            geometry: sss_render::Geometry::Planar,
-            bounces: 0,
+            geometry: self.geometry,
+            bounces: self.bounces,
             mode: self.mode,
             energy: sss_render::Energy::Profile,
-            emission: sss_render::Emission::Diffuse,
-            sources: sss_render::Sources::Point,
+            emission: self.emission,
+            sources: self.sources,
         }
     }
 }
@@ -91,8 +101,9 @@ impl Node for QhRender {
         NodeSpec {
             kind: "qh.render",
             // 4: lights beyond the sampled cone extrapolated in the local term. 5: sss.render's
-            // silhouette pixels covered in proportion.
-            version: 5,
+            // silhouette pixels covered in proportion. 6: the global term's `geometry`, `sources`,
+            // `emission` and `bounces`, defaulting to sss.render's accurate configuration.
+            version: 6,
             doc: "Quasi-homogeneous material on a mesh (thesis eq. 5.60): local reflectance (BTF) plus the homogeneous diffusion gather scaled by mesostructure entrance and exiting functions (images, or from a height field).",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -114,6 +125,10 @@ impl Node for QhRender {
             .collect(),
             disk_cache: true,
         }
+    }
+
+    fn check(&self, p: &Params) -> Result<(), NodeError> {
+        sss_render::check_params(&p.global())
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
@@ -385,7 +400,10 @@ mod tests {
         let m = medium();
         let prof = profile::tabulate(
             &m,
-            &profile::Params::default(),
+            &profile::Params {
+                model: profile::Model::Dipole,
+                ..Default::default()
+            },
             &crate::progress::Counter::none(),
         )
         .profile;
@@ -403,6 +421,11 @@ mod tests {
             shadow_resolution: 128,
             mm_per_unit: 5.0,
             max_points: 3000,
+            // The weights' algebra holds for any global term; the classic one is the cheapest.
+            geometry: sss_render::Geometry::Planar,
+            sources: sss_render::Sources::Point,
+            emission: sss_render::Emission::Diffuse,
+            bounces: 0,
             ..Default::default()
         };
         (mesh, m, prof, p)
@@ -415,8 +438,19 @@ mod tests {
     #[test]
     fn flat_mesostructure_and_a_black_lrf_give_the_homogeneous_render() {
         // Flat height field: V = 1 and the facet normal is the surface's, so f = fv = 1 exactly;
-        // a zero LRF adds nothing. The result must be sss.render's, bit for bit.
-        let (mesh, m, prof, p) = scene();
+        // a zero LRF adds nothing. The result must be sss.render's, bit for bit, with the
+        // global term's defaults (the body, the beam's sources, P1's exit, two bounces).
+        let (mesh, m, _, p) = scene();
+        let d = Params::default();
+        let p = Params {
+            geometry: d.geometry,
+            sources: d.sources,
+            emission: d.emission,
+            bounces: d.bounces,
+            max_points: 1000,
+            ..p
+        };
+        let prof = profile::tabulate(&m, &profile::Params::default(), &Counter::none()).profile;
         let btf = constant_btf(0.0);
         let lrf = Material::new(Source::Raw(&btf));
         let hf = flat(16);

@@ -52,7 +52,7 @@ impl Model {
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Params {
-    /// `dipole`, `better_dipole`, `pbd` (photon beam diffusion), `pbd_multiple` (its multiple scattering alone) or `montecarlo` (the photon-tracing reference).
+    /// `pbd_multiple` (default: photon beam diffusion's multiple scattering alone, for a render that adds single scattering, as `sss.render` does by default), `pbd` (photon beam diffusion, multiple and single), `dipole` (Jensen et al. 2001), `better_dipole` (d'Eon 2012) or `montecarlo` (the photon-tracing reference).
     pub model: Model,
     /// Radius samples.
     #[schemars(range(min = 8, max = 1000000))]
@@ -67,7 +67,7 @@ pub struct Params {
 impl Default for Params {
     fn default() -> Self {
         Params {
-            model: Model::Dipole,
+            model: Model::PbdMultiple,
             points: 256,
             photons: 100_000,
             seed: 1,
@@ -90,8 +90,10 @@ impl Node for Profile {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.profile",
-            version: 2,
-            doc: "Radial diffuse reflectance Rd(r) per channel (dipole, better_dipole, pbd or the montecarlo reference), on a grid out to 99.9% of the energy, with totals and a sampling table.",
+            // 3: the default model is `pbd_multiple` (was `dipole`), the profile `sss.render`'s
+            // defaults are measured with.
+            version: 3,
+            doc: "Radial diffuse reflectance Rd(r) per channel (pbd_multiple by default, dipole, better_dipole, pbd or the montecarlo reference), on a grid out to 99.9% of the energy, with totals and a sampling table.",
             device: DevicePreference::Cpu,
             inputs: vec![Port::input("material", ScatteringMaterial::TYPE, "the medium")],
             outputs: vec![
@@ -318,6 +320,7 @@ fn cumulative(radii: &[f64], rd: &[f64]) -> Vec<f64> {
 /// The dipole profile (kept for callers that want the classical model directly).
 pub fn dipole_profile(m: &ScatteringMaterial, n: usize) -> DiffusionProfile {
     let p = Params {
+        model: Model::Dipole,
         points: n as u32,
         ..Default::default()
     };

@@ -32,9 +32,9 @@ use std::f64::consts::PI;
 #[serde(rename_all = "snake_case")]
 pub enum Emission {
     /// Diffuse behind the boundary: Ft(μo)·M/(π(1 − Fdr)).
-    #[default]
     Diffuse,
     /// Diffusion's own P1 radiance at the boundary, 1 + 3μ′/(2A) inside, refracted out.
+    #[default]
     P1,
     /// Chandrasekhar's exact shapes: local light as a half-space lit at the point's own
     /// incidence, light from elsewhere as the deep field (η = 1 only).

@@ -23,8 +23,11 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Geometry {
-    /// The profile at the straight distance, as on a flat half-space (Jensen & Buhler 2002).
+    /// `body` on a closed mesh, `exit_normal` (with a warning) on an open one: the most
+    /// accurate the mesh allows (the default).
     #[default]
+    Auto,
+    /// The profile at the straight distance, as on a flat half-space (Jensen & Buhler 2002).
     Planar,
     /// The profile scaled by the entry point's dipole's flux through the exit point's normal:
     /// light through thin and curved parts (CPU gather only).

@@ -25,6 +25,9 @@
 //! single scattering traced through the mesh (`single_scattering_shape: traced`,
 //! `single.rs`), the exact half-space's energy (`energy: half_space`, `energy.rs`) and the
 //! exitance's angular shape (`emission`, `emission.rs`).
+//! The defaults are the configuration that came closest to the volumetric truth over the guide's
+//! scenes (`geometry: auto`, `sources: beam`, `emission: p1`, traced single scattering, two
+//! bounces, with `sss.profile`'s default `pbd_multiple`); `Params::classic` is Jensen & Buhler's.
 //! Silhouette pixels show the object over the share of the pixel it covers (`gather.rs`), as
 //! the truth's samples do. An object fewer than six reduced mean free paths thick gets a
 //! warning (`thickness.rs`): there the truth showed the light `exit_normal` and `body` send
@@ -83,20 +86,22 @@ crate::view_params! {
         /// Octree criterion ΔA/d² under which a node is one source (CPU); 0 = brute force.
         #[schemars(range(min = 0.0))]
         pub threshold: f64 = 0.05,
-        /// Add single scattering (needs the material's σs, g).
-        pub single_scattering: bool = false,
-        /// Where single scattering happens: `half_space` (default; Hanrahan & Krueger's flat
-        /// semi-infinite medium under each point) or `traced` (along the camera ray inside the mesh
-        /// itself, the light attenuated by the real distance it travels inside: exact at η = 1; at
-        /// η ≠ 1 directions are not bent inside).
-        pub single_scattering_shape: SingleShape = SingleShape::HalfSpace,
+        /// Add single scattering (from the material's σs, g; on by default: the default
+        /// profile, `pbd_multiple`, leaves it out for the render to add).
+        pub single_scattering: bool = true,
+        /// Where single scattering happens: `traced` (default; along the camera ray inside the
+        /// mesh itself, the light attenuated by the real distance it travels inside: exact at
+        /// η = 1; at η ≠ 1 directions are not bent inside) or `half_space` (Hanrahan & Krueger's
+        /// flat semi-infinite medium under each point).
+        pub single_scattering_shape: SingleShape = SingleShape::Traced,
         /// Seed of the sample points.
         pub seed: u64 = 1,
         /// Bounces of light leaving one part of the object and entering another (0 to 8): what a
-        /// concave object's inner sides send each other.
+        /// concave object's inner sides send each other (default 2).
         #[schemars(range(min = 0, max = 8))]
-        pub bounces: u32 = 0,
-        /// `planar` (default): the profile at the straight distance, as on a flat half-space.
+        pub bounces: u32 = 2,
+        /// `auto` (default): `body` on a closed mesh, `exit_normal` on an open one (with a
+        /// warning). `planar`: the profile at the straight distance, as on a flat half-space.
         /// `exit_normal`: scaled by the dipole's flux through the shaded point's own normal, so that
         /// light passes through thin and curved parts. `directional`: scaled by the directional
         /// dipole (Frisvad et al. 2014) over its value on a plane lit straight down, for the
@@ -105,7 +110,7 @@ crate::view_params! {
         /// inside the mesh (the mesh must be closed; against a wide slab's closed form it is exact,
         /// where `exit_normal` transmits 38% too little). All but `planar` run the gather on the
         /// CPU.
-        pub geometry: Geometry = Geometry::Planar,
+        pub geometry: Geometry = Geometry::Auto,
         /// `diffusion` (default): the profile gathered over irradiance samples. `brdf`: the
         /// profile's total reflectance as a diffuse lobe with the Fresnel transmittances in and out,
         /// no samples and no gather: right where light scatters less far than a pixel covers.
@@ -116,23 +121,24 @@ crate::view_params! {
         /// isotropic scattering behind an index-matched boundary, so η = 1 only; g ≠ 0 through the
         /// reduced albedo); the multiple scattering alone when `single_scattering` adds the first.
         pub energy: Energy = Energy::Profile,
-        /// How the diffuse exitance leaves in angle: `diffuse` (default; Jensen & Buhler's
-        /// Ft(θo)·M/(π(1 − Fdr))), `p1` (diffusion theory's own radiance at the boundary,
+        /// How the diffuse exitance leaves in angle: `p1` (default; diffusion theory's own
+        /// radiance at the boundary,
         /// 1 + 3μ′/(2A) inside, refracted out, the same exitance: at η = 1, 1.25× face-on and 0.5×
-        /// at grazing, as the exact half-space's 1.26× and 0.43×) or `half_space` (η = 1 only:
+        /// at grazing, as the exact half-space's 1.26× and 0.43×), `diffuse` (Jensen & Buhler's
+        /// Ft(θo)·M/(π(1 − Fdr))) or `half_space` (η = 1 only:
         /// Chandrasekhar's exact shapes, the pixel's own light as a half-space lit at its incidence,
         /// the rest as the deep field; the multiple scattering's when `single_scattering` adds the
         /// first).
-        pub emission: Emission = Emission::Diffuse,
-        /// Where the light entering at each sample starts to diffuse: `point` (default; Jensen et
-        /// al. 2001's one source a reduced mean free path under the sample, whatever the light's
-        /// angle) or `beam` (along the refracted light, where its second collisions happen:
-        /// oblique light scatters shallower and sends its multiple scattering less far, as
-        /// transport does; each beam ends where its ray leaves the mesh; the profile still sets
-        /// how much, `beam.rs`). `beam` needs `geometry:
-        /// exit_normal` or `body`, and is meant with a profile of multiple scattering alone
-        /// (`pbd_multiple`) and `single_scattering`.
-        pub sources: Sources = Sources::Point,
+        pub emission: Emission = Emission::P1,
+        /// Where the light entering at each sample starts to diffuse: `beam` (default; along the
+        /// refracted light, where its second collisions happen: oblique light scatters shallower
+        /// and sends its multiple scattering less far, as transport does; each beam ends where
+        /// its ray leaves the mesh; the profile still sets how much, `beam.rs`) or `point`
+        /// (Jensen et al. 2001's one source a reduced mean free path under the sample, whatever
+        /// the light's angle). `beam` needs `geometry: auto`, `exit_normal` or `body`, and is
+        /// meant with a profile of multiple scattering alone (`pbd_multiple`) and
+        /// `single_scattering`.
+        pub sources: Sources = Sources::Beam,
     }
 }
 
@@ -141,9 +147,9 @@ crate::view_params! {
 #[serde(rename_all = "snake_case")]
 pub enum Sources {
     /// One point 1/σt′ under the sample along its normal (Jensen et al. 2001).
-    #[default]
     Point,
     /// The first scatterings along the refracted light (Habel et al. 2013's photon beam).
+    #[default]
     Beam,
 }
 
@@ -152,9 +158,9 @@ pub enum Sources {
 #[serde(rename_all = "snake_case")]
 pub enum SingleShape {
     /// A flat semi-infinite medium under each point (Hanrahan & Krueger 1993).
-    #[default]
     HalfSpace,
     /// The mesh itself, by ray tracing (`single.rs`).
+    #[default]
     Traced,
 }
 
@@ -185,7 +191,9 @@ impl Node for Render {
             // 7: the thin-object warning (results unchanged; then a cache hit did not repeat a
             // node's warnings, so earlier results reran once; it does now). 8: `geometry: body`.
             // 9: `sources`. 10: `sources: beam` ends each beam where its ray leaves the mesh.
-            version: 10,
+            // 11: the accurate configuration is the default (`geometry: auto`, `sources: beam`,
+            // `emission: p1`, traced single scattering, two bounces; `Params::classic` the old).
+            version: 11,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -332,6 +340,15 @@ pub fn render_with(
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     let light = Light::new(&p.light)?;
     let mut warnings = Vec::new();
+    if p.single_scattering
+        && p.mode == Mode::Diffusion
+        && matches!(profile.model.as_str(), "pbd" | "montecarlo")
+    {
+        warnings.push(format!(
+            "the `{}` profile holds single scattering already and `single_scattering` adds it again: give the render a `pbd_multiple` profile (sss.profile's default), or set `single_scattering: false`",
+            profile.model
+        ));
+    }
     // One BVH for the bounces, the thickness, the body's inside test, the view and single
     // scattering.
     let tracer = Tracer::new(mesh);
@@ -347,10 +364,26 @@ pub fn render_with(
         )?,
         Mode::Brdf => Setup::local(mesh, material, profile, p, &light)?,
     };
-    if p.mode == Mode::Diffusion {
+    // `geometry: auto` follows the shape in the set-up as `body` and `exit_normal` both do; which
+    // of the two is decided by the mesh and its thickness.
+    let resolved;
+    let p = if p.mode == Mode::Diffusion {
         let thick = thickness::median_mm(&tracer, &setup.sources, p.mm_per_unit);
+        let p = match p.geometry {
+            Geometry::Auto => {
+                resolved = Params {
+                    geometry: auto_geometry(mesh, material, thick, &mut warnings),
+                    ..p.clone()
+                };
+                &resolved
+            }
+            _ => p,
+        };
         warnings.extend(thick.and_then(|t| thickness::warning(t, material, p.geometry)));
-    }
+        p
+    } else {
+        p
+    };
     let body_start = Instant::now();
     let body = if p.mode == Mode::Diffusion && p.geometry == Geometry::Body {
         let (body, report) = body::Body::new(
@@ -435,6 +468,50 @@ pub fn render_with(
     })
 }
 
+/// `geometry: auto`: `body` where the mesh has an inside to solve in and is thicker than the
+/// extrapolation distance its boundary problem sets (z_b = 2AD: thinner, the problem lies mostly
+/// outside the object and its grid grows to the cap for nothing), else `exit_normal`, with a
+/// warning saying why.
+fn auto_geometry(
+    mesh: &Mesh,
+    material: &ScatteringMaterial,
+    thickness_mm: Option<f64>,
+    warnings: &mut Vec<String>,
+) -> Geometry {
+    let torn = body::open_edges(mesh);
+    let zb = body::extrapolation_mm(material);
+    let why = match thickness_mm {
+        _ if torn > 0 => format!(
+            "{torn} edges border only one triangle, so the object has no inside for the body's diffusion problem"
+        ),
+        Some(t) if t < zb => format!(
+            "the object is {t:.3} mm thick, less than the {zb:.3} mm the body's boundary lies outside it (z_b = 2AD)"
+        ),
+        _ => return Geometry::Body,
+    };
+    warnings.push(format!(
+        "geometry: auto renders this mesh with `exit_normal`, not `body`: {why} (set `geometry` to silence this)"
+    ));
+    Geometry::ExitNormal
+}
+
+impl Params {
+    /// Jensen & Buhler 2002's render, the cheapest gather: planar profile, one source under each
+    /// sample, diffuse exit, no bounces, no single scattering (the defaults before version 11;
+    /// with a `dipole` profile it is the classic model). Everything else as [`Params::default`].
+    pub fn classic() -> Params {
+        Params {
+            single_scattering: false,
+            single_scattering_shape: SingleShape::HalfSpace,
+            bounces: 0,
+            geometry: Geometry::Planar,
+            emission: Emission::Diffuse,
+            sources: Sources::Point,
+            ..Params::default()
+        }
+    }
+}
+
 /// The parameters' own rules: validated before any work (`Node::check`) and again by
 /// [`render_with`] for callers that skip the engine.
 pub fn check_params(p: &Params) -> Result<(), NodeError> {
@@ -450,10 +527,15 @@ pub fn check_params(p: &Params) -> Result<(), NodeError> {
     if p.bounces > 8 {
         return Err(NodeError::param("bounces", "must be in [0, 8]"));
     }
-    if p.sources == Sources::Beam && !matches!(p.geometry, Geometry::ExitNormal | Geometry::Body) {
+    if p.sources == Sources::Beam
+        && !matches!(
+            p.geometry,
+            Geometry::Auto | Geometry::ExitNormal | Geometry::Body
+        )
+    {
         return Err(NodeError::param(
             "sources",
-            "beam needs geometry exit_normal or body (the others take the profile's own shape at the sample)",
+            "beam needs geometry auto, exit_normal or body (the others take the profile's own shape at the sample; `sources: point` goes with them)",
         ));
     }
     Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;

@@ -253,7 +253,10 @@ impl Setup {
             .collect();
         let octree = Octree::build(sources.clone(), area_each);
         let near = 2.0 * area_each.sqrt();
-        let follows_the_shape = matches!(p.geometry, Geometry::ExitNormal | Geometry::Body);
+        let follows_the_shape = matches!(
+            p.geometry,
+            Geometry::Auto | Geometry::ExitNormal | Geometry::Body
+        );
         let beam = (follows_the_shape && p.sources == Sources::Beam)
             .then(|| Beams::new(Beam::new(material, light, unit), &octree, tracer));
         Ok(Setup {

@@ -64,7 +64,7 @@ fn slab_view() -> Params {
         },
         shadows: false,
         threshold: 0.0,
-        ..Default::default()
+        ..Params::classic()
     }
 }
 
@@ -116,7 +116,7 @@ fn sphere_scene(threshold: f64) -> Params {
         threshold,
         shadow_resolution: 128,
         mm_per_unit: 5.0,
-        ..Default::default()
+        ..Params::classic()
     }
 }
 
@@ -390,7 +390,7 @@ fn bounces_leave_a_convex_object_alone_and_light_a_concave_one() {
         },
         mm_per_unit: 4.0,
         max_points: 4000,
-        ..Default::default()
+        ..Params::classic()
     };
     let with = |mesh: &Mesh, bounces| {
         render(
@@ -626,4 +626,112 @@ fn past_its_table_the_profile_keeps_the_dipoles_decay() {
             assert_eq!(table.at(r)[c], 0.0);
         }
     }
+}
+
+/// The defaults are the accurate configuration (`geometry: auto`, the beam's sources, P1's
+/// exit, traced single scattering, two bounces, over `sss.profile`'s default `pbd_multiple`):
+/// `auto` renders a closed mesh exactly as `body` does and an open one exactly as
+/// `exit_normal` does, saying so, and so one thinner than its extrapolation distance; a profile
+/// that holds single scattering already is warned about when the render adds it again.
+#[test]
+fn the_defaults_are_the_accurate_configuration_and_auto_follows_the_mesh() {
+    let m = ScatteringMaterial {
+        eta: 1.0,
+        ..medium()
+    };
+    let none = crate::progress::Counter::none();
+    let profile = prof::tabulate(&m, &prof::Params::default(), &none).profile;
+    assert_eq!(profile.model, "pbd_multiple");
+    let scene = sphere_scene(0.05);
+    let p = Params {
+        camera: CameraParams {
+            resolution: [12, 12],
+            ..scene.camera.clone()
+        },
+        light: scene.light.clone(),
+        threshold: 0.05,
+        shadow_resolution: 128,
+        mm_per_unit: 5.0,
+        max_points: 1500,
+        ..Params::default()
+    };
+    assert_eq!(
+        (p.geometry, p.sources, p.emission, p.bounces),
+        (Geometry::Auto, Sources::Beam, Emission::P1, 2)
+    );
+    assert!(p.single_scattering && p.single_scattering_shape == SingleShape::Traced);
+    let said = |r: &Rendered| r.warnings.iter().any(|w| w.contains("geometry: auto"));
+
+    let sphere = mesh(Shape::Sphere, 1.0);
+    let auto = render(None, &sphere, &m, &profile, &p).unwrap();
+    let body = Params {
+        geometry: Geometry::Body,
+        ..p.clone()
+    };
+    assert_eq!(
+        auto.image.data,
+        render(None, &sphere, &m, &profile, &body)
+            .unwrap()
+            .image
+            .data
+    );
+    assert!(
+        auto.body_spacing.is_some() && !said(&auto),
+        "{:?}",
+        auto.warnings
+    );
+
+    let plane = mesh(Shape::Plane, 1.0);
+    let open = render(None, &plane, &m, &profile, &p).unwrap();
+    let exit = Params {
+        geometry: Geometry::ExitNormal,
+        ..p.clone()
+    };
+    assert_eq!(
+        open.image.data,
+        render(None, &plane, &m, &profile, &exit)
+            .unwrap()
+            .image
+            .data
+    );
+    assert!(
+        open.body_spacing.is_none() && said(&open),
+        "{:?}",
+        open.warnings
+    );
+    assert!(render(None, &plane, &m, &profile, &body)
+        .is_err_and(|e| e.to_string().contains("closed mesh")));
+
+    let pbd = prof::tabulate(
+        &m,
+        &prof::Params {
+            model: Model::Pbd,
+            ..Default::default()
+        },
+        &none,
+    )
+    .profile;
+    let twice = render(None, &sphere, &m, &pbd, &p).unwrap();
+    assert!(
+        twice
+            .warnings
+            .iter()
+            .any(|w| w.contains("holds single scattering already")),
+        "{:?}",
+        twice.warnings
+    );
+    assert!(!auto
+        .warnings
+        .iter()
+        .any(|w| w.contains("single scattering already")));
+
+    // Thinner than the extrapolation distance (0.1 mm against z_b = 0.63 mm in red), the
+    // body's problem would lie mostly outside the object: `auto` takes `exit_normal`.
+    let tiny = render(None, &mesh(Shape::Sphere, 0.01), &m, &profile, &p).unwrap();
+    assert!(tiny.image.data.iter().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(
+        tiny.body_spacing.is_none() && tiny.warnings.iter().any(|w| w.contains("z_b = 2AD")),
+        "{:?}",
+        tiny.warnings
+    );
 }

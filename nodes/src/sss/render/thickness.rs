@@ -66,7 +66,7 @@ pub(super) fn warning(
             "expect the dimmer half 10–38% too dark (measured against the volumetric truth)"
         }
         Geometry::ExitNormal => "the light through thin parts comes out far too bright (the dimmer half 45–79% too bright against the volumetric truth; `geometry: planar` left it 10–38% too dark)",
-        Geometry::Body => "the light through thin parts comes out far too bright (the dimmer half 51–83% too bright against the volumetric truth; `geometry: planar` left it 10–38% too dark)",
+        Geometry::Body | Geometry::Auto => "the light through thin parts comes out far too bright (the dimmer half 51–83% too bright against the volumetric truth; `geometry: planar` left it 10–38% too dark)",
         Geometry::Directional => {
             "expect large errors (not measured against the volumetric truth for `directional`)"
         }

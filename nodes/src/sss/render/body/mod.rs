@@ -216,6 +216,12 @@ fn dipoles(material: &ScatteringMaterial) -> [Dipole; 3] {
     [0, 1, 2].map(|c| Dipole::new(material.sigma_s_prime[c], material.sigma_a[c], material.eta))
 }
 
+/// The largest extrapolation distance z_b = 2AD of the material's channels, mm: how far outside
+/// the surface the body's boundary lies.
+pub(crate) fn extrapolation_mm(material: &ScatteringMaterial) -> f64 {
+    pad(&dipoles(material), 0.0)
+}
+
 /// The grid's margin around the mesh, and the band its signed distance is needed in: the
 /// largest extrapolation distance z_b = 2AD plus two cells.
 fn pad(dipoles: &[Dipole; 3], h: f64) -> f64 {
@@ -549,7 +555,7 @@ impl Grid {
 
 /// Edges with an odd number of triangles on them, corners welded by position
 /// ([`Mesh::position_twins`]: a UV seam repeats its vertices).
-fn open_edges(mesh: &Mesh) -> usize {
+pub(crate) fn open_edges(mesh: &Mesh) -> usize {
     use std::collections::HashMap;
     let id = mesh.position_twins();
     let mut edges: HashMap<(usize, usize), u32> = HashMap::new();
