@@ -40,6 +40,15 @@ fn small(graph: &str) -> Vec<String> {
             "relief_converged.camera.resolution=[32,24]".into(),
         ],
         "btf_compress" => vec!["surface.size=16".into(), "pca.rank=3".into()],
+        "family_translucent" => {
+            let mut v: Vec<String> = vec![
+                "mesh.segments=[32,16]".into(),
+                "truth.samples=4".into(),
+                "truth.camera.resolution=[32,24]".into(),
+            ];
+            v.extend(sss(&["ours"]));
+            v
+        }
         "height_from_normals" => vec!["tile.size=32".into()],
         "isomap" => vec!["roll.n=300".into(), "landmark.landmarks=50".into()],
         "mdf_render" => {
