@@ -3,7 +3,8 @@
 //! (`mesoflow_testkit::scenes`: every Jensen preset, spheres and tori, 10–60 mm a unit, lit
 //! from the front, the side and behind, η = 1). Per scene: relative RMSE over the truth's
 //! coverage with the truth's own noise taken out, bias, the thickness in reduced mean free
-//! paths, whether `sss.render` warned that the object is thin, and both renders' times; then
+//! paths, whether `sss.render` warned that the object is thin, both renders' times and the
+//! path tracer's time at ours' error (scaled from its noise, 1/√samples); then
 //! the distribution over the thick scenes (median, 90th percentile, worst) with the worst five
 //! named, and how the thin-object warning sorts the scenes. Every node on the CPU.
 //!
@@ -12,7 +13,8 @@
 //! worst five, so any of them can be rendered again by hand.
 //!
 //! `cargo bench --bench families -- [--first SEED] [--count N] [--held-out] [--width W]
-//! [--samples S] [--out DIR]` (defaults: seeds 0..12, 64 × 48, 1024 samples a pixel,
+//! [--samples S] [--out DIR] [--set ID.PARAM=VALUE]…` (the `--set`s measure another
+//! configuration of the same graph; defaults: seeds 0..12, 64 × 48, 1024 samples a pixel,
 //! `target/families`): the development seeds are 0.., the held-out ones `scenes::HELD_OUT`..
 //! (`--held-out`), which no one tunes on.
 
@@ -24,6 +26,16 @@ use std::path::PathBuf;
 
 /// `sss.render` warns under six reduced mean free paths (`sss::render::thickness`).
 const THIN: f64 = 6.0;
+
+impl Row {
+    /// The path tracer's time to reach ours' error: its noise falls as 1/√samples, so
+    /// `samples × (noise / ours)²` samples (never more than its own) take that share of its
+    /// time. An estimate from one run; absent where either error is.
+    fn equal_error_s(&self) -> Option<f64> {
+        let (noise, ours) = (self.noise?, self.rel?);
+        (ours > 0.0).then(|| self.truth_s * ((noise / ours).powi(2)).min(1.0))
+    }
+}
 
 struct Row {
     scene: Scene,
@@ -51,8 +63,18 @@ fn main() {
     let out: PathBuf = arg("--out", PathBuf::from("target/families"));
     std::fs::create_dir_all(&out).expect("the output folder");
     let resolution = [width, width * 3 / 4];
+    // `--set id.param=value` (repeatable): a configuration to measure in place of the defaults.
+    let argv: Vec<String> = std::env::args().collect();
+    let extra: Vec<String> = argv
+        .windows(2)
+        .filter(|w| w[0] == "--set")
+        .map(|w| w[1].clone())
+        .collect();
+    if !extra.is_empty() {
+        println!("configuration: {}\n", extra.join(" "));
+    }
     println!(
-        "| seed | scene | mean free paths | relative RMSE | bias | truth noise | thin warning | ours, s | truth, s |\n|---|---|---|---|---|---|---|---|---|"
+        "| seed | scene | mean free paths | relative RMSE | bias | truth noise | thin warning | ours, s | truth, s | truth at ours' error, s |\n|---|---|---|---|---|---|---|---|---|---|"
     );
     let mut rows = Vec::new();
     for seed in first..first + count {
@@ -62,7 +84,8 @@ fn main() {
         let paths = scenes::mean_free_paths(&scene, preset.coefficients());
         let run = out.join(format!("seed-{seed}"));
         // The shipped template with the scene's `--set`s: the command a user reruns.
-        let sets = scene.sets(resolution, samples);
+        let mut sets = scene.sets(resolution, samples);
+        sets.extend(extra.iter().cloned());
         let template = cli::repo().join(scenes::TEMPLATE);
         let mut args: Vec<String> = vec!["run".into(), template.display().to_string()];
         for s in &sets {
@@ -98,9 +121,13 @@ fn main() {
                         .is_some_and(|m| m.contains("diffusion needs"))
             })
         });
+        // The node's own compute time, which a cache entry keeps (`timings.seconds`), so a
+        // rerun over cached truths still reports what each render took when it was made.
         let secs = |id: &str| {
-            cli::node(&report, id)["seconds"]
+            let n = cli::node(&report, id);
+            n["timings"]["seconds"]
                 .as_f64()
+                .or(n["seconds"].as_f64())
                 .unwrap_or(f64::NAN)
         };
         let row = Row {
@@ -116,7 +143,7 @@ fn main() {
         };
         let f = |v: Option<f64>| v.map_or("absent".into(), |v| format!("{v:.3}"));
         println!(
-            "| {seed} | {} | {:.1} | {} | {} | {} | {} | {:.1} | {:.1} |",
+            "| {seed} | {} | {:.1} | {} | {} | {} | {} | {:.1} | {:.1} | {} |",
             row.scene.name(),
             row.paths,
             f(row.rel),
@@ -125,7 +152,9 @@ fn main() {
             f(row.noise),
             if row.warned { "yes" } else { "no" },
             row.ours_s,
-            row.truth_s
+            row.truth_s,
+            row.equal_error_s()
+                .map_or("absent".into(), |t| format!("{t:.2}"))
         );
         rows.push(row);
     }
@@ -171,6 +200,15 @@ fn summary(rows: &[Row]) {
             println!("    {}", r.command);
         }
     }
+    let (faster, slower): (Vec<&Row>, Vec<&Row>) = rows
+        .iter()
+        .filter(|r| r.equal_error_s().is_some())
+        .partition(|r| r.equal_error_s().is_some_and(|t| r.ours_s < t));
+    println!(
+        "ours faster than the path tracer at ours' error: {} scenes; slower: {} (the path tracer on the same CPU, its time scaled from its noise)",
+        faster.len(),
+        slower.len()
+    );
     let noisiest = rows.iter().filter_map(|r| r.noise).fold(0.0f64, f64::max);
     println!(
         "the truths' largest noise estimate: {noisiest:.3} (a third of the 0.15 bound is 0.05)"
