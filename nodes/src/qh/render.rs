@@ -103,7 +103,8 @@ impl Node for QhRender {
             // 4: lights beyond the sampled cone extrapolated in the local term. 5: sss.render's
             // silhouette pixels covered in proportion. 6: the global term's `geometry`, `sources`,
             // `emission` and `bounces`, defaulting to sss.render's accurate configuration.
-            version: 6,
+            // 7: the global term skips its bounces on an object that hardly sees itself.
+            version: 7,
             doc: "Quasi-homogeneous material on a mesh (thesis eq. 5.60): local reflectance (BTF) plus the homogeneous diffusion gather scaled by mesostructure entrance and exiting functions (images, or from a height field).",
             device: DevicePreference::Gpu,
             inputs: vec![

@@ -97,7 +97,8 @@ crate::view_params! {
         /// Seed of the sample points.
         pub seed: u64 = 1,
         /// Bounces of light leaving one part of the object and entering another (0 to 8): what a
-        /// concave object's inner sides send each other (default 2).
+        /// concave object's inner sides send each other (default 2; none where under 10⁻³ of the
+        /// rays leaving the object return to it, as from a convex one).
         #[schemars(range(min = 0, max = 8))]
         pub bounces: u32 = 2,
         /// `auto` (default): `body` on a closed mesh, `exit_normal` on an open one (with a
@@ -193,7 +194,9 @@ impl Node for Render {
             // 9: `sources`. 10: `sources: beam` ends each beam where its ray leaves the mesh.
             // 11: the accurate configuration is the default (`geometry: auto`, `sources: beam`,
             // `emission: p1`, traced single scattering, two bounces; `Params::classic` the old).
-            version: 11,
+            // 12: no bounces on an object that hardly sees itself (`bounce::NEGLIGIBLE`): a
+            // convex mesh renders as with `bounces: 0`, in a quarter of the time.
+            version: 12,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![

@@ -307,7 +307,8 @@ impl Setup {
 
     /// `bounces` rounds of light between parts (`bounce.rs`): each gathers the samples' own
     /// exitance from the light so far, sends it to the samples that see it, and rebuilds the
-    /// sources from their direct and arriving light.
+    /// sources from their direct and arriving light. None when under [`bounce::NEGLIGIBLE`] of
+    /// the first round's rays return to the object.
     fn bounce(&mut self, tracer: &Tracer, points: &[SamplePoint], p: &Params, area_each: f64) {
         let direct: Vec<[f64; 3]> = self
             .sources
@@ -319,6 +320,11 @@ impl Setup {
         // sample takes its nearest member's.
         let count = points.len().min(bounce::MOST_POINTS);
         let subset = &points[..count];
+        // An object that hardly sees itself (a convex one) has no light to send between parts:
+        // the rounds would cost three quarters of the node and change nothing.
+        if bounce::returning_share(tracer, subset, p.seed) < bounce::NEGLIGIBLE {
+            return;
+        }
         let spacing = self.spacing_mm / self.unit * (points.len() as f64 / count as f64).sqrt();
         let nearest = bounce::Nearest::new(subset, spacing);
         let member: Vec<usize> = points
