@@ -322,7 +322,7 @@ impl Setup {
         let subset = &points[..count];
         // An object that hardly sees itself (a convex one) has no light to send between parts:
         // the rounds would cost three quarters of the node and change nothing.
-        if bounce::returning_share(tracer, subset, p.seed) < bounce::NEGLIGIBLE {
+        if !bounce::sees_itself(tracer, subset, p.seed) {
             return;
         }
         let spacing = self.spacing_mm / self.unit * (points.len() as f64 / count as f64).sqrt();
