@@ -6,7 +6,8 @@
 //! paths, whether `sss.render` warned that the object is thin, both renders' times and the
 //! path tracer's time at ours' error (scaled from its noise, 1/√samples); then
 //! the distribution over the thick scenes (median, 90th percentile, worst) with the worst five
-//! named, and how the thin-object warning sorts the scenes. Every node on the CPU.
+//! named (with their truth | ours | difference pictures), and how the thin-object warning sorts
+//! the scenes. Every node on the CPU.
 //!
 //! Each scene is the shipped template `graphs/family_translucent.json` with the scene's `--set`s;
 //! the bench writes that command beside each run (`OUT/seed-N/command.sh`) and prints it for the
@@ -48,6 +49,8 @@ struct Row {
     truth_s: f64,
     /// The `mesoflow run` line that renders this scene.
     command: String,
+    /// Its truth | ours | difference picture.
+    picture: PathBuf,
 }
 
 fn metric(report: &Value, id: &str, name: &str) -> Option<f64> {
@@ -138,6 +141,7 @@ fn main() {
             warned,
             ours_s: secs("ours"),
             command,
+            picture: run.join("out").join(scenes::PICTURE),
             truth_s: secs("truth"),
             scene,
         };
@@ -198,6 +202,7 @@ fn summary(rows: &[Row]) {
                 r.scene.name()
             );
             println!("    {}", r.command);
+            println!("    picture: {}", r.picture.display());
         }
     }
     let (faster, slower): (Vec<&Row>, Vec<&Row>) = rows

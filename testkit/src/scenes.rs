@@ -9,6 +9,9 @@ use serde_json::{json, Value};
 /// The translucent family's template, relative to the repository: seed 0's scene.
 pub const TEMPLATE: &str = "graphs/family_translucent.json";
 
+/// The picture each run writes into its output folder: truth | ours | signed difference.
+pub const PICTURE: &str = "truth_ours_difference.png";
+
 /// The template's resolution and samples a pixel (the bench's defaults).
 pub const TEMPLATE_RESOLUTION: [u32; 2] = [64, 48];
 pub const TEMPLATE_SAMPLES: u32 = 1024;
@@ -142,8 +145,8 @@ impl Scene {
     }
 
     /// The graph: `ours` (the method with its defaults), `truth` (`render.reference` with the
-    /// medium at `samples` a pixel) and `error` (`image.compare` over the truth's coverage), at
-    /// `resolution`. [`TEMPLATE`] is seed 0's at 64 × 48 and 1024 samples; [`Scene::sets`] turns
+    /// medium at `samples` a pixel), `error` (`image.compare` over the truth's coverage) and
+    /// [`PICTURE`] (truth | ours | signed difference), at `resolution`. [`TEMPLATE`] is seed 0's at 64 × 48 and 1024 samples; [`Scene::sets`] turns
     /// it into any other (a test holds the two the same).
     pub fn graph(&self, resolution: [u32; 2], samples: u32) -> Value {
         let (eye, direction) = self.view();
@@ -172,6 +175,19 @@ impl Scene {
                 "error": {
                     "kind": "image.compare",
                     "inputs": { "reference": "truth.image", "image": "ours.image", "reference_mask": "truth.coverage" }
+                },
+                "difference": {
+                    "kind": "image.difference",
+                    "inputs": { "reference": "truth.image", "image": "ours.image" }
+                },
+                "row": {
+                    "kind": "image.row",
+                    "inputs": { "a": "truth.image", "b": "ours.image", "c": "difference.image" }
+                },
+                "picture": {
+                    "kind": "image.write",
+                    "inputs": { "image": "row.image" },
+                    "params": { "path": PICTURE }
                 }
             }
         })
