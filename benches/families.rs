@@ -28,16 +28,6 @@ use std::path::PathBuf;
 /// `sss.render` warns under six reduced mean free paths (`sss::render::thickness`).
 const THIN: f64 = 6.0;
 
-impl Row {
-    /// The path tracer's time to reach ours' error: its noise falls as 1/√samples, so
-    /// `samples × (noise / ours)²` samples (never more than its own) take that share of its
-    /// time. An estimate from one run; absent where either error is.
-    fn equal_error_s(&self) -> Option<f64> {
-        let (noise, ours) = (self.noise?, self.rel?);
-        (ours > 0.0).then(|| self.truth_s * ((noise / ours).powi(2)).min(1.0))
-    }
-}
-
 struct Row {
     scene: Scene,
     paths: f64,
@@ -51,6 +41,16 @@ struct Row {
     command: String,
     /// Its truth | ours | difference picture.
     picture: PathBuf,
+}
+
+impl Row {
+    /// The path tracer's time to reach ours' error: its noise falls as 1/√samples, so
+    /// `samples × (noise / ours)²` samples (never more than its own) take that share of its
+    /// time. An estimate from one run; absent where either error is.
+    fn equal_error_s(&self) -> Option<f64> {
+        let (noise, ours) = (self.noise?, self.rel?);
+        (ours > 0.0).then(|| self.truth_s * ((noise / ours).powi(2)).min(1.0))
+    }
 }
 
 fn metric(report: &Value, id: &str, name: &str) -> Option<f64> {
@@ -172,8 +172,7 @@ fn summary(rows: &[Row]) {
             .unwrap_or(f64::INFINITY)
             .total_cmp(&a.rel.unwrap_or(f64::INFINITY))
     });
-    let errs: Vec<f64> = thick.iter().filter_map(|r| r.rel).collect();
-    let mut sorted = errs.clone();
+    let mut sorted: Vec<f64> = thick.iter().filter_map(|r| r.rel).collect();
     sorted.sort_by(f64::total_cmp);
     let q = |p: f64| sorted[((sorted.len() as f64 - 1.0) * p).round() as usize];
     println!(

@@ -121,6 +121,13 @@ fn direction(seed: u64, i: usize, k: u64, n: V3) -> V3 {
     rotate(n, cos, 2.0 * std::f64::consts::PI * rng.unit())
 }
 
+/// How far the ray from `from` along `d` goes before it meets a surface's outside; `None` where
+/// it leaves or meets an inside (no exitance leaves that way).
+fn returns(tracer: &Tracer, from: V3, d: V3) -> Option<f64> {
+    let hit = tracer.closest(from, d)?;
+    (dot(tracer.triangle(hit.tri).1, d) < 0.0).then_some(hit.t)
+}
+
 /// Under this share of returning rays the bounces are skipped: a convex mesh's facets return
 /// only rays that graze them (on the sphere of the test `bounces_leave_a_convex_object_alone…`
 /// the bounces added 2·10⁻⁴ of its image), and light arriving at a sample is at most its
@@ -145,12 +152,7 @@ pub(super) fn sees_itself(tracer: &Tracer, points: &[SamplePoint], seed: u64) ->
                 let i = c * CHUNK + j;
                 let from = add(s.p, mul(s.n, tracer.epsilon));
                 (0..RAYS)
-                    .filter(|&k| {
-                        let d = direction(seed, i, k, s.n);
-                        tracer
-                            .closest(from, d)
-                            .is_some_and(|hit| dot(tracer.triangle(hit.tri).1, d) < 0.0)
-                    })
+                    .filter(|&k| returns(tracer, from, direction(seed, i, k, s.n)).is_some())
                     .count() as u64
             })
             .sum::<u64>();
@@ -178,14 +180,10 @@ pub(super) fn arriving(
             let from = add(s.p, mul(s.n, tracer.epsilon));
             for k in 0..RAYS {
                 let d = direction(seed, i, k, s.n);
-                let Some(hit) = tracer.closest(from, d) else {
+                let Some(t) = returns(tracer, from, d) else {
                     continue;
                 };
-                let (_, ng) = tracer.triangle(hit.tri);
-                if dot(ng, d) >= 0.0 {
-                    continue; // the inside of a surface: no exitance leaves that way
-                }
-                if let Some(j) = nearest.find(add(from, mul(d, hit.t))) {
+                if let Some(j) = nearest.find(add(from, mul(d, t))) {
                     // E = π · mean L over cosine-distributed rays, with L = M/π.
                     for c in 0..3 {
                         sum[c] += m[j][c];
