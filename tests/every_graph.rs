@@ -52,6 +52,16 @@ fn small(graph: &str) -> Vec<String> {
             v.extend(sss(&["ours"]));
             v
         }
+        "family_mesostructure" => vec![
+            "pattern.size=16".into(),
+            format!("capture.views={DIRS}"),
+            format!("capture.lights={DIRS}"),
+            format!("mdf.views={DIRS}"),
+            "mesh.segments=[32,16]".into(),
+            "truth.samples=4".into(),
+            "truth.camera.resolution=[32,24]".into(),
+            "ours.camera.resolution=[32,24]".into(),
+        ],
         "height_from_normals" => vec!["tile.size=32".into()],
         "isomap" => vec!["roll.n=300".into(), "landmark.landmarks=50".into()],
         "mdf_render" => {

@@ -1,30 +1,16 @@
-//! Seeded families of scenes: a method is measured over many scenes, never the one it was
-//! tuned on. `family(Kind::Translucent, seed)` draws one scene (material, shape, size, light,
-//! camera distance) from the seed alone and writes it as a graph: the method with its
-//! defaults beside `render.reference`'s truth, compared. Seeds below [`HELD_OUT`] are the
-//! development set; seeds from it on are held out (their bounds fixed before their first run).
+//! The translucent family: `family(Kind::Translucent, seed)` draws one scene (material, shape,
+//! size, light, camera distance) from the seed alone and writes it as a graph: `sss.render` with
+//! its defaults beside `render.reference`'s volumetric truth, compared.
 
+use super::{SplitMix, PICTURE};
 use serde_json::{json, Value};
 
 /// The translucent family's template, relative to the repository: seed 0's scene.
 pub const TEMPLATE: &str = "graphs/family_translucent.json";
 
-/// The picture each run writes into its output folder: truth | ours | signed difference.
-pub const PICTURE: &str = "truth_ours_difference.png";
-
 /// The template's resolution and samples a pixel (the bench's defaults).
 pub const TEMPLATE_RESOLUTION: [u32; 2] = [64, 48];
 pub const TEMPLATE_SAMPLES: u32 = 1024;
-
-/// The first held-out seed: seeds 0..HELD_OUT are for development, HELD_OUT.. are not tuned on.
-pub const HELD_OUT: u64 = 1_000_000;
-
-/// The families.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Kind {
-    /// `sss.render` with its defaults against volumetric path tracing, η = 1.
-    Translucent,
-}
 
 /// Jensen et al. 2001's measured materials (`sss.material`'s presets).
 pub const PRESETS: [&str; 12] = [
@@ -54,7 +40,6 @@ pub enum LightSide {
 #[derive(Clone, Debug)]
 pub struct Scene {
     pub seed: u64,
-    pub kind: Kind,
     pub preset: &'static str,
     /// `sphere` or `torus` (closed meshes: the truth fills them with the medium).
     pub shape: &'static str,
@@ -194,8 +179,8 @@ impl Scene {
     }
 }
 
-/// The scene of `kind` that `seed` draws.
-pub fn family(kind: Kind, seed: u64) -> Scene {
+/// The scene that `seed` draws.
+pub fn draw(seed: u64) -> Scene {
     let mut r = SplitMix(seed ^ 0x5eed_fa31_1e5c_e7e5);
     let preset = PRESETS[r.below(PRESETS.len() as u64) as usize];
     let torus = r.below(2) == 1;
@@ -211,7 +196,6 @@ pub fn family(kind: Kind, seed: u64) -> Scene {
     let distance = r.range(2.4, 4.0);
     Scene {
         seed,
-        kind,
         preset,
         shape,
         size,
@@ -237,40 +221,17 @@ pub fn mean_free_paths(scene: &Scene, coefficients: ([f64; 3], [f64; 3])) -> f64
         .fold(f64::INFINITY, f64::min)
 }
 
-/// SplitMix64: a small, fixed generator, so a seed draws the same scene on every machine and
-/// in every version of the dependencies.
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.unit()
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn a_seed_draws_the_same_scene_and_the_family_covers_its_ranges() {
-        let a = family(Kind::Translucent, 7);
-        let b = family(Kind::Translucent, 7);
+        let a = draw(7);
+        let b = draw(7);
         assert_eq!(a.name(), b.name());
         assert_eq!(a.graph([8, 6], 4), b.graph([8, 6], 4));
-        let scenes: Vec<Scene> = (0..200).map(|s| family(Kind::Translucent, s)).collect();
+        let scenes: Vec<Scene> = (0..200).map(draw).collect();
         for p in PRESETS {
             assert!(scenes.iter().any(|s| s.preset == p), "{p}");
         }

@@ -1,0 +1,142 @@
+//! Seeded families of scenes: a method is measured over many scenes, never the one it was
+//! tuned on. `family(kind, seed)` draws one scene of a family from the seed alone and writes it
+//! as a graph: the method with its defaults beside `render.reference`'s truth, compared and
+//! pictured. Each family has a shipped template (its seed 0) that the scene's `--set`s turn into
+//! any other scene. Seeds below [`HELD_OUT`] are the development set; seeds from it on are held
+//! out (their bounds fixed before their first run).
+//!
+//! - [`Kind::Translucent`] (`translucent`): `sss.render` against volumetric path tracing.
+//! - [`Kind::Mesostructure`] (`mesostructure`): `render.mesh` (BTF + MDF) against the true
+//!   displaced geometry.
+
+pub mod mesostructure;
+pub mod translucent;
+
+use serde_json::Value;
+
+/// The picture each run writes into its output folder: truth | ours | signed difference.
+pub const PICTURE: &str = "truth_ours_difference.png";
+
+/// The first held-out seed: seeds 0..HELD_OUT are for development, HELD_OUT.. are not tuned on.
+pub const HELD_OUT: u64 = 1_000_000;
+
+/// The families.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// `sss.render` with its defaults against volumetric path tracing, η = 1.
+    Translucent,
+    /// `render.mesh` (a captured BTF and the MDF) against `render.reference` on the true
+    /// displaced mesostructure.
+    Mesostructure,
+}
+
+impl Kind {
+    /// Every family.
+    pub const ALL: [Kind; 2] = [Kind::Translucent, Kind::Mesostructure];
+
+    /// The family's name, as the bench's `--family` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Kind::Translucent => "translucent",
+            Kind::Mesostructure => "mesostructure",
+        }
+    }
+
+    /// The family's template, relative to the repository: its seed 0's scene.
+    pub fn template(self) -> &'static str {
+        match self {
+            Kind::Translucent => translucent::TEMPLATE,
+            Kind::Mesostructure => mesostructure::TEMPLATE,
+        }
+    }
+
+    /// The template's resolution and the truth's samples a pixel (the bench's defaults).
+    pub fn resolution(self) -> [u32; 2] {
+        match self {
+            Kind::Translucent => translucent::TEMPLATE_RESOLUTION,
+            Kind::Mesostructure => mesostructure::TEMPLATE_RESOLUTION,
+        }
+    }
+    pub fn samples(self) -> u32 {
+        match self {
+            Kind::Translucent => translucent::TEMPLATE_SAMPLES,
+            Kind::Mesostructure => mesostructure::TEMPLATE_SAMPLES,
+        }
+    }
+}
+
+/// One scene of a family.
+#[derive(Clone, Debug)]
+pub enum Scene {
+    Translucent(translucent::Scene),
+    Mesostructure(mesostructure::Scene),
+}
+
+impl Scene {
+    pub fn kind(&self) -> Kind {
+        match self {
+            Scene::Translucent(_) => Kind::Translucent,
+            Scene::Mesostructure(_) => Kind::Mesostructure,
+        }
+    }
+
+    /// A one-line description naming the seed and every drawn parameter.
+    pub fn name(&self) -> String {
+        match self {
+            Scene::Translucent(s) => s.name(),
+            Scene::Mesostructure(s) => s.name(),
+        }
+    }
+
+    /// The `--set`s that make the family's template this scene at `resolution` and `samples`.
+    pub fn sets(&self, resolution: [u32; 2], samples: u32) -> Vec<String> {
+        match self {
+            Scene::Translucent(s) => s.sets(resolution, samples),
+            Scene::Mesostructure(s) => s.sets(resolution, samples),
+        }
+    }
+
+    /// The scene's graph at `resolution` and `samples` (the template with [`Scene::sets`]: a
+    /// test holds the two the same).
+    pub fn graph(&self, resolution: [u32; 2], samples: u32) -> Value {
+        match self {
+            Scene::Translucent(s) => s.graph(resolution, samples),
+            Scene::Mesostructure(s) => s.graph(resolution, samples),
+        }
+    }
+}
+
+/// The scene of `kind` that `seed` draws.
+pub fn family(kind: Kind, seed: u64) -> Scene {
+    match kind {
+        Kind::Translucent => Scene::Translucent(translucent::draw(seed)),
+        Kind::Mesostructure => Scene::Mesostructure(mesostructure::draw(seed)),
+    }
+}
+
+/// SplitMix64: a small, fixed generator, so a seed draws the same scene on every machine and
+/// in every version of the dependencies.
+pub(crate) struct SplitMix(pub(crate) u64);
+
+impl SplitMix {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    pub(crate) fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+    pub(crate) fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+    pub(crate) fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+    /// A whole number in lo..=hi.
+    pub(crate) fn int(&mut self, lo: u32, hi: u32) -> u32 {
+        lo + self.below((hi - lo + 1) as u64) as u32
+    }
+}
