@@ -328,10 +328,10 @@ fn yaw(v: [f64; 3], degrees: f64) -> [f64; 3] {
     [c * v[0] + s * v[2], v[1], -s * v[0] + c * v[2]]
 }
 
-/// The scene that `seed` draws.
-pub fn draw(seed: u64) -> Scene {
-    let mut r = SplitMix(seed ^ 0x3e50_f10e_a11c_e5ed);
-    let relief = match r.below(8) {
+/// A relief drawn from `r`: bumps (2–16 a tile, a quarter of the family), a weave, cells, fBm
+/// noise (an eighth each) or one of the photographs (three eighths).
+pub(crate) fn draw_relief(r: &mut SplitMix) -> Relief {
+    match r.below(8) {
         0 | 1 => Relief::Pattern {
             pattern: "bumps",
             count: r.int(2, 16),
@@ -353,7 +353,13 @@ pub fn draw(seed: u64) -> Scene {
             width: 0.8,
         },
         _ => Relief::Photo(PHOTOS[r.below(PHOTOS.len() as u64) as usize]),
-    };
+    }
+}
+
+/// The scene that `seed` draws.
+pub fn draw(seed: u64) -> Scene {
+    let mut r = SplitMix(seed ^ 0x3e50_f10e_a11c_e5ed);
+    let relief = draw_relief(&mut r);
     let depth = r.range(2.0, 10.0);
     let brdf = ["lambert", "ward", "ggx"][r.below(3) as usize];
     let albedo = [r.range(0.3, 0.8), r.range(0.3, 0.8), r.range(0.3, 0.8)];

@@ -8,7 +8,10 @@
 //! - [`Kind::Translucent`] (`translucent`): `sss.render` against volumetric path tracing.
 //! - [`Kind::Mesostructure`] (`mesostructure`): `render.mesh` (BTF + MDF) against the true
 //!   displaced geometry.
+//! - [`Kind::HeightFromNormals`] (`height`): heights integrated from corrupted normals against
+//!   the tile they came from.
 
+pub mod height;
 pub mod mesostructure;
 pub mod translucent;
 
@@ -28,17 +31,24 @@ pub enum Kind {
     /// `render.mesh` (a captured BTF and the MDF) against `render.reference` on the true
     /// displaced mesostructure.
     Mesostructure,
+    /// `heightfield.from_normals` on a tile's corrupted normals against the tile.
+    HeightFromNormals,
 }
 
 impl Kind {
     /// Every family.
-    pub const ALL: [Kind; 2] = [Kind::Translucent, Kind::Mesostructure];
+    pub const ALL: [Kind; 3] = [
+        Kind::Translucent,
+        Kind::Mesostructure,
+        Kind::HeightFromNormals,
+    ];
 
     /// The family's name, as the bench's `--family` takes it.
     pub fn name(self) -> &'static str {
         match self {
             Kind::Translucent => "translucent",
             Kind::Mesostructure => "mesostructure",
+            Kind::HeightFromNormals => "height_from_normals",
         }
     }
 
@@ -47,20 +57,24 @@ impl Kind {
         match self {
             Kind::Translucent => translucent::TEMPLATE,
             Kind::Mesostructure => mesostructure::TEMPLATE,
+            Kind::HeightFromNormals => height::TEMPLATE,
         }
     }
 
-    /// The template's resolution and the truth's samples a pixel (the bench's defaults).
+    /// The template's resolution and the truth's samples a pixel (the bench's defaults; a
+    /// family that renders nothing ignores them).
     pub fn resolution(self) -> [u32; 2] {
         match self {
             Kind::Translucent => translucent::TEMPLATE_RESOLUTION,
             Kind::Mesostructure => mesostructure::TEMPLATE_RESOLUTION,
+            Kind::HeightFromNormals => [0, 0],
         }
     }
     pub fn samples(self) -> u32 {
         match self {
             Kind::Translucent => translucent::TEMPLATE_SAMPLES,
             Kind::Mesostructure => mesostructure::TEMPLATE_SAMPLES,
+            Kind::HeightFromNormals => 0,
         }
     }
 }
@@ -70,6 +84,7 @@ impl Kind {
 pub enum Scene {
     Translucent(translucent::Scene),
     Mesostructure(mesostructure::Scene),
+    HeightFromNormals(height::Scene),
 }
 
 impl Scene {
@@ -77,6 +92,16 @@ impl Scene {
         match self {
             Scene::Translucent(_) => Kind::Translucent,
             Scene::Mesostructure(_) => Kind::Mesostructure,
+            Scene::HeightFromNormals(_) => Kind::HeightFromNormals,
+        }
+    }
+
+    /// The seed that drew it.
+    pub fn seed(&self) -> u64 {
+        match self {
+            Scene::Translucent(s) => s.seed,
+            Scene::Mesostructure(s) => s.seed,
+            Scene::HeightFromNormals(s) => s.seed,
         }
     }
 
@@ -85,6 +110,7 @@ impl Scene {
         match self {
             Scene::Translucent(s) => s.name(),
             Scene::Mesostructure(s) => s.name(),
+            Scene::HeightFromNormals(s) => s.name(),
         }
     }
 
@@ -93,6 +119,7 @@ impl Scene {
         match self {
             Scene::Translucent(s) => s.sets(resolution, samples),
             Scene::Mesostructure(s) => s.sets(resolution, samples),
+            Scene::HeightFromNormals(s) => s.sets(),
         }
     }
 
@@ -102,6 +129,7 @@ impl Scene {
         match self {
             Scene::Translucent(s) => s.graph(resolution, samples),
             Scene::Mesostructure(s) => s.graph(resolution, samples),
+            Scene::HeightFromNormals(s) => s.graph(),
         }
     }
 }
@@ -111,6 +139,7 @@ pub fn family(kind: Kind, seed: u64) -> Scene {
     match kind {
         Kind::Translucent => Scene::Translucent(translucent::draw(seed)),
         Kind::Mesostructure => Scene::Mesostructure(mesostructure::draw(seed)),
+        Kind::HeightFromNormals => Scene::HeightFromNormals(height::draw(seed)),
     }
 }
 
