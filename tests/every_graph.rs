@@ -63,6 +63,7 @@ fn small(graph: &str) -> Vec<String> {
             "ours.camera.resolution=[32,24]".into(),
         ],
         "family_height_from_normals" => vec!["pattern.size=32".into()],
+        "family_ward_fit" => vec![],
         "height_from_normals" => vec!["tile.size=32".into()],
         "isomap" => vec!["roll.n=300".into(), "landmark.landmarks=50".into()],
         "mdf_render" => {

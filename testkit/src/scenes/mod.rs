@@ -10,10 +10,13 @@
 //!   displaced geometry.
 //! - [`Kind::HeightFromNormals`] (`height`): heights integrated from corrupted normals against
 //!   the tile they came from.
+//! - [`Kind::WardFit`] (`ward`): Ward fits of Cook–Torrance samples and the weathering degree
+//!   recovered from them, against the samples' truth.
 
 pub mod height;
 pub mod mesostructure;
 pub mod translucent;
+pub mod ward;
 
 use serde_json::Value;
 
@@ -33,14 +36,17 @@ pub enum Kind {
     Mesostructure,
     /// `heightfield.from_normals` on a tile's corrupted normals against the tile.
     HeightFromNormals,
+    /// `brdf.fit_ward` and `manifold.degree` on Cook–Torrance weathered samples.
+    WardFit,
 }
 
 impl Kind {
     /// Every family.
-    pub const ALL: [Kind; 3] = [
+    pub const ALL: [Kind; 4] = [
         Kind::Translucent,
         Kind::Mesostructure,
         Kind::HeightFromNormals,
+        Kind::WardFit,
     ];
 
     /// The family's name, as the bench's `--family` takes it.
@@ -49,6 +55,7 @@ impl Kind {
             Kind::Translucent => "translucent",
             Kind::Mesostructure => "mesostructure",
             Kind::HeightFromNormals => "height_from_normals",
+            Kind::WardFit => "ward_fit",
         }
     }
 
@@ -58,6 +65,7 @@ impl Kind {
             Kind::Translucent => translucent::TEMPLATE,
             Kind::Mesostructure => mesostructure::TEMPLATE,
             Kind::HeightFromNormals => height::TEMPLATE,
+            Kind::WardFit => ward::TEMPLATE,
         }
     }
 
@@ -67,14 +75,14 @@ impl Kind {
         match self {
             Kind::Translucent => translucent::TEMPLATE_RESOLUTION,
             Kind::Mesostructure => mesostructure::TEMPLATE_RESOLUTION,
-            Kind::HeightFromNormals => [0, 0],
+            Kind::HeightFromNormals | Kind::WardFit => [0, 0],
         }
     }
     pub fn samples(self) -> u32 {
         match self {
             Kind::Translucent => translucent::TEMPLATE_SAMPLES,
             Kind::Mesostructure => mesostructure::TEMPLATE_SAMPLES,
-            Kind::HeightFromNormals => 0,
+            Kind::HeightFromNormals | Kind::WardFit => 0,
         }
     }
 }
@@ -85,6 +93,7 @@ pub enum Scene {
     Translucent(translucent::Scene),
     Mesostructure(mesostructure::Scene),
     HeightFromNormals(height::Scene),
+    WardFit(ward::Scene),
 }
 
 impl Scene {
@@ -93,6 +102,7 @@ impl Scene {
             Scene::Translucent(_) => Kind::Translucent,
             Scene::Mesostructure(_) => Kind::Mesostructure,
             Scene::HeightFromNormals(_) => Kind::HeightFromNormals,
+            Scene::WardFit(_) => Kind::WardFit,
         }
     }
 
@@ -102,6 +112,7 @@ impl Scene {
             Scene::Translucent(s) => s.seed,
             Scene::Mesostructure(s) => s.seed,
             Scene::HeightFromNormals(s) => s.seed,
+            Scene::WardFit(s) => s.seed,
         }
     }
 
@@ -111,6 +122,7 @@ impl Scene {
             Scene::Translucent(s) => s.name(),
             Scene::Mesostructure(s) => s.name(),
             Scene::HeightFromNormals(s) => s.name(),
+            Scene::WardFit(s) => s.name(),
         }
     }
 
@@ -120,6 +132,7 @@ impl Scene {
             Scene::Translucent(s) => s.sets(resolution, samples),
             Scene::Mesostructure(s) => s.sets(resolution, samples),
             Scene::HeightFromNormals(s) => s.sets(),
+            Scene::WardFit(s) => s.sets(),
         }
     }
 
@@ -130,6 +143,7 @@ impl Scene {
             Scene::Translucent(s) => s.graph(resolution, samples),
             Scene::Mesostructure(s) => s.graph(resolution, samples),
             Scene::HeightFromNormals(s) => s.graph(),
+            Scene::WardFit(s) => s.graph(),
         }
     }
 }
@@ -140,6 +154,7 @@ pub fn family(kind: Kind, seed: u64) -> Scene {
         Kind::Translucent => Scene::Translucent(translucent::draw(seed)),
         Kind::Mesostructure => Scene::Mesostructure(mesostructure::draw(seed)),
         Kind::HeightFromNormals => Scene::HeightFromNormals(height::draw(seed)),
+        Kind::WardFit => Scene::WardFit(ward::draw(seed)),
     }
 }
 
