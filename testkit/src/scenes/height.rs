@@ -5,7 +5,7 @@
 //! the corrupted normals (plain least squares, least squares weighted by each normal's
 //! residual, Frankot–Chellappa) with their height errors against the tile.
 
-use super::mesostructure::{Relief, PHOTOS};
+use super::mesostructure::Relief;
 use super::SplitMix;
 use serde_json::{json, Value};
 
@@ -32,20 +32,10 @@ pub struct Scene {
 impl Scene {
     /// A one-line description naming the seed and every drawn parameter.
     pub fn name(&self) -> String {
-        let relief = match self.relief {
-            Relief::Pattern {
-                pattern,
-                count,
-                width,
-            } => format!("{pattern} ×{count} (width {width:.2})"),
-            Relief::Photo(p) => format!(
-                "photo {}",
-                p.trim_start_matches("data/").trim_end_matches(".png")
-            ),
-        };
         format!(
-            "seed {}: {relief}, {:.1} texels deep, tilts σ {:.1}°, {:.0}% outliers at {:.0}°",
+            "seed {}: {}, {:.1} texels deep, tilts σ {:.1}°, {:.0}% outliers at {:.0}°",
             self.seed,
+            self.relief.describe(),
             self.depth,
             self.sigma_deg,
             100.0 * self.outliers,
@@ -53,50 +43,17 @@ impl Scene {
         )
     }
 
-    fn pattern(&self) -> (&'static str, u32, f64) {
-        match self.relief {
-            Relief::Pattern {
-                pattern,
-                count,
-                width,
-            } => (pattern, count, width),
-            Relief::Photo(_) => ("bumps", 8, 0.8),
-        }
-    }
-
-    fn edit(&self) -> (&'static str, f64) {
-        match self.relief {
-            Relief::Pattern { .. } => ("scale", 1.0),
-            Relief::Photo(_) => ("replace", self.depth),
-        }
-    }
-
-    fn photo(&self) -> &'static str {
-        match self.relief {
-            Relief::Photo(p) => p,
-            Relief::Pattern { .. } => PHOTOS[0],
-        }
-    }
-
     /// The `--set`s that make [`TEMPLATE`] this scene.
     pub fn sets(&self) -> Vec<String> {
         let j = |v: Value| v.to_string();
-        let (pattern, count, width) = self.pattern();
-        let (operation, amount) = self.edit();
-        vec![
-            format!("pattern.pattern={pattern}"),
-            format!("pattern.count={count}"),
-            format!("pattern.width={}", j(json!(width))),
-            format!("pattern.depth={}", j(json!(self.depth))),
-            format!("pattern.seed={}", self.seed),
-            format!("photo.path={}", self.photo()),
-            format!("surface.operation={operation}"),
-            format!("surface.amount={}", j(json!(amount))),
+        let mut sets = self.relief.sets(self.depth, self.seed);
+        sets.extend([
             format!("noise.sigma_deg={}", j(json!(self.sigma_deg))),
             format!("noise.outliers={}", j(json!(self.outliers))),
             format!("noise.outlier_deg={}", j(json!(self.outlier_deg))),
             format!("noise.seed={}", self.seed % 1_000_003 + 1),
-        ]
+        ]);
+        sets
     }
 
     /// The graph: the tile, its normals, their corruption (`noise`) and the three integrations
@@ -104,8 +61,6 @@ impl Scene {
     /// the uncorrupted normals integrated (what the tile's own relief costs: normals cannot say
     /// how tall a cliff is).
     pub fn graph(&self) -> Value {
-        let (pattern, count, width) = self.pattern();
-        let (operation, amount) = self.edit();
         let integrate = |method: &str, weighted: bool| {
             let mut n = json!({
                 "kind": "heightfield.from_normals",
@@ -118,19 +73,10 @@ impl Scene {
             }
             n
         };
-        json!({
+        let mut graph = json!({
             "mesoflow": 1,
             "description": format!("Scene family `height_from_normals`, {}", self.name()),
             "nodes": {
-                "pattern": { "kind": "heightfield.procedural", "params": {
-                    "pattern": pattern, "size": TILE, "count": count, "width": width,
-                    "depth": self.depth, "seed": self.seed } },
-                "photo": { "kind": "heightfield.read", "params": { "path": self.photo(), "depth": 1.0 } },
-                "surface": {
-                    "kind": "heightfield.edit",
-                    "inputs": { "height": "pattern.height", "other": "photo.height" },
-                    "params": { "operation": operation, "amount": amount }
-                },
                 "normals": { "kind": "heightfield.normals", "inputs": { "height": "surface.height" } },
                 "noise": {
                     "kind": "heightfield.normal_noise",
@@ -147,7 +93,9 @@ impl Scene {
                 "weighted": integrate("least_squares", true),
                 "fourier": integrate("fourier", false)
             }
-        })
+        });
+        super::prepend(&mut graph, self.relief.nodes(self.depth, self.seed));
+        graph
     }
 }
 

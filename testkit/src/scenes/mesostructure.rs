@@ -11,7 +11,7 @@
 //! spheres, open cylinders and a plane with open edges, each tiled so a tile is about square.
 //! Light from the front, the side, grazing or from behind; the camera at several distances.
 
-use super::{SplitMix, PICTURE};
+use super::SplitMix;
 use serde_json::{json, Value};
 
 /// The family's template, relative to the repository: seed 0's scene.
@@ -40,6 +40,97 @@ pub enum Relief {
     },
     /// One of [`PHOTOS`].
     Photo(&'static str),
+}
+
+impl Relief {
+    /// A short description: the pattern with its count and width, or the photograph.
+    pub fn describe(&self) -> String {
+        match *self {
+            Relief::Pattern {
+                pattern,
+                count,
+                width,
+            } => format!("{pattern} ×{count} (width {width:.2})"),
+            Relief::Photo(p) => format!(
+                "photo {}",
+                p.trim_start_matches("data/").trim_end_matches(".png")
+            ),
+        }
+    }
+
+    /// The procedural node's parameters (drawn for a photograph's scene too, where its output
+    /// only gives the tile's size).
+    fn pattern(&self) -> (&'static str, u32, f64) {
+        match *self {
+            Relief::Pattern {
+                pattern,
+                count,
+                width,
+            } => (pattern, count, width),
+            Relief::Photo(_) => ("bumps", 8, 0.8),
+        }
+    }
+
+    /// `heightfield.edit`'s operation and amount: the pattern as it is, or the photograph
+    /// (heights 0 to 1) scaled to `depth`.
+    fn edit(&self, depth: f64) -> (&'static str, f64) {
+        match self {
+            Relief::Pattern { .. } => ("scale", 1.0),
+            Relief::Photo(_) => ("replace", depth),
+        }
+    }
+
+    fn photo(&self) -> &'static str {
+        match *self {
+            Relief::Photo(p) => p,
+            Relief::Pattern { .. } => PHOTOS[0],
+        }
+    }
+
+    /// The three nodes that make the tile, `depth` texels deep: `pattern`
+    /// (`heightfield.procedural`), `photo` (`heightfield.read`) and `surface`
+    /// (`heightfield.edit`: the pattern as it is, or the photograph in its place).
+    pub(crate) fn nodes(&self, depth: f64, seed: u64) -> [(&'static str, Value); 3] {
+        let (pattern, count, width) = self.pattern();
+        let (operation, amount) = self.edit(depth);
+        [
+            (
+                "pattern",
+                json!({ "kind": "heightfield.procedural", "params": {
+                    "pattern": pattern, "size": TILE, "count": count, "width": width,
+                    "depth": depth, "seed": seed } }),
+            ),
+            (
+                "photo",
+                json!({ "kind": "heightfield.read", "params": { "path": self.photo(), "depth": 1.0 } }),
+            ),
+            (
+                "surface",
+                json!({
+                    "kind": "heightfield.edit",
+                    "inputs": { "height": "pattern.height", "other": "photo.height" },
+                    "params": { "operation": operation, "amount": amount }
+                }),
+            ),
+        ]
+    }
+
+    /// The `--set`s that make [`Relief::nodes`] this relief.
+    pub(crate) fn sets(&self, depth: f64, seed: u64) -> Vec<String> {
+        let j = |v: Value| v.to_string();
+        let (pattern, count, width) = self.pattern();
+        let (operation, amount) = self.edit(depth);
+        vec![
+            format!("pattern.pattern={pattern}"),
+            format!("pattern.count={count}"),
+            format!("pattern.width={}", j(json!(width))),
+            format!("pattern.depth={}", j(json!(depth))),
+            format!("pattern.seed={seed}"),
+            format!("photo.path={}", self.photo()),
+            format!("surface.operation={operation}"),
+            format!("surface.amount={}", j(json!(amount))),
+        ]
+    }
 }
 
 /// Where the light comes from, seen from the camera.
@@ -86,17 +177,7 @@ impl Scene {
 
     /// A one-line description naming the seed and every drawn parameter.
     pub fn name(&self) -> String {
-        let relief = match self.relief {
-            Relief::Pattern {
-                pattern,
-                count,
-                width,
-            } => format!("{pattern} ×{count} (width {width:.2})"),
-            Relief::Photo(p) => format!(
-                "photo {}",
-                p.trim_start_matches("data/").trim_end_matches(".png")
-            ),
-        };
+        let relief = self.relief.describe();
         let brdf = match self.brdf {
             "lambert" => "Lambert".to_string(),
             b => format!("{b} (ρs {:.2}, α {:.2})", self.specular, self.roughness),
@@ -159,50 +240,12 @@ impl Scene {
         [self.tiling[0] as f64, self.tiling[1] as f64]
     }
 
-    /// The procedural node's parameters (drawn for a photograph's scene too, where its output
-    /// only gives the tile's size).
-    fn pattern(&self) -> (&'static str, u32, f64) {
-        match self.relief {
-            Relief::Pattern {
-                pattern,
-                count,
-                width,
-            } => (pattern, count, width),
-            Relief::Photo(_) => ("bumps", 8, 0.8),
-        }
-    }
-
-    /// `heightfield.edit`'s operation and amount: the pattern as it is, or the photograph
-    /// (heights 0 to 1) scaled to the depth.
-    fn edit(&self) -> (&'static str, f64) {
-        match self.relief {
-            Relief::Pattern { .. } => ("scale", 1.0),
-            Relief::Photo(_) => ("replace", self.depth),
-        }
-    }
-
-    fn photo(&self) -> &'static str {
-        match self.relief {
-            Relief::Photo(p) => p,
-            Relief::Pattern { .. } => PHOTOS[0],
-        }
-    }
-
     /// The `--set`s that make [`TEMPLATE`] this scene at `resolution` and `samples`.
     pub fn sets(&self, resolution: [u32; 2], samples: u32) -> Vec<String> {
         // serde_json's own text, so a float stays a float (`0.0`, not `0`) when read back.
         let j = |v: Value| v.to_string();
-        let (pattern, count, width) = self.pattern();
-        let (operation, amount) = self.edit();
-        let mut sets = vec![
-            format!("pattern.pattern={pattern}"),
-            format!("pattern.count={count}"),
-            format!("pattern.width={}", j(json!(width))),
-            format!("pattern.depth={}", j(json!(self.depth))),
-            format!("pattern.seed={}", self.seed),
-            format!("photo.path={}", self.photo()),
-            format!("surface.operation={operation}"),
-            format!("surface.amount={}", j(json!(amount))),
+        let mut sets = self.relief.sets(self.depth, self.seed);
+        sets.extend([
             format!("mesh.shape={}", self.shape),
             format!("mesh.size={}", j(json!(self.size))),
             format!("mesh.minor={}", j(json!(self.minor))),
@@ -213,7 +256,7 @@ impl Scene {
             format!("true_surface.depth={}", j(json!(self.shell_depth()))),
             format!("ours.tiling={}", j(json!(self.tiling_f()))),
             format!("ours.shell={}", j(json!(self.shell()))),
-        ];
+        ]);
         for id in ["capture", "truth"] {
             sets.push(format!("{id}.brdf={}", self.brdf));
             sets.push(format!("{id}.albedo={}", j(json!(self.albedo))));
@@ -240,14 +283,12 @@ impl Scene {
 
     /// The graph: `ours` (`render.mesh` with its defaults but the scene's camera, light, tiling
     /// and shell), `truth` (`render.reference` on `true_surface` at `samples` a pixel),
-    /// `error` (`image.compare` over both masks), `flip` and [`PICTURE`]. [`TEMPLATE`] is seed
+    /// `error` (`image.compare` over both masks), `flip` and [`PICTURE`](super::PICTURE). [`TEMPLATE`] is seed
     /// 0's at [`TEMPLATE_RESOLUTION`] and [`TEMPLATE_SAMPLES`]; [`Scene::sets`] turns it into any
     /// other (a test holds the two the same).
     pub fn graph(&self, resolution: [u32; 2], samples: u32) -> Value {
         let camera = json!({ "eye": self.eye, "target": [0.0, 0.0, 0.0], "fov": 40.0, "resolution": resolution });
         let light = json!({ "direction": self.direction, "intensity": 3.0 });
-        let (pattern, count, width) = self.pattern();
-        let (operation, amount) = self.edit();
         let reflectance = |mut v: Value| {
             v["brdf"] = json!(self.brdf);
             v["albedo"] = json!(self.albedo);
@@ -255,19 +296,10 @@ impl Scene {
             v["roughness"] = json!(self.roughness);
             v
         };
-        json!({
+        let mut graph = json!({
             "mesoflow": 1,
             "description": format!("Scene family `mesostructure`, {}", self.name()),
             "nodes": {
-                "pattern": { "kind": "heightfield.procedural", "params": {
-                    "pattern": pattern, "size": TILE, "count": count, "width": width,
-                    "depth": self.depth, "seed": self.seed } },
-                "photo": { "kind": "heightfield.read", "params": { "path": self.photo(), "depth": 1.0 } },
-                "surface": {
-                    "kind": "heightfield.edit",
-                    "inputs": { "height": "pattern.height", "other": "photo.height" },
-                    "params": { "operation": operation, "amount": amount }
-                },
                 "capture": {
                     "kind": "btf.capture",
                     "inputs": { "height": "surface.height" },
@@ -303,22 +335,12 @@ impl Scene {
                     "kind": "image.flip",
                     "inputs": { "reference": "truth.image", "test": "ours.image" },
                     "params": { "object_only": true }
-                },
-                "difference": {
-                    "kind": "image.difference",
-                    "inputs": { "reference": "truth.image", "image": "ours.image" }
-                },
-                "row": {
-                    "kind": "image.row",
-                    "inputs": { "a": "truth.image", "b": "ours.image", "c": "difference.image" }
-                },
-                "picture": {
-                    "kind": "image.write",
-                    "inputs": { "image": "row.image" },
-                    "params": { "path": PICTURE }
                 }
             }
-        })
+        });
+        super::prepend(&mut graph, self.relief.nodes(self.depth, self.seed));
+        super::add_picture(&mut graph);
+        graph
     }
 }
 

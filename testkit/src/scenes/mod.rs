@@ -18,7 +18,7 @@ pub mod mesostructure;
 pub mod translucent;
 pub mod ward;
 
-use serde_json::Value;
+use serde_json::{json, Value};
 
 /// The picture each run writes into its output folder: truth | ours | signed difference.
 pub const PICTURE: &str = "truth_ours_difference.png";
@@ -156,6 +156,38 @@ pub fn family(kind: Kind, seed: u64) -> Scene {
         Kind::HeightFromNormals => Scene::HeightFromNormals(height::draw(seed)),
         Kind::WardFit => Scene::WardFit(ward::draw(seed)),
     }
+}
+
+/// Appends the picture's nodes to a family's graph: `difference` (truth − ours, signed),
+/// `row` (truth | ours | difference) and `picture` ([`PICTURE`], written beside the report).
+pub(crate) fn add_picture(graph: &mut Value) {
+    let nodes = graph["nodes"].as_object_mut().expect("a graph has nodes");
+    for (id, node) in [
+        (
+            "difference",
+            json!({ "kind": "image.difference", "inputs": { "reference": "truth.image", "image": "ours.image" } }),
+        ),
+        (
+            "row",
+            json!({ "kind": "image.row", "inputs": { "a": "truth.image", "b": "ours.image", "c": "difference.image" } }),
+        ),
+        (
+            "picture",
+            json!({ "kind": "image.write", "inputs": { "image": "row.image" }, "params": { "path": PICTURE } }),
+        ),
+    ] {
+        nodes.insert(id.into(), node);
+    }
+}
+
+/// Puts `first` before a graph's other nodes (the file reads from its sources down).
+pub(crate) fn prepend<const N: usize>(graph: &mut Value, first: [(&'static str, Value); N]) {
+    let rest = std::mem::take(graph["nodes"].as_object_mut().expect("a graph has nodes"));
+    let nodes = graph["nodes"].as_object_mut().expect("a graph has nodes");
+    for (id, node) in first {
+        nodes.insert(id.into(), node);
+    }
+    nodes.extend(rest);
 }
 
 /// SplitMix64: a small, fixed generator, so a seed draws the same scene on every machine and

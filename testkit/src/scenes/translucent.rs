@@ -2,7 +2,7 @@
 //! size, light, camera distance) from the seed alone and writes it as a graph: `sss.render` with
 //! its defaults beside `render.reference`'s volumetric truth, compared.
 
-use super::{SplitMix, PICTURE};
+use super::SplitMix;
 use serde_json::{json, Value};
 
 /// The translucent family's template, relative to the repository: seed 0's scene.
@@ -131,7 +131,7 @@ impl Scene {
 
     /// The graph: `ours` (the method with its defaults), `truth` (`render.reference` with the
     /// medium at `samples` a pixel), `error` (`image.compare` over the truth's coverage) and
-    /// [`PICTURE`] (truth | ours | signed difference), at `resolution`. [`TEMPLATE`] is seed 0's at 64 × 48 and 1024 samples; [`Scene::sets`] turns
+    /// [`PICTURE`](super::PICTURE) (truth | ours | signed difference), at `resolution`. [`TEMPLATE`] is seed 0's at 64 × 48 and 1024 samples; [`Scene::sets`] turns
     /// it into any other (a test holds the two the same).
     pub fn graph(&self, resolution: [u32; 2], samples: u32) -> Value {
         let (eye, direction) = self.view();
@@ -140,7 +140,7 @@ impl Scene {
         let light = json!({ "direction": direction, "intensity": 5.0 });
         // `minor` is the torus's tube; a sphere ignores it (written so one template serves both).
         let mesh = json!({ "shape": self.shape, "size": self.size, "minor": self.minor, "segments": [96, 48] });
-        json!({
+        let mut graph = json!({
             "mesoflow": 1,
             "description": format!("Scene family `translucent`, {}", self.name()),
             "nodes": {
@@ -160,22 +160,11 @@ impl Scene {
                 "error": {
                     "kind": "image.compare",
                     "inputs": { "reference": "truth.image", "image": "ours.image", "reference_mask": "truth.coverage" }
-                },
-                "difference": {
-                    "kind": "image.difference",
-                    "inputs": { "reference": "truth.image", "image": "ours.image" }
-                },
-                "row": {
-                    "kind": "image.row",
-                    "inputs": { "a": "truth.image", "b": "ours.image", "c": "difference.image" }
-                },
-                "picture": {
-                    "kind": "image.write",
-                    "inputs": { "image": "row.image" },
-                    "params": { "path": PICTURE }
                 }
             }
-        })
+        });
+        super::add_picture(&mut graph);
+        graph
     }
 }
 
