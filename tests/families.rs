@@ -126,21 +126,12 @@ fn ward_fits_over_the_family() {
     for seed in (0..12).chain(scenes::HELD_OUT..scenes::HELD_OUT + 12) {
         let scene = scenes::family(Kind::WardFit, seed);
         let out = scratch.path().join(format!("seed-{seed}"));
-        let mut args = vec![
-            "run".to_string(),
-            root.join(Kind::WardFit.template()).display().to_string(),
-            "--quiet".into(),
-            "--no-cache".into(),
-            "--out-dir".into(),
-            out.display().to_string(),
-        ];
-        for s in scene.sets([0, 0], 0) {
-            args.push("--set".into());
-            args.push(s);
-        }
-        let argv: Vec<&str> = args.iter().map(String::as_str).collect();
-        let run = crate::common::mesoflow(&argv, root);
-        let report = crate::common::report(&out);
+        let (run, report) = crate::common::try_run_graph(
+            root,
+            Kind::WardFit.template(),
+            &out,
+            &scene.sets([0, 0], 0),
+        );
         let m = |id: &str, k: &str| crate::common::metric(&report, id, k);
         let name = scene.name();
         let (rho_d, rho_s, alpha) = (

@@ -266,6 +266,19 @@ pub fn ids<'a>(st: &'a std::collections::BTreeMap<String, String>, status: &str)
 
 /// `mesoflow run GRAPH --quiet --no-cache --out-dir OUT` with `--set` pairs; the report.
 pub fn run_graph(root: &Path, graph: &str, out: &Path, sets: &[String]) -> serde_json::Value {
+    let (r, report) = try_run_graph(root, graph, out, sets);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    report
+}
+
+/// As [`run_graph`], for a run that may fail: its exit status and stderr, and the report
+/// (written for a failed run too, the failed nodes marked).
+pub fn try_run_graph(
+    root: &Path,
+    graph: &str,
+    out: &Path,
+    sets: &[String],
+) -> (Run, serde_json::Value) {
     let mut args: Vec<String> = vec![
         "run".into(),
         root.join(graph).display().to_string(),
@@ -280,6 +293,5 @@ pub fn run_graph(root: &Path, graph: &str, out: &Path, sets: &[String]) -> serde
     }
     let args: Vec<&str> = args.iter().map(String::as_str).collect();
     let r = mesoflow(&args, root);
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    report(out)
+    (r, report(out))
 }
