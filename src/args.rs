@@ -259,6 +259,16 @@ pub struct PlanArgs {
     /// predicts the least render time) or `equal` (half each).
     #[arg(long, value_enum, default_value_t = SplitArg::Joint)]
     pub split: SplitArg,
+    /// The time the plan may spend proving itself on probes of the view, in renders of the
+    /// full view (the graph's own frame): each candidate is rendered on the probe beside the
+    /// graph and kept only within the budget and not slower. 0: no probe, the measured model
+    /// alone.
+    #[arg(long, value_name = "RENDERS", default_value_t = 1.0)]
+    pub probe_budget: f64,
+    /// The probe frame's share of the render's pixels (its centre, at the same pixels per
+    /// degree).
+    #[arg(long, value_name = "FRACTION", default_value_t = 0.25)]
+    pub probe_share: f64,
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
     #[arg(long, short)]

@@ -96,6 +96,17 @@ fn small(graph: &str) -> Vec<String> {
             v.extend(sss(&["sss_full", "sss_view"]));
             v
         }
+        "plan_photo" => {
+            let mut v: Vec<String> = vec![
+                format!("capture.views={DIRS}"),
+                format!("capture.lights={DIRS}"),
+                format!("mdf.views={DIRS}"),
+                "pca.rank=4".into(),
+                "torus.segments=[32,16]".into(),
+            ];
+            v.extend(render(&["full", "view"]));
+            v
+        }
         "plan_qh" => {
             let mut v: Vec<String> = vec![
                 "surface.size=16".into(),

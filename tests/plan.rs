@@ -2,7 +2,8 @@
 //! runs and renders from the same camera; budget 0 reproduces the full model exactly (FLIP 0);
 //! an enormous budget picks the cheapest model (never nothing); far views drop the MDF;
 //! translucency becomes a BRDF when scattering is sub-pixel; a camera inside the object and bad
-//! arguments are clear errors.
+//! arguments are clear errors. The measured model alone (`--probe-budget 0`): the probe that
+//! proves a plan on the view is tests/plan_probe.rs's.
 
 use crate::common::{mesoflow, metric, report, Run, Scratch};
 use serde_json::Value;
@@ -89,6 +90,10 @@ fn plan_with(
         "--quiet".into(),
         "--cache-dir".into(),
         cache.display().to_string(),
+        // The measured model's rules alone: proving plans on a probe of the view is
+        // tests/plan_probe.rs's (at this test's 48 × 36 a probe would be 24 × 18 pixels).
+        "--probe-budget".into(),
+        "0".into(),
     ];
     for kv in sets {
         args.push("--set".into());
@@ -146,11 +151,14 @@ fn budget_zero_plans_the_full_model_and_reproduces_it_exactly() {
     assert_eq!(both.run.code, 0, "{}", both.run.stderr);
     assert_eq!(decision(&b.plan(), "btf")["choice"]["model"], "raw");
     assert_eq!(decision(&b.plan(), "mdf")["choice"]["use_mdf"], true);
+    // Budget 0 is the graph as given (issue 41), here the full model both views are written
+    // with (a brute-force gather of PBD).
     let g = both.graph();
     assert_eq!(g["nodes"]["sss_view"]["params"]["threshold"], 0.0);
+    assert!(g["nodes"]["sss_view"]["params"].get("mode").is_none());
     assert_eq!(g["nodes"]["skin_profile"]["params"]["model"], "pbd");
-    // The planned views are the full model: identical renders, FLIP exactly 0 (the same keys,
-    // so the same cached values).
+    // The planned views are the full model: identical renders, FLIP exactly 0 (the same
+    // keys, so the same cached values).
     let rep = run_planned(&s, &both);
     assert_eq!(metric(&rep, "btf_flip", "mean"), 0.0);
     assert_eq!(metric(&rep, "sss_flip", "mean"), 0.0);

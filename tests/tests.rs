@@ -14,6 +14,7 @@ mod families;
 mod flip_peer;
 mod hostile;
 mod plan;
+mod plan_probe;
 mod plan_verify;
 mod reference_peer;
 mod shipped_graphs;

@@ -7,6 +7,8 @@ use serde_json::{json, Map};
 /// The BTF's model: raw, or a PCA basis of `rank` (luma) and `chroma_rank` at `level`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BtfModel {
+    /// The graph's own model, left as it is.
+    pub given: bool,
     pub raw: bool,
     pub level: f64,
     pub rank: u32,
@@ -45,6 +47,7 @@ pub(crate) fn decide_btf(cx: &Stage, share: f64) -> (Decision, BtfModel) {
                 }),
             },
             BtfModel {
+                given: false,
                 raw: true,
                 level: 0.0,
                 rank: 0,
@@ -52,20 +55,71 @@ pub(crate) fn decide_btf(cx: &Stage, share: f64) -> (Decision, BtfModel) {
             },
         )
     };
-    if full {
-        return raw(
-            "budget 0: the full model is the raw BTF at full resolution".into(),
-            0.0,
-        );
-    }
     // Memory of a basis: per block of rank k, k maps at the level's resolution, a mean, and
     // k basis vectors over the pairs.
     let texels = scene.tile_texels.unwrap_or(64.0).powi(2);
     let pairs = scene.btf_pairs.unwrap_or(0.0);
-    let floats = |r: u32, l: f64| {
-        let chroma = (r / 4).max(1) as f64;
+    let basis_floats = |luma: u32, chroma: u32, l: f64| {
         let at = (texels / 4f64.powf(l)).max(1.0);
-        (r as f64 + 2.0 * chroma) * (at + pairs) + 3.0 * at
+        (luma as f64 + 2.0 * chroma as f64) * (at + pairs) + 3.0 * at
+    };
+    let floats = |r: u32, l: f64| basis_floats(r, (r / 4).max(1), l);
+    // The graph's own model, which no candidate may exceed, and what a stage with nothing that
+    // fits keeps.
+    let keep = |reason: String, floats: Option<f64>| {
+        (
+            Decision {
+                stage: "btf",
+                choice: json!({ "model": "as given" }),
+                reason,
+                predicted_error: Some(0.0),
+                predicted_cost: Some(match floats {
+                    Some(f) => json!({ "floats": f, "render_time_vs_full": 1.0 }),
+                    None => json!({ "render_time_vs_full": 1.0 }),
+                }),
+            },
+            BtfModel {
+                given: true,
+                raw: false,
+                level: 0.0,
+                rank: 0,
+                chroma_rank: 0,
+            },
+        )
+    };
+    let limit = match cx.btf_given {
+        Some(GivenBtf::Pca {
+            rank,
+            chroma_rank,
+            ycbcr,
+            level,
+            ..
+        }) => {
+            let (luma, chroma) = if *ycbcr {
+                (*rank, *chroma_rank)
+            } else {
+                (*rank, *rank)
+            };
+            Some((*rank, *level, basis_floats(luma, chroma, *level)))
+        }
+        _ => None,
+    };
+    let raw_given = matches!(cx.btf_given, Some(GivenBtf::Raw));
+    let fallback = |reason: String| {
+        if raw_given {
+            raw(format!("{reason}; the raw BTF, as the graph gives it"), 0.0)
+        } else {
+            keep(
+                format!("{reason}; the graph's own basis is kept (a plan never gives more model than the graph)"),
+                limit.map(|l| l.2),
+            )
+        }
+    };
+    if full {
+        return fallback("budget 0: the graph's own model".into());
+    }
+    let within_given = |r: u32, l: f64| {
+        limit.is_none_or(|(rank, level, f)| r <= rank && l >= level && floats(r, l) <= f)
     };
     let pca = |r: u32, l: f64, reason: String, predicted: Option<f64>, time: Option<f64>| {
         let chroma = (r / 4).max(1);
@@ -89,6 +143,7 @@ pub(crate) fn decide_btf(cx: &Stage, share: f64) -> (Decision, BtfModel) {
                 }),
             },
             BtfModel {
+                given: false,
                 raw: false,
                 level: l,
                 rank: r,
@@ -108,12 +163,13 @@ pub(crate) fn decide_btf(cx: &Stage, share: f64) -> (Decision, BtfModel) {
         return pca(1, coarsest, why_cheapest.to_string(), worst, None);
     }
     let Some(t) = tpp else {
-        return raw("texels per pixel unknown: the raw BTF".into(), 0.0);
+        return fallback("texels per pixel unknown".into());
     };
     let best = model
         .btf
         .iter()
         .filter(|o| o.level as f64 <= coarsest)
+        .filter(|o| within_given(o.rank, o.level as f64))
         .filter_map(|o| predict(o).map(|p| (o, p)))
         .filter(|(_, (e, inside))| *inside && *e <= share)
         .min_by(|a, b| {
@@ -130,10 +186,10 @@ pub(crate) fn decide_btf(cx: &Stage, share: f64) -> (Decision, BtfModel) {
             Some(e),
             o.time.at(t).map(|p| p.0),
         ),
-        None => raw(
-            format!("{t:.2} texels per pixel: no PCA rank and level is predicted within this stage's {share:.3}; the raw BTF"),
-            0.0,
-        ),
+        None => fallback(format!(
+            "{t:.2} texels per pixel: no PCA rank and level{} is predicted within this stage's {share:.3}",
+            if limit.is_some() { " below the graph's" } else { "" }
+        )),
     }
 }
 
@@ -149,6 +205,9 @@ pub(crate) fn apply_btf(
             n.inputs.insert(port.into(), from);
         }
     };
+    if m.given {
+        return;
+    }
     if m.raw {
         set_input(out, chain.raw.clone());
         return;

@@ -57,16 +57,55 @@ pub(crate) fn prune(out: &mut GraphFile, before: &GraphFile, render: &str) {
 }
 
 /// Where the BTF of `render`'s `port` comes from: through `btf.lod` and `btf.pca` back to the
-/// raw BTF.
+/// raw BTF, and the model the graph gives the renderer on the way.
 pub fn btf_chain(file: &GraphFile, render: &str, port: &str) -> Option<BtfChain> {
-    let mut from = file.node(render)?.inputs.get(port)?.clone();
+    let input = file.node(render)?.inputs.get(port)?.clone();
+    let mut from = input.clone();
+    let mut level = 0.0;
+    let mut pca: Option<Option<(u32, u32, bool)>> = None;
     loop {
         let (id, _) = from.split_once('.')?;
         let n = file.node(id)?;
         match n.kind.as_str() {
-            "btf.lod" => from = n.inputs.get("basis")?.clone(),
-            "btf.pca" => from = n.inputs.get("btf")?.clone(),
-            _ => return Some(BtfChain { raw: from }),
+            "btf.lod" => {
+                level += n.params.get("level").and_then(Value::as_f64).unwrap_or(0.0);
+                from = n.inputs.get("basis")?.clone();
+            }
+            "btf.pca" => {
+                pca = Some(pca_rank(&n.params));
+                from = n.inputs.get("btf")?.clone();
+            }
+            _ => {
+                let given = match pca {
+                    None => Some(GivenBtf::Raw),
+                    Some(None) => None,
+                    Some(Some((rank, chroma_rank, ycbcr))) => Some(GivenBtf::Pca {
+                        from: input,
+                        rank,
+                        chroma_rank,
+                        ycbcr,
+                        level,
+                    }),
+                };
+                return Some(BtfChain { raw: from, given });
+            }
         }
     }
+}
+
+/// A `btf.pca`'s rank, chroma rank and colour space as its parameters declare them (its
+/// defaults: rank 8, rgb, chroma max(1, rank / 4)); `None` where the rank follows from the data
+/// (`max_rmse` or `energy`).
+fn pca_rank(p: &Map<String, Value>) -> Option<(u32, u32, bool)> {
+    let set = |k: &str| p.get(k).is_some_and(|v| !v.is_null());
+    if !set("rank") && (set("max_rmse") || set("energy")) {
+        return None;
+    }
+    let rank = p.get("rank").and_then(Value::as_u64).unwrap_or(8) as u32;
+    let ycbcr = p.get("color").and_then(Value::as_str) == Some("ycbcr");
+    let chroma = p
+        .get("chroma_rank")
+        .and_then(Value::as_u64)
+        .map_or((rank / 4).max(1), |c| c as u32);
+    Some((rank, chroma, ycbcr))
 }

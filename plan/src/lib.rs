@@ -38,11 +38,13 @@ mod scene;
 mod shadows;
 mod sss;
 mod synthesis;
+pub mod verify;
 pub mod view;
 
 pub use btf::BtfModel;
 pub use edit::btf_chain;
 pub use scene::{texture_sources, Scene, TextureView};
+pub use verify::{ProbeOptions, Proof};
 pub use view::{plan_view, render_kind, Planned};
 
 use btf::{apply_btf, decide_btf, range_note};
@@ -136,6 +138,26 @@ pub enum PlanError {
 pub struct BtfChain {
     /// The node and port giving the raw BTF (what `btf.pca` reads, or the renderer directly).
     pub raw: String,
+    /// What the graph itself gives the renderer: the raw BTF, or a PCA basis of a rank and
+    /// level (`None` where its rank is only known after running, `max_rmse` or `energy`). The
+    /// plan never gives more than this: no candidate of a higher rank, a finer level or more
+    /// memory, and where none fits the graph's own model is kept.
+    pub given: Option<GivenBtf>,
+}
+
+/// The graph's own BTF model, as its chain declares it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GivenBtf {
+    Raw,
+    Pca {
+        /// The renderer's input (`btf.lod`'s or `btf.pca`'s basis): what a plan that keeps the
+        /// graph's model connects back.
+        from: String,
+        rank: u32,
+        chroma_rank: u32,
+        ycbcr: bool,
+        level: f64,
+    },
 }
 
 /// The error the view may show: mean FLIP over the object's pixels, for a viewer at `ppd`
@@ -182,6 +204,7 @@ pub enum Split {
 }
 
 /// Decisions and the graph edits that carry them out.
+#[derive(Clone)]
 pub struct Plan {
     pub decisions: Vec<Decision>,
     pub file: GraphFile,
@@ -222,6 +245,8 @@ struct Stage<'a> {
     full: bool,
     cheapest: bool,
     why_cheapest: &'a str,
+    /// The graph's own BTF model (see [`BtfChain::given`]).
+    btf_given: Option<&'a GivenBtf>,
 }
 
 /// Plans `render` (a node of `file`) for `budget`, from `scene`. `chain` is where its BTF comes
@@ -260,6 +285,7 @@ pub fn plan(
         full,
         cheapest,
         why_cheapest,
+        btf_given: chain.and_then(|c| c.given.as_ref()),
     };
 
     let mut shares = Vec::new();

@@ -16,6 +16,11 @@ pub(crate) fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decisio
         why_cheapest,
         ..
     } = *cx;
+    // The graph's own spacing, where it sets one: no candidate samples closer.
+    let given_spacing = file
+        .node(render)
+        .and_then(|n| n.params.get("spacing"))
+        .and_then(Value::as_f64);
     let set = |out: &mut GraphFile, k: &str, v: Value| {
         if let Some(n) = out.node_mut(render) {
             n.params.insert(k.into(), v);
@@ -27,22 +32,11 @@ pub(crate) fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decisio
         .and_then(|m| candidate(calibration::SssOption::Brdf).and_then(|c| c.flip.at(m)))
         .map(|p| p.0);
     if full {
-        set(out, "mode", json!("diffusion"));
-        set(out, "threshold", json!(0.0));
-        // The full model's profile is PBD, where the profile comes from `sss.profile`.
-        let profile_node = file
-            .node(render)
-            .and_then(|n| n.inputs.get("profile"))
-            .and_then(|s| s.split_once('.').map(|(n, _)| n.to_string()));
-        if let Some(id) = profile_node {
-            if let Some(n) = out.node_mut(&id).filter(|n| n.kind == "sss.profile") {
-                n.params.insert("model".into(), json!("pbd"));
-            }
-        }
+        // The full model is the graph as written: a plan only simplifies it.
         return Decision {
             stage: "sss",
-            choice: json!({ "mode": "diffusion", "threshold": 0.0, "profile": "pbd" }),
-            reason: "budget 0: the full model gathers the PBD profile by brute force".into(),
+            choice: json!({ "model": "as given" }),
+            reason: "budget 0: the graph's own translucency, unchanged".into(),
             predicted_error: Some(0.0),
             predicted_cost: None,
         };
@@ -104,15 +98,17 @@ pub(crate) fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decisio
             Some(default),
             Some(footprint),
         ) => {
-            let spacing = (k * footprint).max(default);
+            let spacing = (k * footprint)
+                .max(default)
+                .max(given_spacing.unwrap_or(0.0));
             set(out, "mode", json!("diffusion"));
             set(out, "spacing", json!(spacing));
-            // Brute force, as calibrated (the calibration's gathers ran on the GPU path, which
-            // sums every sample); an octree would add an error the model does not know.
-            set(out, "threshold", json!(0.0));
+            // The graph's own octree threshold stays (the calibration's gathers summed every
+            // sample, so the prediction leaves out what the octree adds: the probe measures
+            // it); brute force would be more model, and on the CPU more time, than the graph.
             Decision {
                 stage: "sss",
-                choice: json!({ "mode": "diffusion", "spacing_mm": spacing, "threshold": 0.0 }),
+                choice: json!({ "mode": "diffusion", "spacing_mm": spacing }),
                 reason: format!(
                     "scattering spans {:.2} px; samples {k} pixel footprints apart ({spacing:.3} mm, never closer than the default {default:.3} mm) are predicted at FLIP {e:.3} (the worse calibration medium), within {share:.3}",
                     mfp.unwrap_or(f64::NAN),
@@ -122,21 +118,16 @@ pub(crate) fn decide_sss(cx: &Stage, out: &mut GraphFile, share: f64) -> Decisio
             }
         }
         _ => {
-            // Nothing cheaper is predicted within the budget: the full model's gather (brute
-            // force at the profile's own spacing). The profile stays the graph's.
-            set(out, "mode", json!("diffusion"));
-            set(out, "threshold", json!(0.0));
-            if let Some(n) = out.node_mut(render) {
-                n.params.remove("spacing");
-            }
+            // Nothing cheaper is predicted within the budget: the graph's own gather, as
+            // written (a plan never gives more model, nor a costlier gather, than the graph).
             Decision {
                 stage: "sss",
-                choice: json!({ "mode": "diffusion", "threshold": 0.0 }),
+                choice: json!({ "model": "as given" }),
                 reason: format!(
-                    "scattering spans {:.2} px; no cheaper candidate is predicted within {share:.3}: the full model's brute-force gather",
+                    "scattering spans {:.2} px; no cheaper candidate is predicted within {share:.3}: the graph's own gather, unchanged",
                     mfp.unwrap_or(f64::NAN)
                 ),
-                predicted_error: None,
+                predicted_error: Some(0.0),
                 predicted_cost: None,
             }
         }
@@ -171,12 +162,21 @@ pub(crate) fn invisible_sss(
 /// threshold, so there the choice changes nothing; on the CPU the octree is what makes the
 /// gather fast.
 pub(crate) fn decide_threshold(cx: &Stage, out: &mut GraphFile, share: f64) -> Option<Decision> {
+    // Never a finer octree than the graph's own (0.05 unless it sets one): a smaller
+    // threshold is more model.
+    let given = cx
+        .file
+        .node(cx.render)
+        .and_then(|n| n.params.get("threshold"))
+        .and_then(Value::as_f64)
+        .unwrap_or(mesoflow_nodes::sss::render::Params::default().threshold);
     let (t, e, time) = invisible_sss(cx, out, share)
         .into_iter()
         .filter_map(|(o, e, time)| match o {
             calibration::SssOption::Octree { threshold } => Some((threshold, e, time)),
             _ => None,
         })
+        .filter(|(t, ..)| *t > given)
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
     out.node_mut(cx.render)?
         .params

@@ -72,14 +72,66 @@ fn decision<'a>(p: &'a Plan, stage: &str) -> &'a Decision {
 }
 
 #[test]
-fn budget_zero_is_the_full_model() {
+fn budget_zero_is_the_graph_as_given() {
+    // The full model is the graph as the user wrote it (issue 41): its own PCA basis, not the
+    // raw BTF the planner once put in its place.
     let p = run(&scene(10.0, 0.1), 0.0);
-    let r = p.file.node("r").unwrap();
-    assert_eq!(r.inputs["btf"], "capture.btf");
-    assert_eq!(r.inputs["mdf"], "mdf.mdf");
-    // The user's PCA fed only the render: disconnected, it is pruned.
-    assert!(p.file.node("pca").is_none());
+    assert_eq!(p.file, graph());
     assert!(p.decisions.iter().all(|d| d.predicted_error == Some(0.0)));
+}
+
+#[test]
+fn a_plan_never_gives_more_model_than_the_graph() {
+    // A far view whose BTF share no candidate fits (the issue's 11.5 texels per pixel): the
+    // user's rank-16 basis stays, never the raw BTF; and no candidate above rank 16 or finer
+    // than the graph's level is ever chosen.
+    let mut f = graph();
+    f.node_mut("pca").unwrap().params =
+        serde_json::from_value(json!({"rank": 16, "color": "ycbcr"})).unwrap();
+    f.nodes.push((
+        "lod".into(),
+        mesoflow_graph::NodeDecl {
+            kind: "btf.lod".into(),
+            params: serde_json::from_value(json!({"level": 1.0})).unwrap(),
+            inputs: [("basis".to_string(), "pca.basis".to_string())].into(),
+        },
+    ));
+    f.node_mut("r")
+        .unwrap()
+        .inputs
+        .insert("btf".into(), "lod.basis".into());
+    let chain = btf_chain(&f, "r", "btf").unwrap();
+    assert!(matches!(
+        chain.given,
+        Some(GivenBtf::Pca { rank: 16, level, .. }) if level == 1.0
+    ));
+    for tpp in [0.3, 2.0, 11.5, 40.0] {
+        for b in [0.0, 0.001, 0.02, 0.08, 0.3] {
+            let p = plan(
+                &f,
+                "r",
+                RenderKind::Mesh,
+                &scene(tpp, 1.0),
+                Some(&chain),
+                Budget::flip(b),
+                Split::Joint,
+            )
+            .unwrap();
+            let d = decision(&p, "btf");
+            let input = &p.file.node("r").unwrap().inputs["btf"];
+            assert_ne!(
+                input, "capture.btf",
+                "tpp {tpp}, budget {b}: the raw BTF: {d:?}"
+            );
+            if d.choice["model"] == json!("pca") {
+                assert!(d.choice["rank"].as_u64().unwrap() <= 16, "{d:?}");
+                assert!(d.choice["level"].as_f64().unwrap() >= 1.0, "{d:?}");
+            } else {
+                assert_eq!(d.choice["model"], json!("as given"), "{d:?}");
+                assert_eq!(input, "lod.basis");
+            }
+        }
+    }
 }
 
 #[test]
@@ -373,6 +425,7 @@ fn the_dipole_replaces_pbd_only_where_predicted_invisible_and_never_in_place() {
                         full: b == 0.0,
                         cheapest: false,
                         why_cheapest: "",
+                        btf_given: None,
                     };
                     let mut out = f.clone();
                     out.node_mut("r")
@@ -452,18 +505,26 @@ fn the_cpu_octree_coarsens_with_the_budget_within_a_tenth_of_it() {
             match p.decisions.iter().find(|d| d.stage == "octree") {
                 Some(d) => {
                     chosen += 1;
-                    assert!(b > 0.0 && r.params["mode"] == json!("diffusion"));
+                    assert!(b > 0.0 && r.params.get("mode") == Some(&json!("diffusion")));
+                    assert!(t > 0.05, "never a finer octree than the graph's");
                     assert_eq!(d.choice["threshold"].as_f64(), Some(t));
                     assert!(
                         d.predicted_error.unwrap() <= 0.1 * b,
                         "{mfp} px, {b}: {d:?}"
                     );
                 }
-                // Without one the gather is brute force (the graph's 0.05 is not kept),
-                // or the render is a BRDF.
-                None => assert!(t == 0.0 || r.params["mode"] == json!("brdf"), "{t}"),
+                // Without one the gather keeps the graph's 0.05 (brute force would be more
+                // model than the graph), or the render is a BRDF.
+                None => assert!(
+                    t == 0.05 || r.params.get("mode") == Some(&json!("brdf")),
+                    "{t}"
+                ),
             }
-            if r.params["mode"] == json!("diffusion") {
+            // The graph leaves `mode` at its default, diffusion.
+            if r.params
+                .get("mode")
+                .is_none_or(|m| m == &json!("diffusion"))
+            {
                 assert!(t >= last, "{mfp} px: a larger budget, a finer octree");
                 last = t;
             }
@@ -526,7 +587,7 @@ fn scattering_under_half_a_pixel_becomes_a_brdf() {
         "{d:?}"
     );
     assert!(d.predicted_error.is_none_or(|e| e <= 0.05), "{d:?}");
-    // Budget 0: brute force, PBD.
+    // Budget 0: the graph as given (no brute force, no PBD it did not ask for).
     let p = plan(
         &f,
         "r",
@@ -537,8 +598,7 @@ fn scattering_under_half_a_pixel_becomes_a_brdf() {
         Split::Joint,
     )
     .unwrap();
-    assert_eq!(p.file.node("r").unwrap().params["threshold"], json!(0.0));
-    assert_eq!(p.file.node("pr").unwrap().params["model"], json!("pbd"));
+    assert_eq!(p.file, f);
 }
 
 #[test]

@@ -2,10 +2,12 @@
 //! render's view with the probe, decide each stage, check the planned graph, and describe the
 //! plan as `plan.json` holds it.
 
+use crate::verify::{prove, Ask, ProbeOptions, Proof};
 use crate::{btf_chain, plan, probe, Budget, Plan, PlanError, RenderKind, Scene, Split};
 use mesoflow_graph::GraphFile;
 use mesoflow_runtime::{Engine, RunOptions};
 use serde_json::{json, Map, Value};
+use std::time::Instant;
 
 /// A view planned: what the probe measured, and the plan.
 pub struct Planned {
@@ -15,6 +17,8 @@ pub struct Planned {
     pub budget: Budget,
     pub split: Split,
     pub plan: Plan,
+    /// What the probes of the view measured (absent where the plan was not proved on one).
+    pub proof: Option<Proof>,
 }
 
 /// The renderer kind of node `render`, or why it cannot be planned.
@@ -33,8 +37,10 @@ pub fn render_kind(file: &GraphFile, render: &str) -> Result<RenderKind, PlanErr
 }
 
 /// Plans `render` of `file` (checked by the caller) for `budget`: measures the view on `engine`
-/// with `opts` (see [`probe::measure`]), decides, and checks the planned graph against the
-/// engine's catalog. `name` names the graph in errors.
+/// with `opts` (see [`probe::measure`]), decides, proves the plan on a probe of the view where
+/// `probe` is given (see [`crate::verify`]; `None`: the measured model alone), and checks the
+/// planned graph against the engine's catalog. `name` names the graph in errors.
+#[allow(clippy::too_many_arguments)]
 pub fn plan_view(
     engine: &Engine,
     name: &str,
@@ -43,14 +49,44 @@ pub fn plan_view(
     budget: Budget,
     split: Split,
     opts: RunOptions,
+    probe: Option<ProbeOptions>,
 ) -> Result<Planned, PlanError> {
+    let start = Instant::now();
     let kind = render_kind(file, render)?;
     budget.check()?;
-    let scene = probe::measure(engine, name, file, render, kind, opts)?;
+    let scene = probe::measure(
+        engine,
+        name,
+        file,
+        render,
+        kind,
+        crate::verify::copy_options(&opts),
+    )?;
     let chain = kind
         .btf_port()
         .and_then(|port| btf_chain(file, render, port));
-    let p = plan(file, render, kind, &scene, chain.as_ref(), budget, split)?;
+    let (p, proof) = match probe {
+        Some(options) => {
+            let ask = Ask {
+                engine,
+                name,
+                file,
+                render,
+                kind,
+                scene: &scene,
+                chain: chain.as_ref(),
+                budget,
+                split,
+                opts: &opts,
+            };
+            let (p, proof) = prove(&ask, options, start)?;
+            (p, Some(proof))
+        }
+        None => (
+            plan(file, render, kind, &scene, chain.as_ref(), budget, split)?,
+            None,
+        ),
+    };
     mesoflow_graph::check(name, &p.file, engine.registry())
         .map_err(|e| PlanError::Invalid(e.to_string().trim_end().to_string()))?;
     Ok(Planned {
@@ -60,6 +96,7 @@ pub fn plan_view(
         budget,
         split,
         plan: p,
+        proof,
     })
 }
 
@@ -103,6 +140,12 @@ impl Planned {
         });
         if let Some(t) = self.predicted_error() {
             doc["predicted_error"] = json!(t);
+        }
+        if let Some(p) = &self.proof {
+            doc["probe"] = p.to_json();
+            if let Some(f) = p.flip() {
+                doc["probed_error"] = json!(f);
+            }
         }
         if !self.plan.ppd_inside {
             doc["ppd_note"] = json!(format!(

@@ -4,7 +4,7 @@
 
 use crate::session::{device_mode, engine, parse_with_sets};
 use mesoflow_graph::check;
-use mesoflow_plan::{plan_view, Budget, PlanError, Split};
+use mesoflow_plan::{plan_view, Budget, PlanError, ProbeOptions, Split};
 use mesoflow_runtime::RunOptions;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -16,7 +16,7 @@ use std::sync::Arc;
 /// (FLIP's default 67 when `None`). Returns `(plan_json, planned_graph_json)`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (text, name, base_dir, render, budget, sets, ppd=None, split="joint", device="auto", cache_dir=None, use_cache=true))]
+#[pyo3(signature = (text, name, base_dir, render, budget, sets, ppd=None, split="joint", device="auto", cache_dir=None, use_cache=true, probe_budget=1.0, probe_share=0.25))]
 pub fn plan(
     py: Python<'_>,
     text: &str,
@@ -30,7 +30,23 @@ pub fn plan(
     device: &str,
     cache_dir: Option<String>,
     use_cache: bool,
+    probe_budget: f64,
+    probe_share: f64,
 ) -> PyResult<(String, String)> {
+    if !(probe_budget.is_finite() && probe_budget >= 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "probe_budget={probe_budget}: a number of renders ≥ 0"
+        )));
+    }
+    if !(probe_share > 0.0 && probe_share <= 1.0) {
+        return Err(PyValueError::new_err(format!(
+            "probe_share={probe_share}: a fraction of the frame in (0, 1]"
+        )));
+    }
+    let probe = (probe_budget > 0.0).then_some(ProbeOptions {
+        share: probe_share,
+        budget: probe_budget,
+    });
     let file = parse_with_sets(text, &sets)?;
     let split = match split {
         "joint" => Split::Joint,
@@ -59,7 +75,7 @@ pub fn plan(
     let (result, interrupted) = crate::wait::run_interruptibly(
         py,
         "the plan",
-        move || plan_view(&worker, &name, &file, &render, budget, split, opts),
+        move || plan_view(&worker, &name, &file, &render, budget, split, opts, probe),
         || cancel.store(true, Ordering::Relaxed),
     )?;
     if let Some(e) = interrupted {

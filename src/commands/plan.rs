@@ -109,6 +109,22 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         crate::args::SplitArg::Equal => plan::Split::Equal,
     };
     let name = args.graph.display().to_string();
+    if !(args.probe_budget.is_finite() && args.probe_budget >= 0.0) {
+        return Err(invalid(format!(
+            "--probe-budget {}: a number of renders ≥ 0",
+            args.probe_budget
+        )));
+    }
+    if !(args.probe_share > 0.0 && args.probe_share <= 1.0) {
+        return Err(invalid(format!(
+            "--probe-share {}: a fraction of the frame in (0, 1]",
+            args.probe_share
+        )));
+    }
+    let probe = (args.probe_budget > 0.0).then_some(plan::ProbeOptions {
+        share: args.probe_share,
+        budget: args.probe_budget,
+    });
     let planned = plan::plan_view(
         &engine,
         &name,
@@ -117,6 +133,7 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         plan::Budget { flip: budget, ppd },
         split,
         opts,
+        probe,
     )
     .map_err(|e| match e {
         plan::PlanError::Probe(_) => anyhow::anyhow!("{e}"),
@@ -160,6 +177,18 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         }
         if let Some(t) = planned.predicted_error() {
             println!("predicted FLIP {t:.4} (budget {budget})");
+        }
+        if let Some(p) = &planned.proof {
+            for (i, r) in p.rungs.iter().enumerate() {
+                println!(
+                    "probe {i}: {}: FLIP {} frame {} s{}",
+                    r.candidate,
+                    r.flip.map_or("absent".into(), |f| format!("{f:.4}")),
+                    r.frame_s.map_or("absent".into(), |t| format!("{t:.4}")),
+                    if p.chosen == Some(i) { " (kept)" } else { "" }
+                );
+            }
+            println!("{} ({:.1} s planning)", p.why, p.plan_s);
         }
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }

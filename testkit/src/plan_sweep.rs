@@ -33,7 +33,8 @@ pub struct Row {
     pub budget: f64,
     pub object: &'static str,
     pub flip: f64,
-    /// What the plan predicted (absent where it could not say).
+    /// What the plan predicted: the kept plan's FLIP on the probe of the view where it was
+    /// proved on one, else the measured model's prediction (absent where it could not say).
     pub predicted: Option<f64>,
     pub full_s: f64,
     pub view_s: f64,
@@ -158,7 +159,9 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
                     budget: b,
                     object,
                     flip,
-                    predicted: plan["predicted_error"].as_f64(),
+                    predicted: plan["probed_error"]
+                        .as_f64()
+                        .or(plan["predicted_error"].as_f64()),
                     full_s: secs(full),
                     view_s: secs(view),
                     decisions,
@@ -243,7 +246,9 @@ pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
                 flip: node(&report, "qh_flip")["metrics"]["mean"]
                     .as_f64()
                     .unwrap_or(f64::NAN),
-                predicted: plan["predicted_error"].as_f64(),
+                predicted: plan["probed_error"]
+                    .as_f64()
+                    .or(plan["predicted_error"].as_f64()),
                 full_s: secs("qh_full"),
                 view_s: secs("qh_view"),
                 decisions,

@@ -66,6 +66,8 @@ def plan(
     device: str = "auto",
     cache_dir: Optional[str] = None,
     use_cache: bool = True,
+    probe_budget: float = 1.0,
+    probe_share: float = 0.25,
 ) -> Tuple[str, str]:
     """Plans a render node of a graph file's text; returns the plan document and the planned
     graph, both as JSON text."""

@@ -48,6 +48,13 @@ class Plan:
         self.scene: Dict[str, Any] = doc["scene"]
         self.budget: float = doc["budget"]["flip"]
         self.ppd: float = doc["budget"]["ppd"]
+        #: What the probes of the view measured (``None`` with ``probe_budget=0``): each
+        #: candidate's probed FLIP and frame beside the graph's, which was kept, and why.
+        self.probe: Optional[Dict[str, Any]] = doc.get("probe")
+        #: The kept plan's FLIP against the graph on the probe (0 for the graph itself).
+        self.probed_error: Optional[float] = doc.get("probed_error")
+        #: Wall time of the whole plan, s.
+        self.plan_seconds: Optional[float] = (self.probe or {}).get("plan_seconds")
 
     def save(self, path: PathLike) -> Path:
         """Writes the planned graph to ``path`` and ``plan.json`` beside it, as ``mesoflow plan
@@ -60,7 +67,8 @@ class Plan:
     def __repr__(self) -> str:
         e = "unknown" if self.predicted_error is None else f"{self.predicted_error:.4f}"
         stages = ", ".join(f"{d.stage}: {json.dumps(d.choice)}" for d in self.decisions)
-        return f"<mesoflow plan at FLIP {self.budget} (predicted {e}): {stages}>"
+        probed = "" if self.probed_error is None else f", probed {self.probed_error:.4f}"
+        return f"<mesoflow plan at FLIP {self.budget} (predicted {e}{probed}): {stages}>"
 
 
 def plan(
@@ -74,12 +82,18 @@ def plan(
     cache_dir: Optional[PathLike] = None,
     use_cache: bool = True,
     set: Optional[Mapping[str, Any]] = None,
+    probe_budget: float = 1.0,
+    probe_share: float = 0.25,
 ) -> Plan:
     """Plans node ``render`` of ``graph`` (a :class:`Graph` or a graph file's path) for a FLIP
     ``budget`` (mean FLIP over the object's pixels) at ``ppd`` pixels per degree (FLIP's default
     67 when ``None``): measures the view with the render's own camera and data on the engine and
     cache that :meth:`Graph.run` uses, then picks each stage's cheapest model predicted within
-    its share. Raises :class:`GraphError` for an invalid graph or render node, ``ValueError`` for
+    its share, then proves the plan on a probe of the view (the frame's centre ``probe_share``,
+    at the same pixels per degree): each candidate rendered beside the graph, kept only within
+    the budget and no slower, stepped up until one is, else the graph itself; the probes may
+    spend ``probe_budget`` renders of the full view (0: no probe, the measured model alone).
+    Raises :class:`GraphError` for an invalid graph or render node, ``ValueError`` for
     a plan that cannot be made (camera inside the mesh, a bad budget), ``RuntimeError`` when the
     view cannot be measured."""
     g = graph if isinstance(graph, Graph) else load(graph)
@@ -106,6 +120,8 @@ def plan(
         device=device,
         cache_dir=cache,
         use_cache=use_cache,
+        probe_budget=float(probe_budget),
+        probe_share=float(probe_share),
     )
     d = json.loads(planned_text)
     planned = Graph(d.get("description", ""), base_dir=g.base_dir, name=g.name)
