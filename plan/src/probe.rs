@@ -22,7 +22,7 @@ fn view_fields() -> impl Iterator<Item = &'static str> {
 }
 
 /// The nodes `id` depends on, and itself.
-fn ancestors(file: &GraphFile, id: &str) -> BTreeSet<String> {
+pub(crate) fn ancestors(file: &GraphFile, id: &str) -> BTreeSet<String> {
     let mut seen = BTreeSet::new();
     let mut stack = vec![id.to_string()];
     while let Some(n) = stack.pop() {
@@ -114,17 +114,23 @@ pub fn probe_graph(
     out
 }
 
+/// A probe run that failed, as the error naming each node that did.
+pub(crate) fn failed(report: &RunReport) -> Result<(), PlanError> {
+    if report.ok {
+        return Ok(());
+    }
+    let errors: Vec<String> = report
+        .nodes
+        .iter()
+        .filter_map(|n| n.error.as_ref().map(|e| format!("{}: {e}", n.id)))
+        .collect();
+    Err(PlanError::Probe(errors.join("; ")))
+}
+
 /// The scene a probe run measured: the probe's metrics, and each texture probe's texels per
 /// pixel by the output it measured.
 pub fn scene_of(report: &RunReport, file: &GraphFile, render: &str) -> Result<Scene, PlanError> {
-    if !report.ok {
-        let errors: Vec<String> = report
-            .nodes
-            .iter()
-            .filter_map(|n| n.error.as_ref().map(|e| format!("{}: {e}", n.id)))
-            .collect();
-        return Err(PlanError::Probe(errors.join("; ")));
-    }
+    failed(report)?;
     let metrics = report
         .node(PROBE)
         .map(|n| n.metrics.clone())

@@ -258,26 +258,9 @@ pub fn probe_graph(
             ]),
         },
     ));
-    let keep = ancestors(&out, FLIP);
+    let keep = crate::probe::ancestors(&out, FLIP);
     out.nodes.retain(|(id, _)| keep.contains(id));
     out
-}
-
-fn ancestors(file: &GraphFile, id: &str) -> BTreeSet<String> {
-    let mut seen = BTreeSet::new();
-    let mut stack = vec![id.to_string()];
-    while let Some(n) = stack.pop() {
-        if seen.insert(n.clone()) {
-            if let Some(d) = file.node(&n) {
-                stack.extend(
-                    d.inputs
-                        .values()
-                        .filter_map(|f| upstream(f).map(str::to_string)),
-                );
-            }
-        }
-    }
-    seen
 }
 
 /// A render node's frame in a report: `frame_ms` where the renderer measures one (without its
@@ -347,14 +330,7 @@ fn measure(
     let report = engine
         .run(&checked, &opts, Arc::new(SilentObserver))
         .map_err(|e| PlanError::Probe(e.to_string()))?;
-    if !report.ok {
-        let errors: Vec<String> = report
-            .nodes
-            .iter()
-            .filter_map(|n| n.error.as_ref().map(|e| format!("{}: {e}", n.id)))
-            .collect();
-        return Err(PlanError::Probe(errors.join("; ")));
-    }
+    crate::probe::failed(&report)?;
     let spent = report
         .nodes
         .iter()
