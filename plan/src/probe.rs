@@ -5,7 +5,7 @@
 use crate::{texture_sources, PlanError, RenderKind, Scene, TextureView};
 use mesoflow_graph::{Catalog, GraphFile, NodeDecl};
 use mesoflow_runtime::{Engine, RunOptions, RunReport, SilentObserver};
-use serde_json::Map;
+use serde_json::{Map, Value};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
@@ -40,6 +40,18 @@ pub(crate) fn ancestors(file: &GraphFile, id: &str) -> BTreeSet<String> {
     seen
 }
 
+/// Parameter `param`'s default in kind `kind`'s schema (`None` where it has none, or null).
+pub(crate) fn kind_default(catalog: &dyn Catalog, kind: &str, param: &str) -> Option<Value> {
+    catalog
+        .signature(kind)?
+        .params
+        .get("properties")?
+        .get(param)?
+        .get("default")
+        .filter(|d| !d.is_null())
+        .cloned()
+}
+
 /// The probe graph for `render` (a node of `file`). A view parameter the render node leaves out
 /// takes the render kind's own default from `catalog`, not the probe's, so the probe sees the
 /// view the render will draw (render kinds differ in their `tiling` and `mm_per_unit`).
@@ -54,18 +66,15 @@ pub fn probe_graph(
         params: Map::new(),
         inputs: Default::default(),
     });
-    let defaults = catalog
-        .signature(&r.kind)
-        .and_then(|s| s.params.get("properties").cloned());
     let mut params = Map::new();
     for k in view_fields() {
-        let default = defaults
-            .as_ref()
-            .and_then(|p| p.get(k))
-            .and_then(|p| p.get("default"))
-            .filter(|d| !d.is_null());
-        if let Some(v) = r.params.get(k).or(default) {
-            params.insert(k.into(), v.clone());
+        if let Some(v) = r
+            .params
+            .get(k)
+            .cloned()
+            .or_else(|| kind_default(catalog, &r.kind, k))
+        {
+            params.insert(k.into(), v);
         }
     }
     if kind == RenderKind::Sss {

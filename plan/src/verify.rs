@@ -140,10 +140,7 @@ fn camera_of(file: &GraphFile, render: &str, catalog: &dyn Catalog) -> Map<Strin
         .node(render)
         .map(|n| n.kind.clone())
         .unwrap_or_default();
-    let mut cam = catalog
-        .signature(&kind)
-        .and_then(|s| s.params.get("properties").cloned())
-        .and_then(|p| p.get("camera").and_then(|c| c.get("default")).cloned())
+    let mut cam = crate::probe::kind_default(catalog, &kind, "camera")
         .and_then(|c| c.as_object().cloned())
         .unwrap_or_default();
     if let Some(Value::Object(given)) = file.node(render).and_then(|n| n.params.get("camera")) {
