@@ -66,6 +66,7 @@ fn weighting_by_residual_keeps_outlier_normals_from_bending_the_height() {
 }
 
 #[test]
+#[ignore = "slow: graphs/btf_edit.json at full size (the Ward fit of 64² pixels over 8 × 16 directions), 99 s here"]
 fn the_chain_on_a_photo_derived_ggx_capture_reports_its_model_error() {
     // graphs/btf_edit.json at full size: a gravel photograph's heights (RMS slope 0.30) captured
     // with GGX + Fresnel (α 0.3), which no Ward lobe contains, so these are model errors, not
@@ -96,4 +97,50 @@ fn the_chain_on_a_photo_derived_ggx_capture_reports_its_model_error() {
     eprintln!("relief against render.mesh {relief:.3}, against its converged search {search:.4}");
     assert!(relief < 0.202 * 1.25, "{relief}");
     assert!(search < 0.0176 * 1.25, "{search}");
+}
+
+/// The default tier's run of the same chain: 3 × 4 view and light directions, 50 fit
+/// iterations, 32 × 24 renders (the sizes tests/every_graph.rs uses).
+const SMALL: &[&str] = &[
+    r#"capture.views={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#,
+    r#"capture.lights={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#,
+    r#"recovered.views={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#,
+    r#"recovered.lights={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#,
+    r#"mdf.views={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#,
+    "fit.iterations=50",
+    "exact.camera.resolution=[32,24]",
+    "exact.shadow_resolution=128",
+    "relief.camera.resolution=[32,24]",
+    "relief_converged.camera.resolution=[32,24]",
+];
+
+/// The small chain's figures as measured on this machine (2026-12-06), each bound 25% above.
+const BOUND_N: f64 = 13.09;
+const BOUND_H: f64 = 0.519;
+const BOUND_I: f64 = 1.383;
+const BOUND_R: f64 = 0.431;
+const BOUND_S: f64 = 0.0226;
+
+#[test]
+fn the_chain_at_small_size_reports_its_model_error() {
+    // The full-size figures are held by the slow test above; this holds the same chain at the
+    // default tier's sizes, with bounds from this size's own measurement: normals 13.09°,
+    // height 0.519 texels, re-capture 1.383, relief against render.mesh 0.431, against its
+    // converged search 0.0226 (3 × 4 directions fit poorly: a regression check of the chain,
+    // not an accuracy claim). Bounds 25% above each (as above: a loss of
+    // accuracy fails, another platform's rounding does not).
+    let s = Scratch::new();
+    let m = metrics(&s, "btf_edit", SMALL);
+    let get = |id: &str, k: &str| m[id][k].as_f64().unwrap_or(f64::NAN);
+    let got = [
+        ("normals (°)", get("fit", "error_normal_deg"), BOUND_N),
+        ("height (texels)", get("height", "error_texels"), BOUND_H),
+        ("re-capture", get("model_error", "relative_rmse"), BOUND_I),
+        ("relief", get("relief_error", "relative_rmse"), BOUND_R),
+        ("search", get("search_error", "relative_rmse"), BOUND_S),
+    ];
+    for (what, v, measured) in got {
+        eprintln!("{what}: {v:.4} (measured {measured})");
+        assert!(v < measured * 1.25, "{what}: {v}, measured {measured}");
+    }
 }

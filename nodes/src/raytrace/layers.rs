@@ -62,84 +62,201 @@ const TILE: u32 = 16;
 /// A pixel's index and its layers (front, back).
 type PixelLayers = (usize, Vec<(Option<Frag>, Option<Frag>)>);
 
+/// A mesh's triangles binned by the screen tiles of a camera their projection covers, so that
+/// one pixel's layers cost the triangles of its tile ([`Binned::pixel`]): [`trace`] peels every
+/// pixel, a lazy shadow map only the texels a frame asks for.
+pub struct Binned<'a> {
+    mesh: &'a Mesh,
+    cam: &'a Camera,
+    tiles_x: u32,
+    bins: Vec<Vec<u32>>,
+    /// Each triangle's screen box widened by a pixel.
+    boxes: Vec<[f64; 4]>,
+}
+
+impl<'a> Binned<'a> {
+    pub fn new(mesh: &'a Mesh, cam: &'a Camera) -> Binned<'a> {
+        let (w, h) = (cam.width, cam.height);
+        let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
+        let pos = |i: usize| mesh.positions[i].map(|v| v as f64);
+        // Bin triangles by the screen tiles their projection covers; a corner behind a pinhole
+        // puts the triangle in every tile (rare, and correct, just slower).
+        let mut bins: Vec<Vec<u32>> = vec![Vec::new(); (tiles_x * tiles_y) as usize];
+        // Each triangle's screen box widened by a pixel, so that a pixel whose centre lies
+        // outside it skips the triangle: a far object lands whole in one tile, and without this
+        // every pixel of that tile would test every triangle.
+        let mut boxes: Vec<[f64; 4]> = Vec::with_capacity(mesh.triangles());
+        for t in 0..mesh.triangles() {
+            let c = mesh.corners(t);
+            let proj: Option<Vec<(f64, f64, f64)>> =
+                c.iter().map(|&i| cam.project(pos(i))).collect();
+            let (x0, x1, y0, y1) = match proj {
+                Some(p) => {
+                    let xs = p.iter().map(|q| q.0);
+                    let ys = p.iter().map(|q| q.1);
+                    (
+                        xs.clone().fold(f64::INFINITY, f64::min),
+                        xs.fold(f64::NEG_INFINITY, f64::max),
+                        ys.clone().fold(f64::INFINITY, f64::min),
+                        ys.fold(f64::NEG_INFINITY, f64::max),
+                    )
+                }
+                None => (
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                    f64::NEG_INFINITY,
+                    f64::INFINITY,
+                ),
+            };
+            boxes.push([x0 - 1.0, x1 + 1.0, y0 - 1.0, y1 + 1.0]);
+            if x1 < -1.0 || y1 < -1.0 || x0 > w as f64 + 1.0 || y0 > h as f64 + 1.0 {
+                continue;
+            }
+            let tx = |x: f64| ((x.max(0.0) as u32) / TILE).min(tiles_x - 1);
+            let ty = |y: f64| ((y.max(0.0) as u32) / TILE).min(tiles_y - 1);
+            for j in ty(y0 - 1.0)..=ty(y1 + 1.0) {
+                for i in tx(x0 - 1.0)..=tx(x1 + 1.0) {
+                    bins[(j * tiles_x + i) as usize].push(t as u32);
+                }
+            }
+        }
+        Binned {
+            mesh,
+            cam,
+            tiles_x,
+            bins,
+            boxes,
+        }
+    }
+
+    /// The first `count` layers of pixel (x, y), peeled from the hits of its tile's triangles;
+    /// `hits` is scratch space (cleared here), so a loop over pixels allocates it once.
+    pub fn pixel_with(
+        &self,
+        x: u32,
+        y: u32,
+        count: usize,
+        hits: &mut Vec<(Frag, bool)>,
+    ) -> Vec<(Option<Frag>, Option<Frag>)> {
+        let tris = &self.bins[((y / TILE) * self.tiles_x + x / TILE) as usize];
+        let pos = |i: usize| self.mesh.positions[i].map(|v| v as f64);
+        let (o, d) = self.cam.ray(x, y);
+        let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
+        hits.clear();
+        hits.extend(
+            tris.iter()
+                .filter(|&&tri| {
+                    let [x0, x1, y0, y1] = self.boxes[tri as usize];
+                    (x0..=x1).contains(&cx) && (y0..=y1).contains(&cy)
+                })
+                .filter_map(|&tri| {
+                    let [a, b, c] = self.mesh.corners(tri as usize);
+                    intersect(o, d, pos(a), pos(b), pos(c))
+                        .map(|(t, b1, b2, front)| (Frag { t, tri, b1, b2 }, front))
+                }),
+        );
+        hits.sort_by(|p, q| p.0.t.total_cmp(&q.0.t).then(p.0.tri.cmp(&q.0.tri)));
+        peel(hits, count)
+    }
+
+    /// The camera the triangles are binned for.
+    pub fn camera(&self) -> &'a Camera {
+        self.cam
+    }
+
+    /// The layers of every pixel of screen tile (bx, by), appended to `out`: the same as
+    /// [`Binned::pixel_with`] for each, found triangle by triangle (each tested against the
+    /// pixels its widened box holds, by the same test) and sorted per pixel by (t, triangle),
+    /// which orders any pixel's hits exactly as the pixel's own loop does.
+    pub fn tile(&self, bx: u32, by: u32, count: usize, out: &mut Vec<PixelLayers>) {
+        let (w, h) = (self.cam.width, self.cam.height);
+        let (x_end, y_end) = (((bx + 1) * TILE).min(w), ((by + 1) * TILE).min(h));
+        let (x0, y0) = (bx * TILE, by * TILE);
+        let tw = (x_end - x0) as usize;
+        let rays: Vec<_> = (y0..y_end)
+            .flat_map(|y| (x0..x_end).map(move |x| (x, y)))
+            .map(|(x, y)| self.cam.ray(x, y))
+            .collect();
+        let pos = |i: usize| self.mesh.positions[i].map(|v| v as f64);
+        // (pixel in the tile, hit, front-facing)
+        let mut hits: Vec<(u32, Frag, bool)> = Vec::new();
+        for &tri in &self.bins[(by * self.tiles_x + bx) as usize] {
+            let [bx0, bx1, by0, by1] = self.boxes[tri as usize];
+            // The pixels whose centre the box may hold (a pixel either side for rounding);
+            // the test itself is the per-pixel loop's.
+            let lo = |v: f64, start: u32| (v - 1.5).max(start as f64) as u32;
+            let hi = |v: f64, end: u32| ((v + 0.5).max(0.0) as u32).min(end - 1);
+            let [a, b, c] = self.mesh.corners(tri as usize);
+            let (pa, pb, pc) = (pos(a), pos(b), pos(c));
+            for y in lo(by0, y0)..=hi(by1, y_end) {
+                let cy = y as f64 + 0.5;
+                if !(by0..=by1).contains(&cy) {
+                    continue;
+                }
+                for x in lo(bx0, x0)..=hi(bx1, x_end) {
+                    let cx = x as f64 + 0.5;
+                    if !(bx0..=bx1).contains(&cx) {
+                        continue;
+                    }
+                    let i = (y - y0) as usize * tw + (x - x0) as usize;
+                    let (o, d) = rays[i];
+                    if let Some((t, b1, b2, front)) = intersect(o, d, pa, pb, pc) {
+                        hits.push((i as u32, Frag { t, tri, b1, b2 }, front));
+                    }
+                }
+            }
+        }
+        hits.sort_by(|p, q| {
+            p.0.cmp(&q.0)
+                .then(p.1.t.total_cmp(&q.1.t))
+                .then(p.1.tri.cmp(&q.1.tri))
+        });
+        let mut group: Vec<(Frag, bool)> = Vec::new();
+        let mut k = 0;
+        for i in 0..rays.len() {
+            group.clear();
+            while k < hits.len() && hits[k].0 as usize == i {
+                group.push((hits[k].1, hits[k].2));
+                k += 1;
+            }
+            let (x, y) = (x0 + (i % tw) as u32, y0 + (i / tw) as u32);
+            out.push(((y * w + x) as usize, peel(&group, count)));
+        }
+    }
+
+    /// Pixel (x, y)'s layers alone, as a one-pixel [`Layers`] (index 0).
+    pub fn pixel(&self, x: u32, y: u32, count: usize) -> Layers {
+        let ls = self.pixel_with(x, y, count, &mut Vec::new());
+        let (front, back) = ls.into_iter().unzip();
+        Layers {
+            count,
+            width: 1,
+            height: 1,
+            front,
+            back,
+        }
+    }
+}
+
 /// The layers of every pixel; screen tiles are counted on `watch`, and once it is stopped the
 /// remaining tiles are left empty (the caller returns `Cancelled`).
 pub fn trace(mesh: &Mesh, cam: &Camera, count: usize, watch: &Counter) -> Layers {
     let (w, h) = (cam.width, cam.height);
-    let (tiles_x, tiles_y) = (w.div_ceil(TILE), h.div_ceil(TILE));
-    let pos = |i: usize| mesh.positions[i].map(|v| v as f64);
-    // Bin triangles by the screen tiles their projection covers; a corner behind a pinhole puts
-    // the triangle in every tile (rare, and correct, just slower).
-    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); (tiles_x * tiles_y) as usize];
-    // Each triangle's screen box widened by a pixel, so that a pixel whose centre lies outside
-    // it skips the triangle: a far object lands whole in one tile, and without this every pixel
-    // of that tile would test every triangle.
-    let mut boxes: Vec<[f64; 4]> = Vec::with_capacity(mesh.triangles());
-    for t in 0..mesh.triangles() {
-        let c = mesh.corners(t);
-        let proj: Option<Vec<(f64, f64, f64)>> = c.iter().map(|&i| cam.project(pos(i))).collect();
-        let (x0, x1, y0, y1) = match proj {
-            Some(p) => {
-                let xs = p.iter().map(|q| q.0);
-                let ys = p.iter().map(|q| q.1);
-                (
-                    xs.clone().fold(f64::INFINITY, f64::min),
-                    xs.fold(f64::NEG_INFINITY, f64::max),
-                    ys.clone().fold(f64::INFINITY, f64::min),
-                    ys.fold(f64::NEG_INFINITY, f64::max),
-                )
-            }
-            None => (
-                f64::NEG_INFINITY,
-                f64::INFINITY,
-                f64::NEG_INFINITY,
-                f64::INFINITY,
-            ),
-        };
-        boxes.push([x0 - 1.0, x1 + 1.0, y0 - 1.0, y1 + 1.0]);
-        if x1 < -1.0 || y1 < -1.0 || x0 > w as f64 + 1.0 || y0 > h as f64 + 1.0 {
-            continue;
-        }
-        let tx = |x: f64| ((x.max(0.0) as u32) / TILE).min(tiles_x - 1);
-        let ty = |y: f64| ((y.max(0.0) as u32) / TILE).min(tiles_y - 1);
-        for j in ty(y0 - 1.0)..=ty(y1 + 1.0) {
-            for i in tx(x0 - 1.0)..=tx(x1 + 1.0) {
-                bins[(j * tiles_x + i) as usize].push(t as u32);
-            }
-        }
-    }
+    let binned = Binned::new(mesh, cam);
+    let tiles_x = binned.tiles_x;
     let plane = (w * h) as usize;
-    watch.grow(bins.len() as u64);
-    let per_tile: Vec<Vec<PixelLayers>> = bins
-        .par_iter()
-        .enumerate()
-        .map(|(b, tris)| {
+    watch.grow(binned.bins.len() as u64);
+    let per_tile: Vec<Vec<PixelLayers>> = (0..binned.bins.len())
+        .into_par_iter()
+        .map(|b| {
             let (bx, by) = (b as u32 % tiles_x, b as u32 / tiles_x);
             let mut out = Vec::new();
             watch.add(1);
-            if watch.stopped() {
+            // A tile no triangle covers has no layers: its pixels stay empty, untraced.
+            if watch.stopped() || binned.bins[b].is_empty() {
                 return out;
             }
-            for y in by * TILE..((by + 1) * TILE).min(h) {
-                for x in bx * TILE..((bx + 1) * TILE).min(w) {
-                    let (o, d) = cam.ray(x, y);
-                    let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
-                    let mut hits: Vec<(Frag, bool)> = tris
-                        .iter()
-                        .filter(|&&tri| {
-                            let [x0, x1, y0, y1] = boxes[tri as usize];
-                            (x0..=x1).contains(&cx) && (y0..=y1).contains(&cy)
-                        })
-                        .filter_map(|&tri| {
-                            let [a, b, c] = mesh.corners(tri as usize);
-                            intersect(o, d, pos(a), pos(b), pos(c))
-                                .map(|(t, b1, b2, front)| (Frag { t, tri, b1, b2 }, front))
-                        })
-                        .collect();
-                    hits.sort_by(|p, q| p.0.t.total_cmp(&q.0.t).then(p.0.tri.cmp(&q.0.tri)));
-                    out.push(((y * w + x) as usize, peel(&hits, count)));
-                }
-            }
+            binned.tile(bx, by, count, &mut out);
             out
         })
         .collect();
@@ -229,6 +346,42 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_tile_traced_triangle_by_triangle_is_each_pixel_traced_alone() {
+        // `trace` finds a tile's hits triangle by triangle; `Binned::pixel` pixel by pixel
+        // (the lazy shadow map's way): the same layers, bit for bit, on a pinhole view of a
+        // torus whose triangles straddle tiles and the image's edge.
+        let mesh = build(&Params {
+            shape: Shape::Torus,
+            size: 1.0,
+            minor: 0.4,
+            segments: [40, 20],
+        })
+        .unwrap();
+        let cam = Camera::new(&CameraParams {
+            eye: [0.3, 1.4, 2.2],
+            resolution: [83, 61],
+            ..Default::default()
+        })
+        .unwrap();
+        let l = trace(&mesh, &cam, 3, &Counter::none());
+        let binned = Binned::new(&mesh, &cam);
+        let plane = 83 * 61;
+        let mut hit = 0;
+        for y in 0..61u32 {
+            for x in 0..83u32 {
+                let one = binned.pixel(x, y, 3);
+                let i = (y * 83 + x) as usize;
+                for k in 0..3 {
+                    assert_eq!(l.front[k * plane + i], one.front[k], "({x}, {y}) layer {k}");
+                    assert_eq!(l.back[k * plane + i], one.back[k], "({x}, {y}) layer {k}");
+                }
+                hit += one.front[0].is_some() as usize;
+            }
+        }
+        assert!(hit > plane / 4, "{hit}");
     }
 
     #[test]

@@ -47,6 +47,7 @@
 //! u = (x + 0.5)/W, v = 1 − (y + 0.5)/H of one tile. The MDF blends only its finite entries and
 //! reports +∞ when they carry less than half the weight (a ray that mostly misses misses).
 
+pub use super::rings::Blend;
 use super::rings::Rings;
 use crate::types::{Btf, BtfBasis, Centring, ColorSpace, Direction, Mdf};
 
@@ -54,9 +55,6 @@ use crate::types::{Btf, BtfBasis, Centring, ColorSpace, Direction, Mdf};
 /// implied visibility is already small, a query light the MDF calls shadowed darkens the BTF's
 /// value only in part (the MDF's bilinear distances err near shadow edges), not to black.
 const IMPLIED_FLOOR: f64 = 0.1;
-
-/// Up to three (index, weight) pairs, weights summing to 1.
-pub type Blend = Vec<(usize, f64)>;
 
 /// The blend of `q` over `dirs`: bilinear over their rings where they have them, else the
 /// nearest three.
@@ -81,27 +79,34 @@ pub fn blend_ring(dirs: &[[f64; 3]], q: [f64; 3], c: f64) -> Blend {
 }
 
 fn blend_where(dirs: &[[f64; 3]], q: [f64; 3], keep: impl Fn(&[f64; 3]) -> bool) -> Blend {
-    let mut best: Vec<(usize, f64)> = Vec::with_capacity(4);
+    // The nearest three as (index, angle), sorted by angle.
+    let mut best = [(0usize, 0.0f64); 3];
+    let mut n = 0;
     for (i, d) in dirs.iter().enumerate().filter(|(_, d)| keep(d)) {
         let c = (d[0] * q[0] + d[1] * q[1] + d[2] * q[2]).clamp(-1.0, 1.0);
         let angle = c.acos();
         // Insertion into a sorted list of 3 keeps the first-found on ties, like the shader.
-        let pos = best.iter().position(|b| angle < b.1).unwrap_or(best.len());
+        let pos = best[..n].iter().position(|b| angle < b.1).unwrap_or(n);
         if pos < 3 {
-            best.insert(pos, (i, angle));
-            best.truncate(3);
+            for k in (pos + 1..3.min(n + 1)).rev() {
+                best[k] = best[k - 1];
+            }
+            best[pos] = (i, angle);
+            n = (n + 1).min(3);
         }
     }
-    if best.is_empty() {
-        return best;
+    if n == 0 {
+        return Blend::EMPTY;
     }
     if best[0].1 < 1e-4 {
-        return vec![(best[0].0, 1.0)];
+        return Blend::one(best[0].0);
     }
-    let total: f64 = best.iter().map(|b| 1.0 / b.1).sum();
-    best.into_iter()
-        .map(|(i, a)| (i, 1.0 / a / total))
-        .collect()
+    let total: f64 = best[..n].iter().map(|b| 1.0 / b.1).sum();
+    let mut out = Blend::EMPTY;
+    for &(i, a) in &best[..n] {
+        out.push(i, 1.0 / a / total);
+    }
+    out
 }
 
 /// Bilinear periodic taps of texture coordinate (u, v) on a W×H tile: (x, y, weight).
@@ -275,6 +280,7 @@ impl<'a> Material<'a> {
         visible: Option<&dyn Fn([f64; 3]) -> f64>,
     ) -> [f64; 3] {
         let at = Lookup { u, v, wo, depth };
+        let bv = lookup(&self.views, self.view_table.as_ref(), wo);
         // The visibility a blend of sampled lights implies: theirs, with its weights.
         let implied = |bl: &Blend| match visible {
             Some(f) => bl.iter().map(|&(i, w)| w * f(self.lights[i])).sum::<f64>(),
@@ -292,7 +298,7 @@ impl<'a> Material<'a> {
         let Some((c1, c0)) = self.light_rings.filter(|r| wi[2] < r.0 - 1e-9) else {
             let bl = lookup(&self.lights, self.light_table.as_ref(), wi);
             let vis = implied(&bl);
-            return reshadow(self.eval_sampled(&at, bl), vis);
+            return reshadow(self.eval_sampled(&at, &bv, bl), vis);
         };
         let h = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
         let (cp, sp) = if h > 1e-12 {
@@ -317,8 +323,8 @@ impl<'a> Material<'a> {
         };
         // Both rings carried to the query's own visibility, then continued in cos θ.
         let (v1, v0) = (implied(&b1), implied(&b0));
-        let e1 = reshadow(self.eval_sampled(&at, b1), v1);
-        let e0 = reshadow(self.eval_sampled(&at, b0), v0);
+        let e1 = reshadow(self.eval_sampled(&at, &bv, b1), v1);
+        let e0 = reshadow(self.eval_sampled(&at, &bv, b0), v0);
         // A power of cos θ through the two rings, e₁ · (c / c₁)^p with p = ln(e₁/e₀) / ln(c₁/c₀):
         // the cosine law where p = 1, steeper where the texel's shadowing grows toward grazing.
         let c = wi[2].max(0.0);
@@ -332,24 +338,27 @@ impl<'a> Material<'a> {
         })
     }
 
-    /// [`Material::eval`] within the sampled directions, the lights blended by `bl`.
-    fn eval_sampled(&self, at: &Lookup, bl: Blend) -> [f64; 3] {
+    /// [`Material::eval`] within the sampled directions, the views blended by `bv` (the view's
+    /// blend) and the lights by `bl`.
+    fn eval_sampled(&self, at: &Lookup, bv: &Blend, bl: Blend) -> [f64; 3] {
         let wo = at.wo;
-        let bv = lookup(&self.views, self.view_table.as_ref(), wo);
-        let mut weights: Vec<(usize, usize, f64)> = Vec::with_capacity(16);
-        for &(vi, wv) in &bv {
+        let mut weights = [(0usize, 0usize, 0.0f64); 16];
+        let mut count = 0;
+        for &(vi, wv) in bv {
             for &(li, wl) in &bl {
                 if let Some(p) = self.pair_of[vi * self.lights.len() + li] {
-                    weights.push((vi, p, wv * wl));
+                    weights[count] = (vi, p, wv * wl);
+                    count += 1;
                 }
             }
         }
+        let weights = &weights[..count];
         let total: f64 = weights.iter().map(|w| w.2).sum();
         if total <= 0.0 {
             return [0.0; 3];
         }
         let mut out = [0.0; 3];
-        for (vi, p, w) in weights {
+        for &(vi, p, w) in weights {
             let (u, v) = match at.depth {
                 Some(d) => {
                     let vk = self.views[vi];
@@ -408,7 +417,7 @@ impl<'a> MdfLookup<'a> {
         let (mut sum, mut weight) = (0.0, 0.0);
         for (k, wk) in lookup(&self.views, self.rings.as_ref(), wo) {
             for &(x, y, tw) in &taps {
-                let d = self.mdf.at(k, x as isize, y as isize) as f64;
+                let d = self.mdf.at_texel(k, x, y) as f64;
                 if d.is_finite() && tw > 0.0 {
                     sum += d * wk * tw;
                     weight += wk * tw;
@@ -427,7 +436,7 @@ impl<'a> MdfLookup<'a> {
     fn at_view(&self, k: usize, u: f64, v: f64) -> f64 {
         let (mut sum, mut weight) = (0.0, 0.0);
         for (x, y, tw) in texel_taps(u, v, self.mdf.width, self.mdf.height) {
-            let d = self.mdf.at(k, x as isize, y as isize) as f64;
+            let d = self.mdf.at_texel(k, x, y) as f64;
             if d.is_finite() && tw > 0.0 {
                 sum += d * tw;
                 weight += tw;
@@ -633,7 +642,7 @@ mod tests {
             .iter()
             .map(|d| d.vector())
             .collect();
-        assert_eq!(blend(&dirs, dirs[17]), vec![(17, 1.0)]);
+        assert_eq!(&*blend(&dirs, dirs[17]), &[(17, 1.0)]);
         let q = Direction::degrees(22.0, 33.0).vector();
         let b = blend(&dirs, q);
         assert_eq!(b.len(), 3);
@@ -641,8 +650,8 @@ mod tests {
         // One sampled direction: every query gets it, even a grazing one.
         let one = vec![[0.0, 0.0, 1.0]];
         assert_eq!(
-            blend(&one, Direction::degrees(89.0, 0.0).vector()),
-            vec![(0, 1.0)]
+            &*blend(&one, Direction::degrees(89.0, 0.0).vector()),
+            &[(0, 1.0)]
         );
     }
 

@@ -9,7 +9,94 @@
 //!
 //! The GPU reads the same table from the `dirs` buffer ([`Rings::encode`]).
 
-use super::material::Blend;
+use std::sync::OnceLock;
+
+/// Up to four (index, weight) pairs, weights summing to 1: a direction's blend over sampled
+/// directions (bilinear over rings: four; nearest three: three; on one ring: two). Held inline,
+/// so a lookup allocates nothing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Blend {
+    len: usize,
+    items: [(usize, f64); 4],
+}
+
+impl Blend {
+    pub const EMPTY: Blend = Blend {
+        len: 0,
+        items: [(0, 0.0); 4],
+    };
+
+    /// One direction alone.
+    pub fn one(i: usize) -> Blend {
+        let mut b = Blend::EMPTY;
+        b.push(i, 1.0);
+        b
+    }
+
+    /// Appends a pair; a fifth is a bug in the caller (no blend has more than four).
+    pub fn push(&mut self, i: usize, w: f64) {
+        self.items[self.len] = (i, w);
+        self.len += 1;
+    }
+
+    /// Keeps the pairs `keep` accepts, in order.
+    pub fn retain(&mut self, keep: impl Fn(&(usize, f64)) -> bool) {
+        let mut n = 0;
+        for k in 0..self.len {
+            if keep(&self.items[k]) {
+                self.items[n] = self.items[k];
+                n += 1;
+            }
+        }
+        self.len = n;
+    }
+}
+
+impl std::ops::Deref for Blend {
+    type Target = [(usize, f64)];
+    fn deref(&self) -> &[(usize, f64)] {
+        &self.items[..self.len]
+    }
+}
+
+impl IntoIterator for Blend {
+    type Item = (usize, f64);
+    type IntoIter = std::iter::Take<std::array::IntoIter<(usize, f64), 4>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.items.into_iter().take(self.len)
+    }
+}
+
+impl<'b> IntoIterator for &'b Blend {
+    type Item = &'b (usize, f64);
+    type IntoIter = std::slice::Iter<'b, (usize, f64)>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.iter()
+    }
+}
+
+/// Whether directions at cosine `c` (clamped to [-1, 1]) are within 1e-4 rad of each other,
+/// `acos(c) < 1e-4`, without the arc cosine: `c` at least the smallest cosine whose arc cosine
+/// is under 1e-4, found once by bisection over the doubles (`acos` is monotone), so the answer
+/// is the arc cosine's own, bit for bit.
+pub fn within_1e4_rad(c: f64) -> bool {
+    static SMALLEST: OnceLock<f64> = OnceLock::new();
+    let x0 = *SMALLEST.get_or_init(|| {
+        // acos(0.99) > 1e-4 and acos(1) = 0: the first double in between whose arc cosine is
+        // under 1e-4 (positive doubles order as their bits).
+        let (mut lo, mut hi) = (0.99f64.to_bits(), 1.0f64.to_bits());
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            if f64::from_bits(mid).acos() < 1e-4 {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        f64::from_bits(hi)
+    });
+    c >= x0
+}
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct Ring {
@@ -65,7 +152,7 @@ impl Rings {
     pub fn on_ring(&self, r: usize, phi: f64) -> Blend {
         let m = &self.rings[r].members;
         if m.len() == 1 {
-            return vec![(m[0].1, 1.0)];
+            return Blend::one(m[0].1);
         }
         let tau = std::f64::consts::TAU;
         let phi = phi.rem_euclid(tau);
@@ -82,7 +169,10 @@ impl Rings {
         } else {
             0.0
         };
-        vec![(a.1, 1.0 - t), (b.1, t)]
+        let mut out = Blend::EMPTY;
+        out.push(a.1, 1.0 - t);
+        out.push(b.1, t);
+        out
     }
 
     /// The bilinear blend of `q` (unit vector); a sampled direction within 1e-4 rad alone.
@@ -97,23 +187,21 @@ impl Rings {
         } else {
             let (a, b) = (below - 1, below);
             let s = (theta - self.rings[a].theta) / (self.rings[b].theta - self.rings[a].theta);
-            let mut v: Blend = self
-                .on_ring(a, phi)
-                .into_iter()
-                .map(|(i, w)| (i, w * (1.0 - s)))
-                .collect();
-            v.extend(self.on_ring(b, phi).into_iter().map(|(i, w)| (i, w * s)));
+            let mut v = Blend::EMPTY;
+            for (i, w) in self.on_ring(a, phi) {
+                v.push(i, w * (1.0 - s));
+            }
+            for (i, w) in self.on_ring(b, phi) {
+                v.push(i, w * s);
+            }
             v
         };
         let exact = out.iter().find(|(i, _)| {
             let d = dirs[*i];
-            (d[0] * q[0] + d[1] * q[1] + d[2] * q[2])
-                .clamp(-1.0, 1.0)
-                .acos()
-                < 1e-4
+            within_1e4_rad((d[0] * q[0] + d[1] * q[1] + d[2] * q[2]).clamp(-1.0, 1.0))
         });
         if let Some(&(i, _)) = exact {
-            return vec![(i, 1.0)];
+            return Blend::one(i);
         }
         out.retain(|(_, w)| *w > 0.0);
         out
@@ -154,7 +242,7 @@ mod tests {
         let counts: Vec<usize> = r.rings.iter().map(|x| x.members.len()).collect();
         assert_eq!(counts, [1, 6, 12, 18, 20, 24]);
         for (i, d) in dirs.iter().enumerate() {
-            assert_eq!(r.blend(&dirs, *d), vec![(i, 1.0)]);
+            assert_eq!(&*r.blend(&dirs, *d), &[(i, 1.0)]);
         }
         // Scattered directions are not rings.
         let scattered: Vec<[f64; 3]> = (0..10)

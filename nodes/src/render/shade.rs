@@ -41,12 +41,11 @@
 //! appear, while the self-shadowing inside a tile, already in the BTF, is not applied twice.
 use super::material::{Material, MdfLookup};
 use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
-use crate::raytrace::camera::Camera;
+use crate::raytrace::layers::Binned;
 use crate::raytrace::layers::{Frag, Layers};
 use crate::raytrace::light::Light;
-use crate::raytrace::shadow::{shadow_bias, ShadowMap};
+use crate::raytrace::shadow::{shadow_bias, LazyShadowMap};
 use crate::types::{Mdf, Mesh};
-use rayon::prelude::*;
 
 pub struct Scene<'a> {
     pub mesh: &'a Mesh,
@@ -544,7 +543,7 @@ impl Scene<'_> {
         px: usize,
         o: V3,
         d: V3,
-        shadow: Option<&ShadowMap>,
+        shadow: Option<&LazyShadowMap>,
     ) -> Option<[f64; 3]> {
         let (t, t_front, s, wo, depth) = self.hit_with_depth(layers, px, o, d)?;
         let p = add(o, mul(d, t_front));
@@ -601,20 +600,22 @@ fn local_up(v: V3) -> V3 {
     [v[0] / h * s, v[1] / h * s, 1e-4]
 }
 
-impl ShadowMap {
-    pub fn build(scene: &Scene, camera: Camera, layers: &Layers, radius: f64) -> ShadowMap {
-        let (w, h) = (camera.width, camera.height);
-        let depth = (0..(w * h) as usize)
-            .into_par_iter()
-            .map(|px| {
-                let (o, d) = camera.ray(px as u32 % w, px as u32 / w);
-                scene.hit(layers, px, o, d).map_or(f64::INFINITY, |h| h.0)
-            })
-            .collect();
-        ShadowMap {
-            bias: shadow_bias(radius, camera.width),
-            camera,
-            depth,
-        }
+impl Scene<'_> {
+    /// The shadow map of the displaced mesostructure seen from the light camera `binned` was
+    /// made for: a texel's depth is where its ray first meets mesostructure ([`Scene::hit`]
+    /// through its own `count` layers), traced when a pixel first looks it up.
+    pub fn shadow_map<'s>(
+        &'s self,
+        binned: &'s Binned<'s>,
+        count: usize,
+        radius: f64,
+    ) -> LazyShadowMap<'s> {
+        let camera = binned.camera().clone();
+        let bias = shadow_bias(radius, camera.width);
+        LazyShadowMap::new(camera, bias, move |x, y| {
+            let l = binned.pixel(x, y, count);
+            let (o, d) = binned.camera().ray(x, y);
+            self.hit(&l, 0, o, d).map_or(f64::INFINITY, |h| h.0)
+        })
     }
 }

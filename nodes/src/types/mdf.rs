@@ -31,6 +31,13 @@ impl Mdf {
         &self.data[view * n..(view + 1) * n]
     }
 
+    /// Distance at texel (x, y) for view `view`, the texel already within the tile (as
+    /// `texel_taps` gives them): [`Mdf::at`] without the wrap.
+    pub fn at_texel(&self, view: usize, x: usize, y: usize) -> f32 {
+        debug_assert!(x < self.width && y < self.height);
+        self.data[(view * self.height + y) * self.width + x]
+    }
+
     /// Distance at texel (x, y) (wrapping) for view `view`.
     pub fn at(&self, view: usize, x: isize, y: isize) -> f32 {
         let xi = x.rem_euclid(self.width as isize) as usize;

@@ -15,7 +15,6 @@ use crate::raytrace::camera::Camera;
 use crate::raytrace::footprint;
 use crate::raytrace::layers;
 use crate::raytrace::light::Light;
-use crate::raytrace::shadow::ShadowMap;
 use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -122,8 +121,8 @@ impl Node for RenderMesh {
             return Err(NodeError::param("mm_per_unit", "must be in [1e-9, 1e9] mm"));
         }
         // Peeled layers hold a front and a back fragment per pixel and layer (40 bytes each,
-        // twice while they are binned per tile): about 180 bytes per pixel and layer, for the
-        // image and for the shadow map, whose texels cost as much as pixels.
+        // twice while they are binned per tile): about 180 bytes per pixel and layer. The
+        // shadow map is lazy: 8 bytes a texel where a frame touches every block of it.
         let per_texel = 180 * u64::from(p.layers.max(1)) + 16;
         let pixels = u64::from(w) * u64::from(h);
         let texels = if p.shadows {
@@ -137,7 +136,7 @@ impl Node for RenderMesh {
             "camera",
         )?;
         crate::memory::check_param(
-            texels.saturating_mul(per_texel),
+            texels.saturating_mul(8),
             &format!("a {0} × {0} shadow map", p.shadow_resolution),
             "shadow_resolution",
         )
@@ -148,6 +147,11 @@ impl Node for RenderMesh {
             ("frame_ms", "mean wall time per frame, ms"),
             ("gpu_ms", "mean GPU time per frame from timestamp queries, ms; absent where the adapter has none, and on the CPU"),
             ("fps", "frames per second (from frame_ms)"),
+            ("layers_ms", "CPU: the view's visibility layers (ray-cast depth peeling), ms a frame"),
+            ("shade_ms", "CPU: the shading pass (shell test, MDF and BTF lookups, the shadow texels it traces), ms a frame"),
+            ("shadow_setup_ms", "CPU, shadows on: binning the mesh for the light camera and allocating the lazy map, ms a frame"),
+            ("shadow_thread_ms", "CPU, shadows on: time spent tracing shadow texels, summed over threads (its share of shade_ms × threads is the shadows' share), ms a frame"),
+            ("shadow_texels", "CPU, shadows on: shadow-map texels traced a frame (the rest of the map is never traced)"),
         ]
     }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
@@ -199,13 +203,17 @@ impl Node for RenderMesh {
             None => {
                 let start = Instant::now();
                 let mut frame = (Vec::new(), Vec::new());
+                let mut stages = Stages::default();
                 // One counter for all frames: each frame's screen tiles add to its total.
                 let watch = Counter::new(ctx, 0);
                 for _ in 0..p.frames {
                     ctx.check_cancel()?;
-                    frame = render_cpu(&scene, &camera, p, &watch)?;
+                    let (data, mask, s) = render_cpu_stages(&scene, &camera, p, &watch)?;
+                    frame = (data, mask);
+                    stages.add(&s);
                 }
                 let ms = start.elapsed().as_secs_f64() * 1e3 / p.frames as f64;
+                stages.record(ctx, p.frames, p.shadows);
                 (frame.0, frame.1, ms, None)
             }
         };
@@ -269,6 +277,40 @@ pub fn coverage(mask: &[f32]) -> f64 {
     mask.iter().filter(|m| **m > 0.5).count() as f64 / mask.len().max(1) as f64
 }
 
+/// What one CPU frame spent, by stage: the view's visibility layers, binning the mesh for the
+/// light camera (with shadows), and the shading pass (the shell test, MDF and BTF lookups, and
+/// the shadow texels traced on first use, whose time summed over threads is `shadow_thread_ms`).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Stages {
+    pub layers_ms: f64,
+    pub shadow_setup_ms: f64,
+    pub shade_ms: f64,
+    pub shadow_thread_ms: f64,
+    pub shadow_texels: u64,
+}
+
+impl Stages {
+    /// The stages as the report's timings (the names `timings()` declares).
+    fn record(&self, ctx: &NodeContext, frames: u32, shadows: bool) {
+        let n = frames.max(1) as f64;
+        ctx.timing("layers_ms", self.layers_ms / n);
+        ctx.timing("shade_ms", self.shade_ms / n);
+        if shadows {
+            ctx.timing("shadow_setup_ms", self.shadow_setup_ms / n);
+            ctx.timing("shadow_thread_ms", self.shadow_thread_ms / n);
+            ctx.timing("shadow_texels", self.shadow_texels as f64 / n);
+        }
+    }
+
+    fn add(&mut self, o: &Stages) {
+        self.layers_ms += o.layers_ms;
+        self.shadow_setup_ms += o.shadow_setup_ms;
+        self.shade_ms += o.shade_ms;
+        self.shadow_thread_ms += o.shadow_thread_ms;
+        self.shadow_texels += o.shadow_texels;
+    }
+}
+
 /// One frame on the CPU: (RGB data, mask).
 pub fn render_cpu(
     scene: &Scene,
@@ -276,25 +318,45 @@ pub fn render_cpu(
     p: &Params,
     watch: &Counter,
 ) -> Result<(Vec<f32>, Vec<f32>), NodeError> {
+    render_cpu_stages(scene, camera, p, watch).map(|(d, m, _)| (d, m))
+}
+
+/// One frame on the CPU: (RGB data, mask, the time each stage took).
+pub fn render_cpu_stages(
+    scene: &Scene,
+    camera: &Camera,
+    p: &Params,
+    watch: &Counter,
+) -> Result<(Vec<f32>, Vec<f32>, Stages), NodeError> {
     let count = p.layers.max(1) as usize;
-    let shadow = if p.shadows {
+    let mut stages = Stages::default();
+    let clock = Instant::now();
+    let shadow_cam = if p.shadows {
         if p.shadow_resolution == 0 || p.shadow_resolution > CPU_MAX_SIDE {
             return Err(NodeError::param(
                 "shadow_resolution",
                 format!("must be in 1..={CPU_MAX_SIDE}"),
             ));
         }
-        let cam = shadow_camera(scene, p.shadow_resolution)?;
-        let l = layers::trace(scene.mesh, &cam, count, watch);
-        let radius = bounding_sphere(scene.mesh).1;
-        Some(ShadowMap::build(scene, cam, &l, radius))
+        Some(shadow_camera(scene, p.shadow_resolution)?)
     } else {
         None
     };
+    let binned = shadow_cam
+        .as_ref()
+        .map(|cam| layers::Binned::new(scene.mesh, cam));
+    let radius = bounding_sphere(scene.mesh).1;
+    let shadow = binned.as_ref().map(|b| scene.shadow_map(b, count, radius));
+    stages.shadow_setup_ms = clock.elapsed().as_secs_f64() * 1e3;
+
+    let clock = Instant::now();
     let l = layers::trace(scene.mesh, camera, count, watch);
     if watch.stopped() {
         return Err(NodeError::Cancelled);
     }
+    stages.layers_ms = clock.elapsed().as_secs_f64() * 1e3;
+
+    let clock = Instant::now();
     let (w, h) = (camera.width as usize, camera.height as usize);
     let pixels: Vec<([f64; 3], bool)> = (0..w * h)
         .into_par_iter()
@@ -304,12 +366,17 @@ pub fn render_cpu(
             (colour.unwrap_or(scene.background), colour.is_some())
         })
         .collect();
+    stages.shade_ms = clock.elapsed().as_secs_f64() * 1e3;
+    if let Some(s) = &shadow {
+        stages.shadow_thread_ms = s.thread_ms();
+        stages.shadow_texels = s.traced();
+    }
     let mask = pixels.iter().map(|p| p.1 as u8 as f32).collect();
     let data = pixels
         .iter()
         .flat_map(|(c, _)| c.map(|v| v as f32))
         .collect();
-    Ok((data, mask))
+    Ok((data, mask, stages))
 }
 
 /// A rendered frame on the GPU: RGB data, mask, wall ms per frame, GPU ms per frame from

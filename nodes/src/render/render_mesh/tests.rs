@@ -625,3 +625,69 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
     }
     crate::gpu::require_tested(tested);
 }
+
+#[test]
+fn the_lazy_shadow_map_holds_the_full_maps_depths_bit_for_bit_and_traces_only_what_a_frame_asks() {
+    // The full map as render.mesh built it before (every texel's layers traced, then the
+    // shell test through them) against the lazy map texel for texel: a texel's depth is a
+    // function of the texel alone, so the same bits. And a frame traces far fewer texels than
+    // the map has: at 96 × 72 pixels and a 512² map, at most one texel a pixel.
+    let (btf, mdf) = woven(16);
+    let torus = build(&MeshParams {
+        shape: Shape::Torus,
+        size: 0.9,
+        minor: 0.35,
+        segments: [48, 24],
+    })
+    .unwrap();
+    let p = Params {
+        camera: CameraParams {
+            eye: [0.0, 1.6, 2.4],
+            resolution: [96, 72],
+            ..Default::default()
+        },
+        light: LightParams {
+            direction: [1.0, 0.45, 0.2],
+            ..Default::default()
+        },
+        shell: 0.25,
+        shadows: true,
+        shadow_resolution: 512,
+        ..Default::default()
+    };
+    let material = Material::new(Source::Raw(&btf));
+    let scene = Scene {
+        mesh: &torus,
+        material: &material,
+        mdf: Some(MdfLookup::new(&mdf)),
+        light: Light::new(&p.light).unwrap(),
+        tiling: p.tiling,
+        shell: p.shell,
+        background: p.background,
+        parallax: p.parallax,
+        sides: shell_sides(&torus, p.shell),
+        aspect: texel_aspect(&torus, p.tiling, p.shell, Some(&mdf)),
+    };
+    let cam = shadow_camera(&scene, p.shadow_resolution).unwrap();
+    let radius = bounding_sphere(&torus).1;
+    let full_layers = layers::trace(&torus, &cam, 2, &Counter::none());
+    let binned = layers::Binned::new(&torus, &cam);
+    let lazy = scene.shadow_map(&binned, 2, radius);
+    let n = (cam.width * cam.height) as usize;
+    let mut surface = 0;
+    for i in (0..n).step_by(7) {
+        let (o, d) = cam.ray(i as u32 % cam.width, i as u32 / cam.width);
+        let full = scene
+            .hit(&full_layers, i, o, d)
+            .map_or(f64::INFINITY, |h| h.0);
+        assert_eq!(full.to_bits(), lazy.depth(i).to_bits(), "texel {i}");
+        surface += full.is_finite() as usize;
+    }
+    assert!(surface > n / 7 / 10, "the light sees the torus: {surface}");
+
+    let view = Camera::new(&p.camera).unwrap();
+    let (_, _, stages) = render_cpu_stages(&scene, &view, &p, &Counter::none()).unwrap();
+    let pixels = (view.width * view.height) as u64;
+    eprintln!("{stages:?}");
+    assert!(stages.shadow_texels > 0 && stages.shadow_texels <= pixels);
+}
