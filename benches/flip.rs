@@ -1,9 +1,10 @@
 //! `image.flip` against NVIDIA's `flip-evaluator` on the same 512 × 512 pair, same machine: a
 //! scikit-image photograph (the astronaut) against its Gaussian blur (σ = 1.5 px), LDR and HDR,
 //! median of five runs each. The peer runs from `target/peer-venv` (or `MESOFLOW_PEER_PYTHON`);
-//! without it only mesoflow's times are printed.
+//! without it the bench says so and stops. `--size W×H` (e.g. `1920x1080`) scales the photograph
+//! to that size first (bilinear), then blurs it.
 //!
-//! `cargo bench --bench flip`
+//! `cargo bench --bench flip [-- --size 1920x1080]`
 
 use mesoflow_nodes::image::flip::{evaluate, Mode, Params};
 use mesoflow_nodes::types::{srgb_to_linear, Image};
@@ -15,7 +16,11 @@ const PEER: &str = r#"
 import sys, time, numpy as np, flip_evaluator as flip
 from skimage import data
 from scipy.ndimage import gaussian_filter
+from skimage.transform import resize
 a = data.astronaut().astype(np.float32) / 255
+w, h = int(sys.argv[2]), int(sys.argv[3])
+if (w, h) != (512, 512):
+    a = resize(a, (h, w, 3), order=1, anti_aliasing=False).astype(np.float32)
 b = gaussian_filter(a, (1.5, 1.5, 0))
 np.save(sys.argv[1] + "/a.npy", a); np.save(sys.argv[1] + "/b.npy", b)
 for mode in ["LDR", "HDR"]:
@@ -49,9 +54,20 @@ fn main() {
         .unwrap_or_else(|| {
             Path::new(env!("CARGO_MANIFEST_DIR")).join("target/peer-venv/bin/python")
         });
+    let size: String = mesoflow_testkit::args::arg("--size", "512x512".to_string());
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .expect("--size W x H, e.g. 1920x1080");
     let dir = tempfile::tempdir().expect("temp dir");
     let peer = Command::new(&python)
-        .args(["-c", PEER, dir.path().to_str().unwrap()])
+        .args([
+            "-c",
+            PEER,
+            dir.path().to_str().unwrap(),
+            &w.to_string(),
+            &h.to_string(),
+        ])
         .output();
     let Some(peer) = peer.ok().filter(|o| o.status.success()) else {
         eprintln!(
@@ -61,7 +77,10 @@ fn main() {
         return;
     };
     let text = String::from_utf8_lossy(&peer.stdout);
-    println!("mode  mesoflow_s  flip_evaluator_s  mesoflow_mean  flip_evaluator_mean  (512×512, {} threads)", rayon::current_num_threads());
+    println!(
+        "mode  mesoflow_s  flip_evaluator_s  peer/ours  mesoflow_mean  flip_evaluator_mean  ({w}×{h}, {} threads)",
+        rayon::current_num_threads()
+    );
     for (mode, line) in [Mode::Ldr, Mode::Hdr].into_iter().zip(text.lines()) {
         let decode = mode == Mode::Ldr;
         let (a, b) = (
@@ -84,9 +103,15 @@ fn main() {
         }
         ts.sort_by(f64::total_cmp);
         let f: Vec<&str> = line.split_whitespace().collect();
+        let peer_s: f64 = f[1].parse().unwrap_or(f64::NAN);
         println!(
-            "{:4}  {:10.4}  {:16}  {:13.6}  {}",
-            f[0], ts[2], f[1], mean, f[2]
+            "{:4}  {:10.4}  {:16}  {:9.2}  {:13.6}  {}",
+            f[0],
+            ts[2],
+            f[1],
+            peer_s / ts[2],
+            mean,
+            f[2]
         );
     }
 }

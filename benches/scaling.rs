@@ -20,11 +20,17 @@
 //! What this measures is frame against frame at a fixed sample count, not time to equal error:
 //! the families bench (`--family mesostructure`) measures error against a converged truth.
 //!
+//! The rows go to `OUT/scaling.json` and three charts beside it (`scaling_tiles`: both frames
+//! against the tiles at a fixed image; `scaling_memory`: peak memory against the tiles;
+//! `scaling_pixels`: ours over Mitsuba against the image's pixels), PNG and SVG; `--replot
+//! FILE.json` draws the charts again from such a file without running anything.
+//!
 //! `cargo bench --bench scaling -- [--axis size|area|tiles|all] [--spp 16] [--frames 3]
-//! [--max-area-tiles 96] [--out target/scaling]`; needs the peer venv (`target/peer-venv`, as
+//! [--max-area-tiles 96] [--out target/scaling] [--replot FILE.json]`; needs the peer venv (`target/peer-venv`, as
 //! `.ci/run` makes it) and Debian's `libllvm19` for Mitsuba's LLVM variant; without them the
 //! Mitsuba columns are absent and the bench says why.
 
+use mesoflow::chart::{self, Chart, Series};
 use mesoflow_testkit::args::arg;
 use mesoflow_testkit::cli;
 use serde_json::{json, Value};
@@ -118,7 +124,11 @@ fn run(dir: &Path, cache: &Path, what: &str) -> (Result<Value, String>, Option<f
     if !output.status.success() {
         let why = stderr
             .lines()
-            .rfind(|l| !l.starts_with("peak_rss_kib") && !l.trim().is_empty())
+            .rfind(|l| {
+                !l.starts_with("peak_rss_kib")
+                    && !l.starts_with("Command exited")
+                    && !l.trim().is_empty()
+            })
             .unwrap_or("failed")
             .to_string();
         return (Err(why), rss);
@@ -161,17 +171,197 @@ fn peer(dir: &Path, p: Point, spp: u32) -> Result<Value, String> {
     serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| e.to_string())
 }
 
+/// The charts of a run's rows (`scaling.json`), written beside it.
+fn charts(rows: &[Value], out: &Path) {
+    let pick =
+        |axis: &str, x: &dyn Fn(&Value) -> Option<f64>, y: &dyn Fn(&Value) -> Option<f64>| {
+            rows.iter()
+                .filter(|r| r["axis"] == axis)
+                .filter_map(|r| Some((x(r)?, y(r)?)))
+                .collect::<Vec<_>>()
+        };
+    let tiles = |r: &Value| Some(r["tiles"][0].as_f64()? * r["tiles"][1].as_f64()?);
+    let get = |k: &'static str| move |r: &Value| r[k].as_f64();
+    let series = |name: &str, points| Series {
+        name: name.into(),
+        points,
+        scatter: false,
+    };
+    let spp = rows.first().and_then(|r| r["spp"].as_u64()).unwrap_or(16);
+    let made = [
+        (
+            "scaling_tiles",
+            Chart {
+                title: "Frame at 640 × 480 as the surface grows".into(),
+                x_label: "tiles of the 64² mesostructure on the torus",
+                y_label: "frame, ms (CPU, 2 cores)",
+                series: vec![
+                    series(
+                        "render.mesh (BTF + MDF, shadows)",
+                        pick("tiles", &tiles, &get("ours_ms")),
+                    ),
+                    series(
+                        &format!("Mitsuba 3 llvm, true geometry, {spp} spp"),
+                        pick("tiles", &tiles, &get("mitsuba_ms")),
+                    ),
+                ],
+                x_names: None,
+            },
+        ),
+        (
+            "scaling_memory",
+            Chart {
+                title: "Peak memory as the surface grows (640 × 480)".into(),
+                x_label: "tiles of the 64² mesostructure on the torus",
+                y_label: "peak resident set, MiB",
+                series: vec![
+                    series(
+                        "render.mesh (raw BTF + MDF)",
+                        pick("tiles", &tiles, &get("ours_mib")),
+                    ),
+                    series(
+                        "mesh.displace (true geometry)",
+                        // A refused run's memory is the refusal's, not the geometry's.
+                        pick("tiles", &tiles, &|r: &Value| {
+                            r["triangles"].as_f64().and(r["displace_mib"].as_f64())
+                        }),
+                    ),
+                    series(
+                        "Mitsuba 3 (load + render)",
+                        pick("tiles", &tiles, &get("mitsuba_mib")),
+                    ),
+                ],
+                x_names: None,
+            },
+        ),
+        (
+            "scaling_pixels",
+            Chart {
+                title: "Ours' frame over Mitsuba's as the image grows (60 tiles)".into(),
+                x_label: "pixels, millions",
+                y_label: "render.mesh frame / Mitsuba frame",
+                series: vec![series(
+                    &format!("ratio (below 1: ours is faster than {spp} spp)"),
+                    pick(
+                        "size",
+                        &|r: &Value| Some(r["image"][0].as_f64()? * r["image"][1].as_f64()? / 1e6),
+                        &|r: &Value| Some(r["ours_ms"].as_f64()? / r["mitsuba_ms"].as_f64()?),
+                    ),
+                )],
+                x_names: None,
+            },
+        ),
+    ];
+    for (name, c) in made {
+        if c.series.iter().all(|s| s.points.is_empty()) {
+            continue;
+        }
+        match chart::write(&out.join(name), &c) {
+            Ok(()) => eprintln!("scaling: {}", out.join(format!("{name}.svg")).display()),
+            Err(e) => eprintln!("scaling: no chart {name}: {e}"),
+        }
+    }
+}
+
+/// The machine's peaks, measured in the same run: read bandwidth (a sum over 1 GiB of f64 on
+/// every core), the latency of a dependent random read over the same memory (a pointer chase:
+/// what a BTF texel read that misses every cache costs), and f64 multiply-adds a second on every
+/// core (eight independent chains a thread).
+struct Peaks {
+    read_gb_s: f64,
+    miss_ns: f64,
+    gflops: f64,
+}
+
+fn peaks() -> Peaks {
+    use rayon::prelude::*;
+    use std::time::Instant;
+    let n = 1usize << 27; // 1 GiB of f64
+    let data: Vec<f64> = (0..n).into_par_iter().map(|i| (i & 1023) as f64).collect();
+    let mut best = f64::INFINITY;
+    for _ in 0..3 {
+        let t = Instant::now();
+        let s: f64 = data
+            .par_chunks(1 << 16)
+            .map(|c| c.iter().sum::<f64>())
+            .sum();
+        best = best.min(t.elapsed().as_secs_f64());
+        assert!(s > 0.0);
+    }
+    let read_gb_s = (n * 8) as f64 / best / 1e9;
+    // A single cycle through all slots in a random order (Sattolo), followed from slot 0.
+    let m = n;
+    let mut next: Vec<u32> = (0..m as u32).collect();
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    for i in (1..m).rev() {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        let j = (x % i as u64) as usize;
+        next.swap(i, j);
+    }
+    drop(data);
+    let steps = 1usize << 22;
+    let t = Instant::now();
+    let mut k = 0usize;
+    for _ in 0..steps {
+        k = next[k] as usize;
+    }
+    let miss_ns = t.elapsed().as_secs_f64() * 1e9 / steps as f64;
+    assert!(k < m);
+    let iters = 1u64 << 26;
+    let t = Instant::now();
+    let total: f64 = (0..rayon::current_num_threads())
+        .into_par_iter()
+        .map(|th| {
+            let mut a = [1.0 + th as f64 * 1e-9; 8];
+            for _ in 0..iters {
+                for v in a.iter_mut() {
+                    *v = *v * 0.999_999_9 + 1e-9;
+                }
+            }
+            a.iter().sum::<f64>()
+        })
+        .sum();
+    let gflops = (2 * 8 * iters * rayon::current_num_threads() as u64) as f64
+        / t.elapsed().as_secs_f64()
+        / 1e9;
+    assert!(total.is_finite());
+    Peaks {
+        read_gb_s,
+        miss_ns,
+        gflops,
+    }
+}
+
 fn ms(v: Option<f64>) -> String {
     v.map_or("absent".into(), |x| format!("{x:.0}"))
 }
 
 fn main() {
+    let replot: String = arg("--replot", String::new());
+    if !replot.is_empty() {
+        let rows: Vec<Value> =
+            serde_json::from_slice(&std::fs::read(&replot).expect("--replot FILE"))
+                .expect("a scaling.json");
+        charts(&rows, Path::new(&replot).parent().unwrap_or(Path::new(".")));
+        return;
+    }
     let axis: String = arg("--axis", "size".to_string());
     let spp: u32 = arg("--spp", 16);
     let frames: u32 = arg("--frames", 3);
     let max_tiles: u32 = arg("--max-area-tiles", 96);
     let out: PathBuf = arg("--out", cli::repo().join("target/scaling"));
     let cache = out.join("cache");
+    let pk = peaks();
+    println!(
+        "Machine ({} threads): read bandwidth {:.1} GB/s, a dependent random read {:.0} ns, {:.1} GFLOP/s (f64 multiply-add).",
+        rayon::current_num_threads(),
+        pk.read_gb_s,
+        pk.miss_ns,
+        pk.gflops
+    );
+    println!();
     let base = Point {
         tiles: [12, 5],
         resolution: [320, 240],
@@ -202,10 +392,11 @@ fn main() {
             k *= 2;
         }
     }
+    let mut rows: Vec<Value> = Vec::new();
     println!(
-        "| axis | tiles | image | ours' frame, ms | layers / shade, ms | shadow texels | ours' peak, MiB | true triangles | displace peak, MiB | Mitsuba load, s | Mitsuba first frame, s | Mitsuba {spp} spp, ms | Mitsuba peak, MiB | ours / Mitsuba |"
+        "| axis | tiles | image | ours' frame, ms | BTF-read limit, ms | layers / shade, ms | shadow texels | ours' peak, MiB | true triangles | displace peak, MiB | Mitsuba load, s | Mitsuba first frame, s | Mitsuba {spp} spp, ms | Mitsuba peak, MiB | ours / Mitsuba |"
     );
-    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for (name, p) in points {
         let dir = out.join(format!(
             "{name}-{}x{}-{}x{}",
@@ -228,6 +419,14 @@ fn main() {
         let ours = ours.unwrap_or_else(|e| panic!("render.mesh at {p:?}: {e}"));
         let t = &cli::node(&ours, "ours")["timings"];
         let frame = t["frame_ms"].as_f64();
+        // The limit the raw BTF's reads set: a covered pixel blends 4 views × 4 lights at 4
+        // bilinear taps (2 rows), 3 channel planes apart: 96 cache lines of 64 bytes, at the
+        // measured read bandwidth (a lower bound on the frame: it leaves out the MDF, the
+        // shadow texel and all arithmetic).
+        let covered = cli::node(&ours, "ours")["metrics"]["coverage"]
+            .as_f64()
+            .map(|c| c * (p.resolution[0] * p.resolution[1]) as f64);
+        let limit = covered.map(|c| c * 96.0 * 64.0 / (pk.read_gb_s * 1e9) * 1e3);
         let (truth, displace_rss) = run(&dir, &cache, "ply.file");
         let (triangles, mitsuba) = match truth {
             Ok(_) => match peer(&dir, p, spp) {
@@ -236,6 +435,17 @@ fn main() {
             },
             Err(e) => (None, Err(format!("mesh.displace refused: {e}"))),
         };
+        let m = mitsuba.as_ref().ok();
+        rows.push(json!({
+            "axis": name, "tiles": p.tiles, "image": p.resolution, "spp": spp,
+            "ours_ms": frame, "btf_limit_ms": limit, "layers_ms": t["layers_ms"], "shade_ms": t["shade_ms"],
+            "shadow_texels": t["shadow_texels"], "ours_mib": ours_rss,
+            "triangles": triangles, "displace_mib": displace_rss,
+            "mitsuba_load_s": m.map(|m| &m["load_s"]), "mitsuba_first_s": m.map(|m| &m["first_s"]),
+            "mitsuba_ms": m.and_then(|m| m["frame_s"].as_f64()).map(|s| s * 1e3),
+            "mitsuba_mib": m.map(|m| &m["peak_rss_mib"]),
+            "refused": mitsuba.as_ref().err(),
+        }));
         let (load, first, mframe, mrss, ratio) = match &mitsuba {
             Ok(m) => {
                 let f = m["frame_s"].as_f64().map(|s| s * 1e3);
@@ -261,12 +471,13 @@ fn main() {
             }
         };
         println!(
-            "| {name} | {} × {} | {} × {} | {} | {} / {} | {} | {} | {} | {} | {load} | {first} | {mframe} | {mrss} | {ratio} |",
+            "| {name} | {} × {} | {} × {} | {} | {} | {} / {} | {} | {} | {} | {} | {load} | {first} | {mframe} | {mrss} | {ratio} |",
             p.tiles[0],
             p.tiles[1],
             p.resolution[0],
             p.resolution[1],
             ms(frame),
+            limit.map_or("absent".into(), |x| format!("{x:.1}")),
             ms(t["layers_ms"].as_f64()),
             ms(t["shade_ms"].as_f64()),
             t["shadow_texels"].as_f64().map_or("absent".into(), |x| format!("{x:.0}")),
@@ -275,4 +486,12 @@ fn main() {
             ms(displace_rss),
         );
     }
+    let json_path = out.join("scaling.json");
+    std::fs::write(
+        &json_path,
+        serde_json::to_string_pretty(&rows).expect("rows as JSON"),
+    )
+    .expect("write scaling.json");
+    eprintln!("scaling: {}", json_path.display());
+    charts(&rows, &out);
 }

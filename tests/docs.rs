@@ -365,7 +365,7 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         "sweep graphs/sss_render.json --vary marble.threshold=1,0.5,0.2,0.1,0.05,0.02,0.01 \
          --measure marble_error.rmse --measure marble.gather_seconds --versus \
          marble.gather_seconds --device cpu --out-dir out/sss_render_sweep",
-        How::AsWritten,
+        How::Slow("seven full-size renders of the torus with the body solver, 23 s here"),
     ),
 ];
 
@@ -484,7 +484,9 @@ fn run_guide_commands(slow: bool) {
             continue;
         }
         let args: Vec<&str> = words.iter().map(String::as_str).collect();
+        let t = std::time::Instant::now();
         let r = mesoflow(&args, s.dir.path());
+        eprintln!("{:.1} s: `mesoflow {cmd}`", t.elapsed().as_secs_f64());
         if r.code != 0 {
             failed.push(format!(
                 "`mesoflow {cmd}` exited {}: {}",

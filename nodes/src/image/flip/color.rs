@@ -22,8 +22,12 @@ const RGB_TO_XYZ: [[f64; 3]; 3] = [
     ],
 ];
 
+// Written out rather than as `[0, 1, 2].map(…)`: these run several times a pixel, and the
+// arithmetic (so every bit) is the same.
+#[inline]
 fn mul(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
+    let row = |r: &[f64; 3]| r[0] * v[0] + r[1] * v[1] + r[2] * v[2];
+    [row(&m[0]), row(&m[1]), row(&m[2])]
 }
 
 fn xyz_to_rgb_matrix() -> [[f64; 3]; 3] {
@@ -70,12 +74,18 @@ impl Default for Spaces {
 impl Spaces {
     /// Linear RGB → YCxCz: Y' = 116·Y/Yn − 16, Cx = 500·(X/Xn − Y/Yn), Cz = 200·(Y/Yn − Z/Zn).
     /// Unlike CIELAB there is no cube root, so the space is linear and filtering in it is exact.
+    #[inline]
     pub fn rgb_to_ycxcz(&self, rgb: [f64; 3]) -> [f64; 3] {
         let xyz = mul(&RGB_TO_XYZ, rgb);
-        let [x, y, z] = [0, 1, 2].map(|i| xyz[i] / self.white[i]);
+        let (x, y, z) = (
+            xyz[0] / self.white[0],
+            xyz[1] / self.white[1],
+            xyz[2] / self.white[2],
+        );
         [116.0 * y - 16.0, 500.0 * (x - y), 200.0 * (y - z)]
     }
 
+    #[inline]
     pub fn ycxcz_to_rgb(&self, c: [f64; 3]) -> [f64; 3] {
         let y = (c[0] + 16.0) / 116.0;
         let x = y + c[1] / 500.0;
@@ -88,6 +98,7 @@ impl Spaces {
 
     /// Linear RGB → CIELAB (D65), then the Hunt adjustment (a and b scaled by L/100: colour
     /// differences shrink as luminance falls).
+    #[inline]
     pub fn rgb_to_hunt_lab(&self, rgb: [f64; 3]) -> [f64; 3] {
         let xyz = mul(&RGB_TO_XYZ, rgb);
         const DELTA: f64 = 6.0 / 29.0;
@@ -98,7 +109,11 @@ impl Spaces {
                 t / (3.0 * DELTA * DELTA) + 4.0 / 29.0
             }
         };
-        let [fx, fy, fz] = [0, 1, 2].map(|i| f(xyz[i] / self.white[i]));
+        let (fx, fy, fz) = (
+            f(xyz[0] / self.white[0]),
+            f(xyz[1] / self.white[1]),
+            f(xyz[2] / self.white[2]),
+        );
         let l = 116.0 * fy - 16.0;
         let a = 500.0 * (fx - fy);
         let b = 200.0 * (fy - fz);

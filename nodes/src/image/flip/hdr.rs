@@ -5,6 +5,7 @@
 
 use super::color::luminance;
 use super::ldr::{flip_map, Rgb};
+use rayon::prelude::*;
 
 /// Narkowicz's fit of the ACES filmic curve with FLIP's 0.6 pre-scale:
 /// t(x) = (k0·x² + k1·x + k2) / (k3·x² + k4·x + k5).
@@ -55,8 +56,11 @@ impl Exposures {
             .map(|i| luminance([0, 1, 2].map(|c| reference.planes[c][i] as f64)))
             .collect();
         let n = lum.len();
-        lum.sort_by(f64::total_cmp);
-        let hi = lum.last().copied().unwrap_or(0.0);
+        // The largest and the upper middle by selection: what a sort would put there.
+        let hi = lum
+            .iter()
+            .copied()
+            .fold(0.0, |a: f64, b| if b.total_cmp(&a).is_gt() { b } else { a });
         if n == 0 || hi <= 0.0 {
             return Exposures {
                 start: 0.0,
@@ -65,7 +69,7 @@ impl Exposures {
             };
         }
         // The upper middle element: the median the reference implementation takes.
-        let lo = lum[n / 2].max(f32::EPSILON as f64);
+        let lo = (*lum.select_nth_unstable_by(n / 2, f64::total_cmp).1).max(f32::EPSILON as f64);
         let x = tone_map_inverse(TARGET);
         let start = (x / hi).log2();
         let stop = (x / lo).log2();
@@ -89,8 +93,9 @@ fn exposed(img: &Rgb, stops: f64) -> Rgb {
     Rgb {
         width: img.width,
         height: img.height,
-        planes: img.planes.clone().map(|p| {
-            p.iter()
+        planes: [0, 1, 2].map(|c| {
+            img.planes[c]
+                .par_iter()
                 .map(|v| tone_map(*v as f64 * gain) as f32)
                 .collect()
         }),

@@ -10,6 +10,7 @@ use rayon::prelude::*;
 /// Exponents and error redistribution of the paper: qc, qf, pc, pt.
 const QC: f64 = 0.7;
 const QF: f64 = 0.5;
+const _: () = assert!(QF == 0.5, "the feature exponent is taken as a square root");
 const PC: f64 = 0.4;
 const PT: f64 = 0.95;
 
@@ -22,7 +23,8 @@ pub struct Rgb {
 
 impl Rgb {
     fn pixel(&self, i: usize) -> [f64; 3] {
-        [0, 1, 2].map(|c| self.planes[c][i] as f64)
+        let p = &self.planes;
+        [p[0][i] as f64, p[1][i] as f64, p[2][i] as f64]
     }
 }
 
@@ -32,41 +34,56 @@ pub fn flip_map(reference: &Rgb, test: &Rgb, ppd: f64) -> Vec<f32> {
     let n = reference.width * reference.height;
     let cmax = max_colour_difference(&spaces);
 
-    let prepare = |img: &Rgb| -> ([Plane; 3], Plane) {
-        let opponent: Vec<[f64; 3]> = (0..n).map(|i| spaces.rgb_to_ycxcz(img.pixel(i))).collect();
-        let ycc: [Vec<f32>; 3] = [0, 1, 2].map(|c| opponent.iter().map(|v| v[c] as f32).collect());
+    let prepare = |img: &Rgb| -> ([Plane; 3], Vec<f32>, Vec<f32>) {
+        let opponent: Vec<[f64; 3]> = (0..n)
+            .into_par_iter()
+            .map(|i| spaces.rgb_to_ycxcz(img.pixel(i)))
+            .collect();
+        let ycc: [Vec<f32>; 3] =
+            [0, 1, 2].map(|c| opponent.par_iter().map(|v| v[c] as f32).collect());
         let plane = |data: Vec<f32>| Plane {
             width: img.width,
             height: img.height,
             data,
         };
         // The feature pipeline sees the unfiltered luminance, normalised to [0, 1].
-        let lum = plane(ycc[0].iter().map(|y| (y + 16.0) / 116.0).collect());
+        let lum = plane(ycc[0].par_iter().map(|y| (y + 16.0) / 116.0).collect());
         let [y, cx, cz] = ycc;
-        let filtered = [
-            csf_filter(&plane(y), Channel::Achromatic, ppd),
-            csf_filter(&plane(cx), Channel::RedGreen, ppd),
-            csf_filter(&plane(cz), Channel::BlueYellow, ppd),
-        ];
-        (filtered, lum)
+        // The three channels' filters and the two detectors side by side: each is a fixed
+        // sequence of sums, so running them at once changes no bit.
+        let ((a, b), (c, (edges, points))) = rayon::join(
+            || {
+                rayon::join(
+                    || csf_filter(&plane(y), Channel::Achromatic, ppd),
+                    || csf_filter(&plane(cx), Channel::RedGreen, ppd),
+                )
+            },
+            || {
+                rayon::join(
+                    || csf_filter(&plane(cz), Channel::BlueYellow, ppd),
+                    || {
+                        rayon::join(
+                            || feature_magnitude(&lum, Feature::Edge, ppd),
+                            || feature_magnitude(&lum, Feature::Point, ppd),
+                        )
+                    },
+                )
+            },
+        );
+        ([a, b, c], edges, points)
     };
-    let (rf, rl) = prepare(reference);
-    let (tf, tl) = prepare(test);
-
-    let edges = (
-        feature_magnitude(&rl, Feature::Edge, ppd),
-        feature_magnitude(&tl, Feature::Edge, ppd),
-    );
-    let points = (
-        feature_magnitude(&rl, Feature::Point, ppd),
-        feature_magnitude(&tl, Feature::Point, ppd),
-    );
+    let ((rf, re, rp), (tf, te, tp)) = rayon::join(|| prepare(reference), || prepare(test));
+    let edges = (re, te);
+    let points = (rp, tp);
 
     let lab = |f: &[Plane; 3], i: usize| {
-        let rgb = spaces
-            .ycxcz_to_rgb([0, 1, 2].map(|c| f[c].data[i] as f64))
-            .map(|v| v.clamp(0.0, 1.0));
-        spaces.rgb_to_hunt_lab(rgb)
+        let c = [
+            f[0].data[i] as f64,
+            f[1].data[i] as f64,
+            f[2].data[i] as f64,
+        ];
+        let [r, g, b] = spaces.ycxcz_to_rgb(c);
+        spaces.rgb_to_hunt_lab([r.clamp(0.0, 1.0), g.clamp(0.0, 1.0), b.clamp(0.0, 1.0)])
     };
     (0..n)
         .into_par_iter()
@@ -74,7 +91,8 @@ pub fn flip_map(reference: &Rgb, test: &Rgb, ppd: f64) -> Vec<f32> {
             let colour = redistribute(hyab(lab(&rf, i), lab(&tf, i)).powf(QC), cmax);
             let feature =
                 ((edges.0[i] - edges.1[i]).abs()).max((points.0[i] - points.1[i]).abs()) as f64;
-            let feature = (feature / std::f64::consts::SQRT_2).powf(QF);
+            // QF is ½: the square root (correctly rounded, as pow's ½ is to within an ulp).
+            let feature = (feature / std::f64::consts::SQRT_2).sqrt();
             colour.powf(1.0 - feature) as f32
         })
         .collect()
