@@ -18,44 +18,22 @@ Prints one JSON line: "load_s" (reading the PLY and building the scene, its BVH 
 "variant".
 """
 import json
+import os
 import resource
 import sys
 import time
 
 import mitsuba as mi
 
+# The scene is the test peer's (tests/peers/mitsuba_reference.py), written once.
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "peers"))
+from mitsuba_reference import direct_scene  # noqa: E402
+
 
 def main(scene_path):
     cfg = json.load(open(scene_path))
     mi.set_variant(cfg.get("variant", "llvm_ad_rgb"))
-    cam, light = cfg["camera"], cfg["light"]
-    width, height = cam["resolution"]
-    scene_dict = {
-        "type": "scene",
-        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
-        "sensor": {
-            "type": "perspective",
-            "fov": cam["fov"],
-            "fov_axis": "y",
-            "to_world": mi.ScalarTransform4f().look_at(
-                origin=cam["eye"], target=cam["target"], up=cam.get("up", [0, 1, 0])),
-            "film": {
-                "type": "hdrfilm", "width": width, "height": height,
-                "pixel_format": "rgb", "rfilter": {"type": "box"},
-            },
-            "sampler": {"type": "independent", "sample_count": cfg["samples"]},
-        },
-        # Mitsuba's direction is the one the light travels in.
-        "light": {
-            "type": "directional",
-            "direction": [-d for d in light["direction"]],
-            "irradiance": {"type": "rgb", "value": [light["intensity"]] * 3},
-        },
-        "shape": {
-            "type": "ply", "filename": cfg["mesh"],
-            "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": cfg["albedo"]}},
-        },
-    }
+    scene_dict = direct_scene(mi, cfg, pixel_format="rgb")
     t = time.perf_counter()
     scene = mi.load_dict(scene_dict)
     load = time.perf_counter() - t

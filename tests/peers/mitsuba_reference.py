@@ -23,12 +23,13 @@ import mitsuba as mi
 import numpy as np
 
 
-def main(scene_path, out_path):
-    mi.set_variant("scalar_rgb")
-    cfg = json.load(open(scene_path))
+def direct_scene(mi, cfg, pixel_format="rgba"):
+    """The scene dict both peers start from: pinhole camera (vertical fov), one directional
+    light, the PLY with a diffuse BSDF, direct illumination only, a box filter. `mi` has its
+    variant set; `benches/mesh_peer.py` times the same scene."""
     cam, light = cfg["camera"], cfg["light"]
     width, height = cam["resolution"]
-    scene_dict = {
+    return {
         "type": "scene",
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
         "sensor": {
@@ -36,10 +37,10 @@ def main(scene_path, out_path):
             "fov": cam["fov"],
             "fov_axis": "y",
             "to_world": mi.ScalarTransform4f().look_at(
-                origin=cam["eye"], target=cam["target"], up=cam["up"]),
+                origin=cam["eye"], target=cam["target"], up=cam.get("up", [0, 1, 0])),
             "film": {
                 "type": "hdrfilm", "width": width, "height": height,
-                "pixel_format": "rgba", "rfilter": {"type": "box"},
+                "pixel_format": pixel_format, "rfilter": {"type": "box"},
             },
             "sampler": {"type": "independent", "sample_count": cfg["samples"], "seed": cfg.get("seed", 7)},
         },
@@ -54,6 +55,12 @@ def main(scene_path, out_path):
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": cfg["albedo"]}},
         },
     }
+
+
+def main(scene_path, out_path):
+    mi.set_variant("scalar_rgb")
+    cfg = json.load(open(scene_path))
+    scene_dict = direct_scene(mi, cfg)
     medium = cfg.get("medium")
     if medium is not None:
         # Russian roulette past the fifth event, volpath's default, stops a path with

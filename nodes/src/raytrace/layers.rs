@@ -129,43 +129,13 @@ impl<'a> Binned<'a> {
         }
     }
 
-    /// The first `count` layers of pixel (x, y), peeled from the hits of its tile's triangles;
-    /// `hits` is scratch space (cleared here), so a loop over pixels allocates it once.
-    pub fn pixel_with(
-        &self,
-        x: u32,
-        y: u32,
-        count: usize,
-        hits: &mut Vec<(Frag, bool)>,
-    ) -> Vec<(Option<Frag>, Option<Frag>)> {
-        let tris = &self.bins[((y / TILE) * self.tiles_x + x / TILE) as usize];
-        let pos = |i: usize| self.mesh.positions[i].map(|v| v as f64);
-        let (o, d) = self.cam.ray(x, y);
-        let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
-        hits.clear();
-        hits.extend(
-            tris.iter()
-                .filter(|&&tri| {
-                    let [x0, x1, y0, y1] = self.boxes[tri as usize];
-                    (x0..=x1).contains(&cx) && (y0..=y1).contains(&cy)
-                })
-                .filter_map(|&tri| {
-                    let [a, b, c] = self.mesh.corners(tri as usize);
-                    intersect(o, d, pos(a), pos(b), pos(c))
-                        .map(|(t, b1, b2, front)| (Frag { t, tri, b1, b2 }, front))
-                }),
-        );
-        hits.sort_by(|p, q| p.0.t.total_cmp(&q.0.t).then(p.0.tri.cmp(&q.0.tri)));
-        peel(hits, count)
-    }
-
     /// The camera the triangles are binned for.
     pub fn camera(&self) -> &'a Camera {
         self.cam
     }
 
     /// The layers of every pixel of screen tile (bx, by), appended to `out`: the same as
-    /// [`Binned::pixel_with`] for each, found triangle by triangle (each tested against the
+    /// [`Binned::pixel`] for each, found triangle by triangle (each tested against the
     /// pixels its widened box holds, by the same test) and sorted per pixel by (t, triangle),
     /// which orders any pixel's hits exactly as the pixel's own loop does.
     pub fn tile(&self, bx: u32, by: u32, count: usize, out: &mut Vec<PixelLayers>) {
@@ -224,10 +194,27 @@ impl<'a> Binned<'a> {
         }
     }
 
-    /// Pixel (x, y)'s layers alone, as a one-pixel [`Layers`] (index 0).
+    /// Pixel (x, y)'s first `count` layers alone, as a one-pixel [`Layers`] (index 0): peeled
+    /// from the hits of its tile's triangles whose widened box holds the pixel's centre.
     pub fn pixel(&self, x: u32, y: u32, count: usize) -> Layers {
-        let ls = self.pixel_with(x, y, count, &mut Vec::new());
-        let (front, back) = ls.into_iter().unzip();
+        let tris = &self.bins[((y / TILE) * self.tiles_x + x / TILE) as usize];
+        let pos = |i: usize| self.mesh.positions[i].map(|v| v as f64);
+        let (o, d) = self.cam.ray(x, y);
+        let (cx, cy) = (x as f64 + 0.5, y as f64 + 0.5);
+        let mut hits: Vec<(Frag, bool)> = tris
+            .iter()
+            .filter(|&&tri| {
+                let [x0, x1, y0, y1] = self.boxes[tri as usize];
+                (x0..=x1).contains(&cx) && (y0..=y1).contains(&cy)
+            })
+            .filter_map(|&tri| {
+                let [a, b, c] = self.mesh.corners(tri as usize);
+                intersect(o, d, pos(a), pos(b), pos(c))
+                    .map(|(t, b1, b2, front)| (Frag { t, tri, b1, b2 }, front))
+            })
+            .collect();
+        hits.sort_by(|p, q| p.0.t.total_cmp(&q.0.t).then(p.0.tri.cmp(&q.0.tri)));
+        let (front, back) = peel(&hits, count).into_iter().unzip();
         Layers {
             count,
             width: 1,

@@ -476,9 +476,9 @@ fn woven(size: u32) -> (Btf, Mdf) {
     (btf, mdf)
 }
 
-#[test]
-fn gpu_and_cpu_renders_agree_on_every_backend() {
-    let (btf, mdf) = woven(16);
+/// A torus under a low light (the ring shadows its own inner side) with a thick shell (the
+/// MDF's silhouettes cover enough pixels to matter), seen at 96 × 72 with a 256² shadow map.
+fn shadowed_torus() -> (Mesh, Params) {
     let torus = build(&MeshParams {
         shape: Shape::Torus,
         size: 0.9,
@@ -486,39 +486,54 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
         segments: [48, 24],
     })
     .unwrap();
-    let mut p = Params {
+    let p = Params {
         camera: CameraParams {
             eye: [0.0, 1.6, 2.4],
             resolution: [96, 72],
             ..Default::default()
         },
-        // A low light, so the ring shadows its own inner side.
         light: LightParams {
             direction: [1.0, 0.45, 0.2],
             ..Default::default()
         },
-        // A thick shell, so the MDF's silhouettes cover enough pixels to matter.
         shell: 0.25,
         shadows: true,
         shadow_resolution: 256,
         ..Default::default()
     };
+    (torus, p)
+}
+
+/// The scene `render_cpu` and `render_gpu` draw for `p`, with or without the MDF.
+fn scene_of<'a>(
+    mesh: &'a Mesh,
+    material: &'a Material<'a>,
+    mdf: Option<&'a Mdf>,
+    p: &Params,
+) -> Scene<'a> {
+    Scene {
+        mesh,
+        material,
+        mdf: mdf.map(MdfLookup::new),
+        light: Light::new(&p.light).unwrap(),
+        tiling: p.tiling,
+        shell: p.shell,
+        background: p.background,
+        parallax: p.parallax,
+        sides: shell_sides(mesh, p.shell),
+        // The torus's tiles are squeezed inside and stretched outside: the GPU must map
+        // directions into the tile's proportions as the CPU does.
+        aspect: texel_aspect(mesh, p.tiling, p.shell, mdf),
+    }
+}
+
+#[test]
+fn gpu_and_cpu_renders_agree_on_every_backend() {
+    let (btf, mdf) = woven(16);
+    let (torus, mut p) = shadowed_torus();
     let scene_in = |gpu: Option<&mesoflow_runtime::Gpu>, with_mdf: bool, p: &Params| {
         let material = Material::new(Source::Raw(&btf));
-        let scene = Scene {
-            mesh: &torus,
-            material: &material,
-            mdf: with_mdf.then(|| MdfLookup::new(&mdf)),
-            light: Light::new(&p.light).unwrap(),
-            tiling: p.tiling,
-            shell: p.shell,
-            background: p.background,
-            parallax: p.parallax,
-            sides: shell_sides(&torus, p.shell),
-            // The torus's tiles are squeezed inside and stretched outside: the GPU must
-            // map directions into the tile's proportions as the CPU does.
-            aspect: texel_aspect(&torus, p.tiling, p.shell, with_mdf.then_some(&mdf)),
-        };
+        let scene = scene_of(&torus, &material, with_mdf.then_some(&mdf), p);
         let cam = Camera::new(&p.camera).unwrap();
         let ctx = NodeContext::detached(None);
         match gpu {
@@ -633,41 +648,10 @@ fn the_lazy_shadow_map_holds_the_full_maps_depths_bit_for_bit_and_traces_only_wh
     // function of the texel alone, so the same bits. And a frame traces far fewer texels than
     // the map has: at 96 × 72 pixels and a 512² map, at most one texel a pixel.
     let (btf, mdf) = woven(16);
-    let torus = build(&MeshParams {
-        shape: Shape::Torus,
-        size: 0.9,
-        minor: 0.35,
-        segments: [48, 24],
-    })
-    .unwrap();
-    let p = Params {
-        camera: CameraParams {
-            eye: [0.0, 1.6, 2.4],
-            resolution: [96, 72],
-            ..Default::default()
-        },
-        light: LightParams {
-            direction: [1.0, 0.45, 0.2],
-            ..Default::default()
-        },
-        shell: 0.25,
-        shadows: true,
-        shadow_resolution: 512,
-        ..Default::default()
-    };
+    let (torus, mut p) = shadowed_torus();
+    p.shadow_resolution = 512;
     let material = Material::new(Source::Raw(&btf));
-    let scene = Scene {
-        mesh: &torus,
-        material: &material,
-        mdf: Some(MdfLookup::new(&mdf)),
-        light: Light::new(&p.light).unwrap(),
-        tiling: p.tiling,
-        shell: p.shell,
-        background: p.background,
-        parallax: p.parallax,
-        sides: shell_sides(&torus, p.shell),
-        aspect: texel_aspect(&torus, p.tiling, p.shell, Some(&mdf)),
-    };
+    let scene = scene_of(&torus, &material, Some(&mdf), &p);
     let cam = shadow_camera(&scene, p.shadow_resolution).unwrap();
     let radius = bounding_sphere(&torus).1;
     let full_layers = layers::trace(&torus, &cam, 2, &Counter::none());
