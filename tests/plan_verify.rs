@@ -8,6 +8,9 @@
 
 use mesoflow_testkit::plan_sweep;
 
+/// The translucent far views' median time saved on the CPU path (see below).
+const SSS_CPU: f64 = 3.0;
+
 #[test]
 #[ignore = "slow: the full verification sweep, 56 cases, each plan proved on a probe, 1.5 min"]
 fn planned_views_stay_within_their_flip_budget() {
@@ -63,14 +66,41 @@ fn planned_views_stay_within_their_flip_budget() {
             .map(|r| r.full_s / r.view_s.max(1e-9))
             .collect()
     };
-    let (btf, all) = (median(far(Some("btf"))), median(far(None)));
-    println!("far half, median render time saved: BTF {btf:.2}×, both objects {all:.2}×");
+    let (btf, sss, all) = (
+        median(far(Some("btf"))),
+        median(far(Some("sss"))),
+        median(far(None)),
+    );
+    println!(
+        "far half, median render time saved: BTF {btf:.2}×, translucent {sss:.2}×, both objects {all:.2}×"
+    );
+    // On the CPU path `render.mesh`'s shadow map is traced only where pixels look it up (issue
+    // 56), so the graph's 512² map no longer costs more than a planned 32–128² one, and the far
+    // BTF views, already a few milliseconds, have little left to save: measured 1.00× (BTF)
+    // there on 2026-12-06, twice, where the median over both objects (half of them near 1×)
+    // then moved between 1.13× and 1.29× from run to run. On the CPU the bounds are that a BTF
+    // plan is not slower (≥ 0.9×) and that the translucent views still save (≥ 3×, about half
+    // their measured 6.78×, which a planner that keeps the full model, 1×, cannot
+    // reach); on a GPU, whose map is still drawn whole, the bounds above.
+    let cpu = rows.iter().any(|r| r.object == "btf" && r.device == "cpu");
+    if cpu {
+        assert!(
+            btf >= 0.9,
+            "the far half's BTF views on the CPU are {btf:.2}× the graph's time (median)\n{table}"
+        );
+        assert!(
+            sss >= SSS_CPU,
+            "the far half's translucent views saved only {sss:.2}× (median)\n{table}"
+        );
+        return;
+    }
+    let (btf_bound, all_bound) = (2.5, 1.5);
     assert!(
-        btf >= 2.5,
+        btf >= btf_bound,
         "the far half's BTF views saved only {btf:.2}× (median)\n{table}"
     );
     assert!(
-        all >= 1.5,
-        "the far half's views saved only {all:.2}× (median)\n{table}"
+        all >= all_bound,
+        "the far half's views saved only {all:.2}× (median; bound {all_bound}×)\n{table}"
     );
 }

@@ -39,6 +39,8 @@ pub struct Row {
     pub full_s: f64,
     pub view_s: f64,
     pub decisions: String,
+    /// The device the full render ran on (`cpu` or `gpu`, as the report says).
+    pub device: String,
 }
 
 /// Runs the sweep at `width` pixels across (height 3/4 of it) into `out`, with its own cache,
@@ -165,6 +167,10 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
                     full_s: secs(full),
                     view_s: secs(view),
                     decisions,
+                    device: node(&report, full)["device"]
+                        .as_str()
+                        .unwrap_or("")
+                        .to_string(),
                 });
             }
             eprintln!("d = {d}, budget {b}: done");
@@ -252,6 +258,10 @@ pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
                 full_s: secs("qh_full"),
                 view_s: secs("qh_view"),
                 decisions,
+                device: node(&report, "qh_full")["device"]
+                    .as_str()
+                    .unwrap_or("")
+                    .to_string(),
             });
             eprintln!("qh: d = {d}, budget {b}: done");
         }
