@@ -181,23 +181,11 @@ impl Node for RenderMesh {
         }
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let [w, h] = p.camera.resolution;
-        let light = Light::new(&p.light)?;
         let degenerate = mesh.degenerate_triangles();
         if degenerate > 0 {
             ctx.warn(format!("{degenerate} zero-area triangles are skipped"));
         }
-        let scene = Scene {
-            mesh,
-            material: &material,
-            mdf: mdf_lookup,
-            light,
-            tiling: p.tiling,
-            shell: p.shell,
-            background: p.background,
-            parallax: p.parallax,
-            sides: shell_sides(mesh, p.shell),
-            aspect: texel_aspect(mesh, p.tiling, p.shell, mdf),
-        };
+        let scene = scene_for(mesh, &material, mdf_lookup, p)?;
         let (data, mask, ms, gpu_ms) = match ctx.gpu() {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
             None => {
@@ -255,6 +243,29 @@ impl Node for RenderMesh {
             );
         Ok(footprint::with_metrics(out, fp.as_ref()))
     }
+}
+
+/// The scene `p` describes: the mesh as the top of its shell, the material, the MDF's lookup
+/// (the tile's proportions come from the MDF it reads), the light, the shell's side walls.
+pub fn scene_for<'a>(
+    mesh: &'a Mesh,
+    material: &'a Material<'a>,
+    mdf: Option<MdfLookup<'a>>,
+    p: &Params,
+) -> Result<Scene<'a>, NodeError> {
+    let aspect = texel_aspect(mesh, p.tiling, p.shell, mdf.as_ref().map(|m| m.mdf));
+    Ok(Scene {
+        mesh,
+        material,
+        mdf,
+        light: Light::new(&p.light)?,
+        tiling: p.tiling,
+        shell: p.shell,
+        background: p.background,
+        parallax: p.parallax,
+        sides: shell_sides(mesh, p.shell),
+        aspect,
+    })
 }
 
 /// The shadow camera: orthographic along a directional light, a pinhole at a point light.

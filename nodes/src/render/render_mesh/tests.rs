@@ -504,27 +504,16 @@ fn shadowed_torus() -> (Mesh, Params) {
     (torus, p)
 }
 
-/// The scene `render_cpu` and `render_gpu` draw for `p`, with or without the MDF.
+/// The scene `render_cpu` and `render_gpu` draw for `p`, with or without the MDF (the torus's
+/// tiles are squeezed inside and stretched outside: the GPU must map directions into the tile's
+/// proportions as the CPU does).
 fn scene_of<'a>(
     mesh: &'a Mesh,
     material: &'a Material<'a>,
     mdf: Option<&'a Mdf>,
     p: &Params,
 ) -> Scene<'a> {
-    Scene {
-        mesh,
-        material,
-        mdf: mdf.map(MdfLookup::new),
-        light: Light::new(&p.light).unwrap(),
-        tiling: p.tiling,
-        shell: p.shell,
-        background: p.background,
-        parallax: p.parallax,
-        sides: shell_sides(mesh, p.shell),
-        // The torus's tiles are squeezed inside and stretched outside: the GPU must map
-        // directions into the tile's proportions as the CPU does.
-        aspect: texel_aspect(mesh, p.tiling, p.shell, mdf),
-    }
+    scene_for(mesh, material, mdf.map(MdfLookup::new), p).unwrap()
 }
 
 #[test]
