@@ -356,8 +356,9 @@ pub fn render_cpu_stages(
     let binned = shadow_cam
         .as_ref()
         .map(|cam| layers::Binned::new(scene.mesh, cam));
-    let radius = bounding_sphere(scene.mesh).1;
-    let shadow = binned.as_ref().map(|b| scene.shadow_map(b, count, radius));
+    let shadow = binned
+        .as_ref()
+        .map(|b| scene.shadow_map(b, count, bounding_sphere(scene.mesh).1));
     stages.shadow_setup_ms = clock.elapsed().as_secs_f64() * 1e3;
 
     let clock = Instant::now();
