@@ -23,7 +23,7 @@ fn small(graph: &str) -> Vec<String> {
     // Subsurface renders gather with `exit_normal` from 500 entry points: the `body` grid
     // solver (3-8 s a render at 24+ cells across) and the bounce tracing at 3000 points made
     // sss_truth 70 s and qh_render 32 s of this test. `body` stays covered here by
-    // family_translucent (`sss_body`) and by the sss.render unit tests.
+    // family_translucent (through its `lighting`) and by the sss.render unit tests.
     let sss = |ids: &[&str]| -> Vec<String> {
         let mut v = render(ids);
         v.extend(ids.iter().flat_map(|id| {
@@ -32,11 +32,6 @@ fn small(graph: &str) -> Vec<String> {
                 format!("{id}.geometry=exit_normal"),
             ]
         }));
-        v
-    };
-    let sss_body = |ids: &[&str]| -> Vec<String> {
-        let mut v = render(ids);
-        v.extend(ids.iter().map(|id| format!("{id}.max_points=3000")));
         v
     };
     let mut s: Vec<String> = match graph {
@@ -54,18 +49,18 @@ fn small(graph: &str) -> Vec<String> {
             "relief_converged.camera.resolution=[32,24]".into(),
         ],
         "btf_compress" => vec!["surface.size=16".into(), "pca.rank=3".into()],
-        "family_translucent" => {
-            let mut v: Vec<String> = vec![
-                "mesh.segments=[32,16]".into(),
-                "truth.samples=4".into(),
-                "truth.camera.resolution=[32,24]".into(),
-                // Fewer mean free paths across: a coarser body grid (3.8 s → 1.2 s).
-                "ours.mm_per_unit=10".into(),
-                "truth.mm_per_unit=10".into(),
-            ];
-            v.extend(sss_body(&["ours"]));
-            v
-        }
+        "family_translucent" => vec![
+            "mesh.segments=[32,16]".into(),
+            "truth.samples=4".into(),
+            "truth.camera.resolution=[32,24]".into(),
+            // Fewer mean free paths across: a coarser body grid (3.8 s → 1.2 s).
+            "lighting.mm_per_unit=10".into(),
+            "truth.mm_per_unit=10".into(),
+            // `ours` takes the lighting parameters from `lighting` (sss.lighting).
+            "ours.camera.resolution=[32,24]".into(),
+            "lighting.shadow_resolution=128".into(),
+            "lighting.max_points=3000".into(),
+        ],
         "family_mesostructure" => vec![
             "pattern.size=16".into(),
             format!("capture.views={DIRS}"),

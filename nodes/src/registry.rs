@@ -49,6 +49,7 @@ pub fn registry() -> Registry {
     r.register(crate::sss::profile::Profile);
     r.register(crate::sss::compare::Compare);
     r.register(crate::sss::render::Render);
+    r.register(crate::sss::render::lighting::Lighting);
     r.register(crate::qh::fit_dipole::FitDipole);
     r.register(crate::qh::render::QhRender);
     r.register(crate::manifold::points_read::PointsRead);

@@ -47,6 +47,24 @@ impl Encoder {
         self.bytes.extend_from_slice(b);
         self
     }
+    /// Length-prefixed little-endian f64s.
+    pub fn f64s(&mut self, v: &[f64]) -> &mut Self {
+        self.u64(v.len() as u64);
+        self.bytes.reserve(v.len() * 8);
+        for x in v {
+            self.bytes.extend_from_slice(&x.to_le_bytes());
+        }
+        self
+    }
+    /// Length-prefixed little-endian u32s.
+    pub fn u32s(&mut self, v: &[u32]) -> &mut Self {
+        self.u64(v.len() as u64);
+        self.bytes.reserve(v.len() * 4);
+        for x in v {
+            self.bytes.extend_from_slice(&x.to_le_bytes());
+        }
+        self
+    }
     pub fn f32s(&mut self, v: &[f32]) -> &mut Self {
         self.u64(v.len() as u64);
         if cfg!(target_endian = "little") {
@@ -116,6 +134,24 @@ impl<'a> Decoder<'a> {
     pub fn raw(&mut self) -> Result<Vec<u8>, DecodeError> {
         let n = self.len(1)?;
         Ok(self.take(n)?.to_vec())
+    }
+    /// [`Encoder::f64s`]'s values, the length checked against the bytes left.
+    pub fn f64s(&mut self) -> Result<Vec<f64>, DecodeError> {
+        let n = self.len(8)?;
+        let bytes = self.take(n * 8)?;
+        Ok(bytes
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().expect("8 bytes")))
+            .collect())
+    }
+    /// [`Encoder::u32s`]'s values, the length checked against the bytes left.
+    pub fn u32s(&mut self) -> Result<Vec<u32>, DecodeError> {
+        let n = self.len(4)?;
+        let bytes = self.take(n * 4)?;
+        Ok(bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes(c.try_into().expect("4 bytes")))
+            .collect())
     }
     pub fn f32s(&mut self) -> Result<Vec<f32>, DecodeError> {
         let n = self.len(4)?;

@@ -5,7 +5,7 @@
 
 use mesoflow_nodes::types::{
     BrdfMap, Btf, BtfBasis, DiffusionProfile, Embedding, HeightField, Image, KnnGraph, Mdf, Mesh,
-    NormalMap, PointSet, ScatteringMaterial, WARD_PARAMS,
+    NormalMap, PointSet, ScatteringMaterial, SssLighting, WARD_PARAMS,
 };
 use mesoflow_runtime::{Artifact, Artifacts, ValueRef};
 use serde_json::{json, Value};
@@ -107,6 +107,9 @@ pub fn describe(v: &ValueRef) -> Value {
     } else if let Some(s) = any.downcast_ref::<ScatteringMaterial>() {
         json!({ "view": "table", "rows": [["σs′ (mm⁻¹)", s.sigma_s_prime], ["σa (mm⁻¹)", s.sigma_a],
                 ["η", s.eta], ["g", s.g]] })
+    } else if let Some(l) = any.downcast_ref::<SssLighting>() {
+        json!({ "view": "table", "rows": [["irradiance samples", l.len()], ["spacing (mm)", l.spacing_mm],
+                ["bounced light", l.bounced.is_some()], ["body grid cells", l.body.as_ref().map(|b| b.dims)]] })
     } else if let Some(a) = any.downcast_ref::<Artifact>() {
         json!({ "view": "files", "files": [{ "path": a.path, "bytes": a.bytes.len() }] })
     } else if let Some(a) = any.downcast_ref::<Artifacts>() {

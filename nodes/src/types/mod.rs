@@ -9,6 +9,7 @@ mod manifold;
 mod mdf;
 mod mesh;
 mod scattering;
+mod sss_lighting;
 pub use image::{linear_to_srgb, srgb_to_linear};
 mod normal_map;
 
@@ -22,6 +23,7 @@ pub use mdf::Mdf;
 pub use mesh::Mesh;
 pub use normal_map::NormalMap;
 pub use scattering::{DiffusionProfile, ScatteringMaterial};
+pub use sss_lighting::{BodyChannel, BodyGrid, LightBounced, SssLighting};
 
 /// Every array-like type, i.e. what `npy.write` accepts.
 pub const ARRAY_TYPES: &[&str] = &[
@@ -47,6 +49,7 @@ pub fn register(r: &mut mesoflow_runtime::Registry) {
     r.register_type(Mesh::TYPE, Mesh::decode);
     r.register_type(ScatteringMaterial::TYPE, ScatteringMaterial::decode);
     r.register_type(DiffusionProfile::TYPE, DiffusionProfile::decode);
+    r.register_type(SssLighting::TYPE, SssLighting::decode);
     r.register_type(PointSet::TYPE, PointSet::decode);
     r.register_type(KnnGraph::TYPE, KnnGraph::decode);
     r.register_type(Embedding::TYPE, Embedding::decode);

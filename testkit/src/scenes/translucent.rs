@@ -115,21 +115,23 @@ impl Scene {
             format!("mesh.minor={}", j(json!(self.minor))),
             format!("material.preset={}", self.preset),
         ];
-        for id in ["ours", "truth"] {
-            sets.push(format!("{id}.camera.eye={}", list(eye)));
+        // `ours` takes the light and the scale from its `lighting` (`sss.lighting`).
+        for (view, lit) in [("ours", "lighting"), ("truth", "truth")] {
+            sets.push(format!("{view}.camera.eye={}", list(eye)));
             sets.push(format!(
-                "{id}.camera.resolution=[{},{}]",
+                "{view}.camera.resolution=[{},{}]",
                 resolution[0], resolution[1]
             ));
-            sets.push(format!("{id}.light.direction={}", list(direction)));
-            sets.push(format!("{id}.mm_per_unit={}", j(json!(self.mm_per_unit))));
+            sets.push(format!("{lit}.light.direction={}", list(direction)));
+            sets.push(format!("{lit}.mm_per_unit={}", j(json!(self.mm_per_unit))));
         }
         sets.push(format!("truth.samples={samples}"));
         sets.push(format!("truth.seed={}", self.truth_seed()));
         sets
     }
 
-    /// The graph: `ours` (the method with its defaults), `truth` (`render.reference` with the
+    /// The graph: `lighting` and `ours` (the method with its defaults, what does not depend on
+    /// the camera in `sss.lighting`), `truth` (`render.reference` with the
     /// medium at `samples` a pixel), `error` (`image.compare` over the truth's coverage) and
     /// [`PICTURE`](super::PICTURE) (truth | ours | signed difference), at `resolution`. [`TEMPLATE`] is seed 0's at 64 × 48 and 1024 samples; [`Scene::sets`] turns
     /// it into any other (a test holds the two the same).
@@ -147,10 +149,15 @@ impl Scene {
                 "mesh": { "kind": "mesh.primitive", "params": mesh },
                 "material": { "kind": "sss.material", "params": { "preset": self.preset, "eta": 1.0 } },
                 "profile": { "kind": "sss.profile", "inputs": { "material": "material.material" } },
+                "lighting": {
+                    "kind": "sss.lighting",
+                    "inputs": { "mesh": "mesh.mesh", "material": "material.material", "profile": "profile.profile" },
+                    "params": { "light": light, "mm_per_unit": self.mm_per_unit }
+                },
                 "ours": {
                     "kind": "sss.render",
-                    "inputs": { "mesh": "mesh.mesh", "material": "material.material", "profile": "profile.profile" },
-                    "params": { "camera": camera, "light": light, "mm_per_unit": self.mm_per_unit }
+                    "inputs": { "mesh": "mesh.mesh", "material": "material.material", "profile": "profile.profile", "lighting": "lighting.lighting" },
+                    "params": { "camera": camera }
                 },
                 "truth": {
                     "kind": "render.reference",

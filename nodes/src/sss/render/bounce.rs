@@ -27,16 +27,22 @@ pub(super) struct Nearest {
 
 impl Nearest {
     pub(super) fn new(points: &[SamplePoint], spacing: f64) -> Nearest {
+        Nearest::at(points.iter().map(|s| s.p).collect(), spacing)
+    }
+
+    /// The grid over `points` (world units) with cells of `spacing`.
+    pub(super) fn at(points: Vec<V3>, spacing: f64) -> Nearest {
         let cell = spacing.max(1e-300);
         let mut grid: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
-        for (i, s) in points.iter().enumerate() {
-            grid.entry(Self::key(s.p, cell)).or_default().push(i);
+        for (i, &p) in points.iter().enumerate() {
+            grid.entry(Self::key(p, cell)).or_default().push(i);
         }
-        Nearest {
-            points: points.iter().map(|s| s.p).collect(),
-            cell,
-            grid,
-        }
+        Nearest { points, cell, grid }
+    }
+
+    /// The members' positions and the cell, as [`Nearest::at`] takes them.
+    pub(super) fn parts(&self) -> (&[V3], f64) {
+        (&self.points, self.cell)
     }
 
     fn key(p: V3, cell: f64) -> [i64; 3] {

@@ -42,7 +42,7 @@ use crate::raytrace::footprint::{self, Footprint};
 use crate::raytrace::layers::Frag;
 use crate::raytrace::light::Light;
 use crate::raytrace::tracer::Tracer;
-use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial};
+use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial, SssLighting};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
 use rayon::prelude::*;
@@ -58,6 +58,7 @@ mod emission;
 mod energy;
 pub(crate) mod gather;
 mod geometry;
+pub mod lighting;
 mod setup;
 mod shading;
 mod single;
@@ -196,6 +197,7 @@ impl Node for Render {
             // `emission: p1`, traced single scattering, two bounces; `Params::classic` the old).
             // 12: no bounces on an object that hardly sees itself (`bounce::NEGLIGIBLE`): a
             // convex mesh renders as with `bounces: 0`, in a quarter of the time.
+            // 12 still: the `lighting` input (images unchanged without it).
             version: 12,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
@@ -203,6 +205,7 @@ impl Node for Render {
                 Port::input("mesh", Mesh::TYPE, "the translucent object"),
                 Port::input("material", ScatteringMaterial::TYPE, "its medium (η, and σs, g for single scattering)"),
                 Port::input("profile", DiffusionProfile::TYPE, "its diffusion profile"),
+                Port::optional("lighting", SssLighting::TYPE, "what does not depend on the camera, from sss.lighting (cached there): the render then takes its lighting parameters from it"),
             ],
             outputs: vec![
                 Port::output("image", Image::TYPE, "linear HDR radiance"),
@@ -227,6 +230,15 @@ impl Node for Render {
         &[
             ("gather_seconds", "wall time of the per-pixel sums, s"),
             (
+                "setup_seconds",
+                "wall time of what the camera does not change: the BVH, the samples, their light, octree, beams and bounces, s",
+            ),
+            ("bounce_seconds", "the bounces' share of `setup_seconds`, s"),
+            (
+                "shading_seconds",
+                "wall time of each pixel's own light and single scattering, s",
+            ),
+            (
                 "body_seconds",
                 "wall time of `geometry: body`'s grid, solve and share of each pixel's exitance, s (absent otherwise)",
             ),
@@ -237,11 +249,26 @@ impl Node for Render {
         let material = inputs.get::<ScatteringMaterial>("material")?;
         let profile = inputs.get::<DiffusionProfile>("profile")?;
         let watch = Counter::new(ctx, 0);
-        let r = render_with(ctx.gpu(), mesh, material, profile, p, &Homogeneous, &watch)?;
+        let lit = inputs.opt::<SssLighting>("lighting")?;
+        let merged = lit.map(|l| lighting::merged(p, l)).transpose()?;
+        let p = merged.as_ref().unwrap_or(p);
+        let r = render_lit(
+            ctx.gpu(),
+            mesh,
+            material,
+            profile,
+            p,
+            &Homogeneous,
+            &watch,
+            lit,
+        )?;
         for w in r.warnings {
             ctx.warn(w);
         }
         ctx.timing("gather_seconds", r.gather_seconds);
+        ctx.timing("setup_seconds", r.setup_seconds);
+        ctx.timing("bounce_seconds", r.bounce_seconds);
+        ctx.timing("shading_seconds", r.shading_seconds);
         if let Some(s) = r.body_seconds {
             ctx.timing("body_seconds", s);
         }
@@ -271,6 +298,13 @@ pub struct Rendered {
     /// Mean profile evaluations per covered pixel.
     pub terms: f64,
     pub gather_seconds: f64,
+    /// The BVH, the samples, their light, octree and beams, the bounces and the thickness
+    /// (everything that does not depend on the camera but the body's grid), s.
+    pub setup_seconds: f64,
+    /// The bounces' share of `setup_seconds`, s.
+    pub bounce_seconds: f64,
+    /// The view's hits and each pixel's shading (its own light, single scattering), s.
+    pub shading_seconds: f64,
     /// With `geometry: body`: the grid's build and solve and each pixel's share, s (outside
     /// `gather_seconds`, the profile's gather), and the grid's cell, mm.
     pub body_seconds: Option<f64>,
@@ -335,6 +369,23 @@ pub fn render_with(
     weights: &dyn Weights,
     watch: &Counter,
 ) -> Result<Rendered, NodeError> {
+    render_lit(gpu, mesh, material, profile, p, weights, watch, None)
+}
+
+/// [`render_with`], the camera-independent part taken from `lighting` when given (made by
+/// `sss.lighting` for this mesh, material, profile and `p`'s lighting parameters; `p` already
+/// holds them, `lighting::merged`).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn render_lit(
+    gpu: Option<&mesoflow_runtime::Gpu>,
+    mesh: &Mesh,
+    material: &ScatteringMaterial,
+    profile: &DiffusionProfile,
+    p: &Params,
+    weights: &dyn Weights,
+    watch: &Counter,
+    lighting: Option<&SssLighting>,
+) -> Result<Rendered, NodeError> {
     mesh.check().map_err(|e| NodeError::input("mesh", e))?;
     if profile.radii.len() < 2 {
         return Err(NodeError::input("profile", "fewer than two radii"));
@@ -354,9 +405,11 @@ pub fn render_with(
     }
     // One BVH for the bounces, the thickness, the body's inside test, the view and single
     // scattering.
+    let setup_start = Instant::now();
     let tracer = Tracer::new(mesh);
-    let setup = match p.mode {
-        Mode::Diffusion => Setup::new(
+    let prepared = match lighting {
+        Some(lit) => lighting::rebuild(&tracer, material, profile, p, &light, lit)?,
+        None => prepare(
             &tracer,
             material,
             profile,
@@ -365,45 +418,18 @@ pub fn render_with(
             weights,
             &mut warnings,
         )?,
-        Mode::Brdf => Setup::local(mesh, material, profile, p, &light)?,
     };
-    // `geometry: auto` follows the shape in the set-up as `body` and `exit_normal` both do; which
-    // of the two is decided by the mesh and its thickness.
-    let resolved;
-    let p = if p.mode == Mode::Diffusion {
-        let thick = thickness::median_mm(&tracer, &setup.sources, p.mm_per_unit);
-        let p = match p.geometry {
-            Geometry::Auto => {
-                resolved = Params {
-                    geometry: auto_geometry(mesh, material, thick, &mut warnings),
-                    ..p.clone()
-                };
-                &resolved
-            }
-            _ => p,
-        };
-        warnings.extend(thick.and_then(|t| thickness::warning(t, material, p.geometry)));
-        p
-    } else {
-        p
-    };
-    let body_start = Instant::now();
-    let body = if p.mode == Mode::Diffusion && p.geometry == Geometry::Body {
-        let (body, report) = body::Body::new(
-            &tracer,
-            mesh,
-            &setup.octree,
-            setup.beam.clone(),
-            material,
-            p.mm_per_unit,
-        )?;
-        warnings.extend(report.warnings);
-        Some((body, report.spacing_mm))
-    } else {
-        None
-    };
-    let body_setup_seconds = body_start.elapsed().as_secs_f64();
+    let Prepared {
+        setup,
+        params,
+        body,
+        body_setup_seconds,
+    } = prepared;
+    let p = &params;
+    let setup_seconds = setup_start.elapsed().as_secs_f64() - body_setup_seconds;
+    let view_start = Instant::now();
     let view = View::new(mesh, &camera, &tracer);
+    let view_seconds = view_start.elapsed().as_secs_f64();
     let gather_start = Instant::now();
     let (mut sums, terms) = match (p.mode, gpu) {
         (Mode::Brdf, _) => (vec![[0.0; 3]; view.hits.len()], 0.0),
@@ -438,6 +464,7 @@ pub fn render_with(
             tracer: &tracer,
             unit: p.mm_per_unit,
         });
+    let shading_start = Instant::now();
     let (image, exitance) = finish(
         &setup,
         &view,
@@ -447,6 +474,7 @@ pub fn render_with(
         weights,
         traced.as_ref(),
     );
+    let shading_seconds = view_seconds + shading_start.elapsed().as_secs_f64();
     if image
         .data
         .iter()
@@ -464,10 +492,71 @@ pub fn render_with(
         spacing: (p.mode == Mode::Diffusion).then_some(setup.spacing_mm),
         terms,
         gather_seconds,
+        setup_seconds,
+        bounce_seconds: setup.bounce_seconds,
+        shading_seconds,
         body_seconds,
         body_spacing: body.map(|b| b.1),
         footprint: footprint::footprint(mesh, &camera, weights.texture(), p.mm_per_unit),
         warnings,
+    })
+}
+
+/// What a render of `p` shares between views: the set-up (samples, their light, octree,
+/// beams, bounces), the parameters with `geometry: auto` resolved, and `geometry: body`'s grid.
+struct Prepared {
+    setup: Setup,
+    params: Params,
+    body: Option<(body::Body, f64)>,
+    /// The body's build and solve, s.
+    body_setup_seconds: f64,
+}
+
+/// Everything of a render that does not depend on the camera, computed.
+fn prepare(
+    tracer: &Tracer,
+    material: &ScatteringMaterial,
+    profile: &DiffusionProfile,
+    p: &Params,
+    light: &Light,
+    weights: &dyn Weights,
+    warnings: &mut Vec<String>,
+) -> Result<Prepared, NodeError> {
+    let mesh = tracer.mesh;
+    let setup = match p.mode {
+        Mode::Diffusion => Setup::new(tracer, material, profile, p, light, weights, warnings)?,
+        Mode::Brdf => Setup::local(mesh, material, profile, p, light)?,
+    };
+    // `geometry: auto` follows the shape in the set-up as `body` and `exit_normal` both do; which
+    // of the two is decided by the mesh and its thickness.
+    let mut params = p.clone();
+    if p.mode == Mode::Diffusion {
+        let thick = thickness::median_mm(tracer, &setup.sources, p.mm_per_unit);
+        if p.geometry == Geometry::Auto {
+            params.geometry = auto_geometry(mesh, material, thick, warnings);
+        }
+        warnings.extend(thick.and_then(|t| thickness::warning(t, material, params.geometry)));
+    }
+    let body_start = Instant::now();
+    let body = if params.mode == Mode::Diffusion && params.geometry == Geometry::Body {
+        let (body, report) = body::Body::new(
+            tracer,
+            mesh,
+            &setup.octree,
+            setup.beam.clone(),
+            material,
+            p.mm_per_unit,
+        )?;
+        warnings.extend(report.warnings);
+        Some((body, report.spacing_mm))
+    } else {
+        None
+    };
+    Ok(Prepared {
+        setup,
+        params,
+        body,
+        body_setup_seconds: body_start.elapsed().as_secs_f64(),
     })
 }
 

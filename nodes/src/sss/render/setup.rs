@@ -134,6 +134,8 @@ pub(super) struct Setup {
     pub(super) table: Table,
     pub(super) sources: Vec<Source>,
     pub(super) octree: Octree,
+    /// Area each source stands for, mm².
+    pub(super) area_each: f64,
     /// ρ₀ in mm and P(ρ₀) per channel.
     pub(super) near: f64,
     pub(super) near_energy: [f64; 3],
@@ -157,6 +159,8 @@ pub(super) struct Setup {
     pub(super) exit: Exit,
     /// With `bounces`, the light between parts.
     pub(super) bounced: Option<Bounced>,
+    /// Wall time of the bounces' rounds, s (0 without them).
+    pub(super) bounce_seconds: f64,
 }
 
 impl Setup {
@@ -251,6 +255,36 @@ impl Setup {
                 }
             })
             .collect();
+        let mut setup = Setup::assemble(
+            tracer,
+            material,
+            profile,
+            p,
+            light,
+            (sources, area_each, spacing),
+            shadow,
+        )?;
+        if p.bounces > 0 {
+            let start = std::time::Instant::now();
+            setup.bounce(tracer, &samples.points, p, area_each);
+            setup.bounce_seconds = start.elapsed().as_secs_f64();
+        }
+        Ok(setup)
+    }
+
+    /// The set-up around lit sources (mm, E·ΔA each of `area_each` mm², `spacing` mm apart):
+    /// their octree, beams and the tables, without bounces. [`Setup::new`] bounces the light
+    /// after; `lighting.rs` gives the sources a cached `sss.lighting` kept after its bounces.
+    pub(super) fn assemble(
+        tracer: &Tracer,
+        material: &ScatteringMaterial,
+        profile: &DiffusionProfile,
+        p: &Params,
+        light: &Light,
+        (sources, area_each, spacing): (Vec<Source>, f64, f64),
+        shadow: Option<ShadowMap>,
+    ) -> Result<Setup, NodeError> {
+        let unit = p.mm_per_unit;
         let octree = Octree::build(sources.clone(), area_each);
         let near = 2.0 * area_each.sqrt();
         let follows_the_shape = matches!(
@@ -263,6 +297,7 @@ impl Setup {
             table: Table::new(profile),
             sources,
             octree,
+            area_each,
             near,
             near_energy: disc_energy(profile, near),
             spacing_mm: spacing,
@@ -274,16 +309,11 @@ impl Setup {
             beam,
             directional: (p.geometry == Geometry::Directional)
                 .then(|| Directional::new(material, light, unit)),
-            energy,
+            energy: energy_scale(material, profile, p)?,
             total: profile.total,
             exit: Exit::for_material(p.emission, material, p.single_scattering)?,
             bounced: None,
-        })
-        .map(|mut setup| {
-            if p.bounces > 0 {
-                setup.bounce(tracer, &samples.points, p, area_each);
-            }
-            setup
+            bounce_seconds: 0.0,
         })
     }
 
@@ -384,9 +414,9 @@ impl Setup {
 
 /// What the bounces leave for the pixels' near discs.
 pub(super) struct Bounced {
-    nearest: bounce::Nearest,
+    pub(super) nearest: bounce::Nearest,
     /// Per sample the transmitted irradiance arriving from other parts.
-    arriving: Vec<[f64; 3]>,
+    pub(super) arriving: Vec<[f64; 3]>,
 }
 
 impl Setup {
@@ -408,6 +438,7 @@ impl Setup {
             table: Table::new(profile),
             sources: Vec::new(),
             octree: Octree::build(Vec::new(), 0.0),
+            area_each: 0.0,
             near: f64::INFINITY,
             near_energy: profile.total,
             spacing_mm: 0.0,
@@ -421,6 +452,7 @@ impl Setup {
             total: profile.total,
             exit: Exit::for_material(p.emission, material, p.single_scattering)?,
             bounced: None,
+            bounce_seconds: 0.0,
         })
     }
 }

@@ -24,7 +24,7 @@ use crate::geometry::{add, dot, mul, sub, V3};
 use crate::raytrace::tracer::Tracer;
 use crate::sss::dipole::Dipole;
 use crate::sss::octree::Octree;
-use crate::types::{Mesh, ScatteringMaterial};
+use crate::types::{BodyChannel, BodyGrid, Mesh, ScatteringMaterial};
 use mesoflow_runtime::NodeError;
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -152,6 +152,57 @@ impl Body {
                 warnings,
             },
         ))
+    }
+
+    /// The grid and its solution as a cached `SssLighting` holds them.
+    pub(super) fn to_grid(&self) -> BodyGrid {
+        BodyGrid {
+            origin: self.origin,
+            h: self.h,
+            dims: self.dims,
+            channels: self
+                .channels
+                .iter()
+                .map(|c| BodyChannel {
+                    index: c.index.clone(),
+                    psi: c.psi.clone(),
+                    d: c.d,
+                    zb: c.zb,
+                })
+                .collect(),
+        }
+    }
+
+    /// The body [`Body::to_grid`] stored, for `material` and the beams (if any) of the octree
+    /// it was made with.
+    pub(super) fn from_grid(
+        grid: &BodyGrid,
+        material: &ScatteringMaterial,
+        beam: Option<Beams>,
+    ) -> Result<Body, NodeError> {
+        if grid.channels.len() != 3 {
+            return Err(NodeError::input(
+                "lighting",
+                "the body grid has not three channels",
+            ));
+        }
+        Ok(Body {
+            origin: grid.origin,
+            h: grid.h,
+            dims: grid.dims,
+            channels: grid
+                .channels
+                .iter()
+                .map(|c| Channel {
+                    index: c.index.clone(),
+                    psi: c.psi.clone(),
+                    d: c.d,
+                    zb: c.zb,
+                })
+                .collect(),
+            dipoles: dipoles(material),
+            beam,
+        })
     }
 
     /// −D ∂ψ/∂n at the surface point `xo` (mm) with outward unit normal `no`, per channel
