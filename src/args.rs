@@ -232,16 +232,29 @@ pub struct SweepArgs {
     pub cluster: ClusterOptions,
 }
 
+/// What `mesoflow plan --against` judges by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum AgainstArg {
+    /// A truth the graph makes (brute force of the same scene).
+    Truth,
+}
+
 #[derive(Args)]
 pub struct PlanArgs {
     pub graph: PathBuf,
     /// The render node to plan (render.mesh, sss.render or qh.render).
     #[arg(long, value_name = "ID")]
     pub render: String,
-    /// The error the view may show: flip=B, the mean FLIP over the object's pixels (0 = the full
-    /// model; 1 or more = the cheapest).
-    #[arg(long, value_name = "flip=B")]
+    /// The error the view may show: flip=B, the mean FLIP over the object's pixels against the
+    /// graph's own model (0 = the full model; 1 or more = the cheapest); with `--against truth`,
+    /// rmse=B, the relative RMSE against the truth.
+    #[arg(long, value_name = "flip=B|rmse=B")]
     pub budget: String,
+    /// Judge every candidate, across model families and brute force, against a truth the graph
+    /// makes (sss.render: its mesh filled with its medium, path traced) instead of against the
+    /// graph's own model; the cheapest within `--budget rmse=B` is planned.
+    #[arg(long, value_enum, value_name = "truth")]
+    pub against: Option<AgainstArg>,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,
     /// The planned graph (default: <graph>.planned.json beside the graph; plan.json goes beside it).

@@ -15,6 +15,7 @@ mod flip_peer;
 mod hostile;
 mod plan;
 mod plan_probe;
+mod plan_truth;
 mod plan_verify;
 mod reference_peer;
 mod shipped_graphs;

@@ -26,9 +26,13 @@
 //! and the cheapest plan. Stage errors are assumed to add; the verification sweep (benches/plan_verify.rs) measures
 //! how far that and the calibration carry to a scene that is not the calibration scene.
 //!
+//! With `--against truth` the judge is not the graph's own model but a truth the graph can
+//! make, and the candidates cross model families, brute force included (`arbiter`).
+//!
 //! One module per stage (`btf`, `mdf`, `synthesis`, `sss`, `shadows`), the scene a probe
 //! measures (`scene`) and how it is measured (`probe`), and the graph edits (`edit`) apart.
 
+pub mod arbiter;
 mod btf;
 pub mod calibration;
 mod edit;
@@ -41,6 +45,7 @@ mod synthesis;
 pub mod verify;
 pub mod view;
 
+pub use arbiter::{arbitrate, Arbitration, TruthOptions};
 pub use btf::BtfModel;
 pub use edit::btf_chain;
 pub use scene::{texture_sources, Scene, TextureView};

@@ -135,7 +135,11 @@ impl Proof {
 }
 
 /// The render node's camera with the kind's defaults filled in.
-fn camera_of(file: &GraphFile, render: &str, catalog: &dyn Catalog) -> Map<String, Value> {
+pub(crate) fn camera_of(
+    file: &GraphFile,
+    render: &str,
+    catalog: &dyn Catalog,
+) -> Map<String, Value> {
     let kind = file
         .node(render)
         .map(|n| n.kind.clone())

@@ -23,7 +23,7 @@ fn parse_budget(text: &str) -> anyhow::Result<f64> {
         .ok_or_else(|| invalid(format!("--budget {text}: expected flip=B")))?;
     if metric.trim() != "flip" {
         return Err(invalid(format!(
-            "--budget {text}: the only budget metric is `flip` (mean FLIP over the object's pixels)"
+            "--budget {text}: against the graph's own model the budget is `flip` (mean FLIP over the object's pixels); `rmse` goes with --against truth"
         )));
     }
     let b: f64 = value
@@ -76,7 +76,31 @@ fn viewer_ppd(args: &PlanArgs, render: &NodeDecl) -> anyhow::Result<f64> {
     .ppd(pixels))
 }
 
+/// `rmse=B` → B, for `--against truth`.
+fn parse_rmse_budget(text: &str) -> anyhow::Result<f64> {
+    let value = text
+        .split_once('=')
+        .filter(|(m, _)| m.trim() == "rmse")
+        .map(|(_, v)| v)
+        .ok_or_else(|| {
+            invalid(format!(
+                "--budget {text}: --against truth takes rmse=B, the relative RMSE against the truth"
+            ))
+        })?;
+    let b: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| invalid(format!("--budget {text}: `{value}` is not a number")))?;
+    if !(b.is_finite() && b > 0.0) {
+        return Err(invalid(format!("--budget {text}: must be a number > 0")));
+    }
+    Ok(b)
+}
+
 pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
+    if args.against.is_some() {
+        return against_truth(args);
+    }
     let budget = parse_budget(&args.budget)?;
     let engine = engine(&args.cache, &args.graph)?;
     let mut file = load::read(&args.graph)?;
@@ -190,6 +214,112 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
             }
             println!("{} ({:.1} s planning)", p.why, p.plan_s);
         }
+        println!("wrote {} and {}", out_path.display(), plan_path.display());
+    }
+    Ok(0)
+}
+
+/// The planned graph's path: `-o`, or `<graph>.planned.json` beside the graph.
+fn planned_path(args: &PlanArgs) -> PathBuf {
+    args.output.clone().unwrap_or_else(|| {
+        let stem = args
+            .graph
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "graph".into());
+        graph_dir(&args.graph).join(format!("{stem}.planned.json"))
+    })
+}
+
+/// `mesoflow plan --against truth`: every candidate measured against the truth the graph makes
+/// (`mesoflow_plan::arbiter`).
+fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
+    let rmse = parse_rmse_budget(&args.budget)?;
+    if !(args.probe_share > 0.0 && args.probe_share <= 1.0) {
+        return Err(invalid(format!(
+            "--probe-share {}: a fraction of the frame in (0, 1]",
+            args.probe_share
+        )));
+    }
+    let engine = engine(&args.cache, &args.graph)?;
+    let mut file = load::read(&args.graph)?;
+    load::apply_sets(&mut file, &args.set)?;
+    load::checked(&args.graph, &file, engine.registry())?;
+    let mut opts = RunOptions::new(
+        &args.graph.display().to_string(),
+        graph_dir(&args.graph),
+        std::env::temp_dir(),
+    );
+    opts.device = device_mode(args.device);
+    opts.require_gpu = require_gpu();
+    opts.use_cache = !args.cache.no_cache;
+    opts.cancel = super::run::cancel_flag();
+    if !args.quiet {
+        eprintln!(
+            "plan: `{}` against the truth at relative RMSE {rmse}: the truth probe, then each candidate",
+            args.render
+        );
+    }
+    let name = args.graph.display().to_string();
+    let a = plan::arbitrate(
+        &engine,
+        &name,
+        &file,
+        &args.render,
+        &opts,
+        plan::TruthOptions {
+            rmse,
+            share: args.probe_share,
+        },
+    )
+    .map_err(|e| match e {
+        plan::PlanError::Probe(_) => anyhow::anyhow!("{e}"),
+        _ => invalid(format!("--render {}: {e}", args.render)),
+    })?;
+    let out_path = planned_path(args);
+    let mut planned_file = a.planned.clone();
+    planned_file.description = Some(format!(
+        "{} — planned for `{}` against the truth at a relative RMSE of {rmse} (see plan.json)",
+        file.description.clone().unwrap_or_default(),
+        args.render
+    ));
+    write(&out_path, &(planned_file.to_json() + "\n"))?;
+    let plan_path = out_path
+        .parent()
+        .map(|p| p.join("plan.json"))
+        .unwrap_or_else(|| PathBuf::from("plan.json"));
+    let mut doc = json!({
+        "graph": args.graph.display().to_string(),
+        "planned": out_path.display().to_string(),
+    });
+    if let (Some(o), Value::Object(rest)) = (doc.as_object_mut(), a.to_json()) {
+        o.extend(rest);
+    }
+    write(
+        &plan_path,
+        &(serde_json::to_string_pretty(&doc).unwrap_or_default() + "\n"),
+    )?;
+    if !args.quiet {
+        println!(
+            "truth probe {}×{}: {} samples a pixel, noise {}",
+            a.resolution[0],
+            a.resolution[1],
+            a.truth_samples,
+            a.truth_noise.map_or("absent".into(), |n| format!("{n:.4}"))
+        );
+        for (i, c) in a.candidates.iter().enumerate() {
+            println!(
+                "{:>3} {}: relative RMSE {}, {} s on the probe, {} s on the view (estimated){}{}",
+                if a.chosen == Some(i) { "->" } else { "" },
+                c.name,
+                c.error.map_or("absent".into(), |e| format!("{e:.3}")),
+                c.probe_s.map_or("absent".into(), |t| format!("{t:.2}")),
+                c.full_s.map_or("absent".into(), |t| format!("{t:.2}")),
+                if c.fits { ", within budget" } else { "" },
+                c.note.as_ref().map_or(String::new(), |n| format!(" ({n})"))
+            );
+        }
+        println!("{} ({:.1} s planning)", a.why, a.plan_s);
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }
     Ok(0)
