@@ -22,6 +22,8 @@ pub struct SssLighting {
     pub sources: Vec<f64>,
     pub bounced: Option<LightBounced>,
     pub body: Option<BodyGrid>,
+    /// The shadow map's depths (world units, row by row; absent without shadows).
+    pub shadow: Option<Vec<f64>>,
 }
 
 /// The light between parts at a uniform subset of the samples.
@@ -125,7 +127,12 @@ impl SssLighting {
                 })
             }
         };
+        let shadow = match d.u32()? {
+            0 => None,
+            _ => Some(d.f64s()?),
+        };
         Ok(Arc::new(SssLighting {
+            shadow,
             params,
             made_for,
             area_each,
@@ -152,7 +159,8 @@ impl Value for SssLighting {
                 .map(|c| 4 * c.index.len() + 8 * c.psi.len())
                 .sum()
         });
-        self.params.len() + self.made_for.len() + 8 * self.sources.len() + bounced + body
+        let shadow = self.shadow.as_ref().map_or(0, |d| 8 * d.len());
+        self.params.len() + self.made_for.len() + 8 * self.sources.len() + bounced + body + shadow
     }
     fn encode(&self, out: &mut Encoder) {
         out.str(&self.params)
@@ -184,6 +192,14 @@ impl Value for SssLighting {
                 for c in &b.channels {
                     out.u32s(&c.index).f64s(&c.psi).f64(c.d).f64(c.zb);
                 }
+            }
+        }
+        match &self.shadow {
+            None => {
+                out.u32(0);
+            }
+            Some(depth) => {
+                out.u32(1).f64s(depth);
             }
         }
     }
@@ -222,6 +238,7 @@ mod tests {
                     })
                     .collect(),
             }),
+            shadow: Some(vec![1.0, f64::INFINITY]),
         };
         let mut out = Encoder::default();
         v.encode(&mut out);

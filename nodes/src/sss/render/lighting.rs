@@ -13,9 +13,10 @@
 
 use super::body::Body;
 use super::bounce::Nearest;
-use super::setup::{shadow_map, Bounced, Setup};
+use super::setup::{shadow_camera, Bounced, Setup};
 use super::{prepare, Energy, Geometry, Homogeneous, Mode, Params, Prepared, Sources};
 use crate::raytrace::light::Light;
+use crate::raytrace::shadow::ShadowMap;
 use crate::raytrace::tracer::Tracer;
 use crate::sss::octree::Source;
 use crate::types::{DiffusionProfile, LightBounced, Mesh, ScatteringMaterial, SssLighting};
@@ -228,6 +229,7 @@ fn to_value(prepared: &Prepared, made_for: String) -> Result<SssLighting, NodeEr
             .collect(),
         bounced,
         body: body.as_ref().map(|(b, _)| b.to_grid()),
+        shadow: setup.shadow.as_ref().map(|m| m.depth.clone()),
     })
 }
 
@@ -292,10 +294,29 @@ pub(super) fn rebuild(
             power: [s[6], s[7], s[8]],
         })
         .collect();
-    let shadow = if p.shadows {
-        Some(shadow_map(tracer.mesh, light, p.shadow_resolution)?)
-    } else {
-        None
+    // The stored depths on the camera they were traced from (a function of the mesh, the
+    // light and the size alone).
+    let shadow = match (&lit.shadow, p.shadows) {
+        (Some(depth), true) => {
+            let (camera, bias) = shadow_camera(tracer.mesh, light, p.shadow_resolution)?;
+            let texels = camera.width as usize * camera.height as usize;
+            if depth.len() != texels {
+                return Err(NodeError::input(
+                    "lighting",
+                    format!(
+                        "holds a shadow map of {} depths, not the {texels} its size makes",
+                        depth.len()
+                    ),
+                ));
+            }
+            Some(ShadowMap {
+                camera,
+                depth: depth.clone(),
+                bias,
+            })
+        }
+        (None, true) => return Err(NodeError::input("lighting", "holds no shadow map")),
+        (_, false) => None,
     };
     let mut setup = Setup::assemble(
         tracer,

@@ -493,6 +493,27 @@ pub(super) fn irradiance(light: &Light, shadow: Option<&ShadowMap>, x: V3, n: V3
 
 /// Nearest-surface depth map from the light (one ray-cast layer).
 pub fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, NodeError> {
+    let (camera, bias) = shadow_camera(mesh, light, size)?;
+    let l = layers::trace(mesh, &camera, 1, &Counter::none());
+    let depth = l
+        .front
+        .iter()
+        .map(|f| f.map_or(f64::INFINITY, |f| f.t))
+        .collect();
+    Ok(ShadowMap {
+        bias,
+        camera,
+        depth,
+    })
+}
+
+/// The light's view of the mesh a [`shadow_map`] of `size` texels a side is traced from, and
+/// its depth bias.
+pub(super) fn shadow_camera(
+    mesh: &Mesh,
+    light: &Light,
+    size: u32,
+) -> Result<(Camera, f64), NodeError> {
     let (c, r) = bounding_sphere(mesh);
     let (dir, from) = match light.position {
         Some(lp) => (
@@ -505,15 +526,5 @@ pub fn shadow_map(mesh: &Mesh, light: &Light, size: u32) -> Result<ShadowMap, No
     };
     let camera =
         Camera::enclosing(c, r, dir, from, size).map_err(|e| NodeError::param("light", e))?;
-    let l = layers::trace(mesh, &camera, 1, &Counter::none());
-    let depth = l
-        .front
-        .iter()
-        .map(|f| f.map_or(f64::INFINITY, |f| f.t))
-        .collect();
-    Ok(ShadowMap {
-        bias: shadow_bias(r, size),
-        camera,
-        depth,
-    })
+    Ok((camera, shadow_bias(r, size)))
 }
