@@ -139,6 +139,26 @@ pub fn write_all(
     Ok(chart_errors)
 }
 
+/// The most runs a sweep makes unless told otherwise (`--max-runs`): three varies of 1 000
+/// values once asked for 10⁹ graphs and ran out of memory making them (issue 43).
+pub const MAX_RUNS: usize = 10_000;
+
+/// The number of runs `varies` make, refused beyond `limit` before anything is allocated.
+pub fn grid_size(varies: &[Vary], limit: usize) -> Result<usize, String> {
+    let sizes: Vec<String> = varies.iter().map(|v| v.values.len().to_string()).collect();
+    let runs = varies
+        .iter()
+        .try_fold(1usize, |n, v| n.checked_mul(v.values.len()));
+    match runs {
+        Some(n) if n <= limit => Ok(n),
+        _ => Err(format!(
+            "the varies make {} runs ({}), more than the limit of {limit}: vary fewer values, or raise the limit (--max-runs)",
+            runs.map_or("more than 2^64".to_string(), |n| n.to_string()),
+            sizes.join(" × ")
+        )),
+    }
+}
+
 pub fn cartesian(varies: &[Vary]) -> Vec<Vec<Value>> {
     let mut combos = vec![Vec::new()];
     for v in varies {

@@ -185,3 +185,88 @@ fn every_hostile_input_gets_its_clear_error() {
     );
     assert!(wrong.is_empty(), "{}", wrong.join("\n\n"));
 }
+
+/// Runs `mesoflow ARGS` in `dir` with [`LIMIT`]: exit code (None past the limit) and output.
+fn within_limit(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let mut child = bin()
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break Some(s);
+        }
+        if start.elapsed() > LIMIT {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut output = String::new();
+    if let Some(mut e) = child.stderr.take() {
+        let _ = e.read_to_string(&mut output);
+    }
+    (status.and_then(|s| s.code()), output)
+}
+
+#[test]
+fn a_grid_of_a_billion_runs_and_a_parameter_path_of_sixty_thousand_keys_are_refused_before_work() {
+    // Issue 43: three varies of 1 000 values once asked for 10⁹ runs (exit 134, memory
+    // exhausted); a path of 200 000 dots overflowed the stack building nested objects (the
+    // command line holds at most 128 KiB an argument, hence 60 000 here).
+    let s = Scratch::new();
+    let graph = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {"x": {"kind": "scalar.constant", "params": {"value": 1}}, "y": {"kind": "scalar.affine", "inputs": {"x": "x.value"}}}}"#,
+    );
+    let values: Vec<String> = (0..1000).map(|i| i.to_string()).collect();
+    let vary = format!("x.value={}", values.join(","));
+    let g = graph.to_str().unwrap();
+    let (code, out) = within_limit(
+        s.dir.path(),
+        &[
+            "sweep",
+            g,
+            "--vary",
+            &vary,
+            "--vary",
+            &vary.replace("x.value", "y.scale"),
+            "--vary",
+            &format!("y.offset={}", values.join(",")),
+            "--measure",
+            "y.y",
+            "--no-cache",
+        ],
+    );
+    assert_eq!(code, Some(2), "{out}");
+    assert!(
+        out.contains("1000000000 runs") && out.contains("--max-runs"),
+        "{out}"
+    );
+    let deep = format!("x.{}=1", vec!["a"; 60_000].join("."));
+    for args in [
+        vec!["run", g, "--set", &deep, "--no-cache", "--quiet"],
+        vec![
+            "sweep",
+            g,
+            "--vary",
+            &deep,
+            "--measure",
+            "y.y",
+            "--no-cache",
+        ],
+    ] {
+        let (code, out) = within_limit(s.dir.path(), &args);
+        assert_eq!(code, Some(2), "{args:?}: {out}");
+        assert!(out.contains("at most"), "{out}");
+        assert!(
+            !out.contains("panicked") && !out.contains("overflow"),
+            "{out}"
+        );
+    }
+}

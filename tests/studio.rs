@@ -800,6 +800,21 @@ fn a_missing_graph_or_a_taken_port_is_a_clear_error() {
 }
 
 #[test]
+fn a_graph_file_deleted_behind_the_studio_is_written_again_on_save() {
+    // Issue 43: save answered `saved` and wrote nothing once the file was gone.
+    let s = start(QUICKSTART);
+    s.settle();
+    std::fs::remove_file(&s.graph).unwrap();
+    let (code, saved) = s.post("/api/save", json!({}));
+    assert_eq!(
+        (code, saved["changed"].clone()),
+        (200, json!(true)),
+        "{saved}"
+    );
+    assert_eq!(std::fs::read_to_string(&s.graph).unwrap(), QUICKSTART);
+}
+
+#[test]
 fn a_file_that_does_not_parse_is_shown_and_never_overwritten() {
     let broken = "{ \"mesoflow\": 1, \"nodes\": { \"a\": ";
     let s = start(broken);

@@ -77,6 +77,13 @@ impl Run {
 
 /// Runs `scene` as its family's template with the scene's `--set`s and `options.extra`.
 pub fn run(scene: &Scene, options: &Options) -> Run {
+    run_for(scene, options, &[], "out")
+}
+
+/// [`run`] producing only `outputs` (`ID.PORT`; every sink when empty) into `OUT/seed-N/<folder>`:
+/// a node a sink did not need (all its consumers cached) is then still reported, from the cache
+/// with the time it took when it was computed.
+pub fn run_for(scene: &Scene, options: &Options, outputs: &[&str], folder: &str) -> Run {
     let kind = scene.kind();
     let dir = options.out.join(format!("seed-{}", scene.seed()));
     let mut sets = scene.sets(options.resolution, options.samples);
@@ -97,11 +104,14 @@ pub fn run(scene: &Scene, options: &Options) -> Run {
     );
     std::fs::create_dir_all(&dir).expect("the scene's folder");
     std::fs::write(dir.join("command.sh"), format!("{command}\n")).expect("write the command");
+    for o in outputs {
+        args.extend(["--output".to_string(), o.to_string()]);
+    }
     args.extend(["--quiet", "--device", "cpu", "--out-dir"].map(String::from));
-    args.push(dir.join("out").display().to_string());
+    args.push(dir.join(folder).display().to_string());
     cli::mesoflow(&args.iter().map(String::as_str).collect::<Vec<_>>());
     let report: Value = serde_json::from_slice(
-        &std::fs::read(dir.join("out").join("report.json")).expect("the run's report"),
+        &std::fs::read(dir.join(folder).join("report.json")).expect("the run's report"),
     )
     .expect("a report");
     Run {

@@ -8,7 +8,7 @@
 //! 1/√samples); then the distribution over the thick scenes with the worst five named, and how
 //! the thin-object warning sorts the scenes.
 
-use super::{distribution, equal_error_seconds, f3, percent, run, Options};
+use super::{distribution, equal_error_seconds, f3, percent, run, run_for, Options};
 use mesoflow_nodes::sss::material::Preset;
 use mesoflow_testkit::scenes::{self, translucent::Scene, Kind};
 use serde_json::Value;
@@ -56,6 +56,13 @@ pub fn bench(options: &Options) {
             serde_json::from_value(Value::from(scene.preset)).expect("a preset name");
         let paths = scenes::translucent::mean_free_paths(&scene, preset.coefficients());
         let r = run(&scenes::Scene::Translucent(scene.clone()), options);
+        // Both of ours' nodes' times, also where the render came from the cache whole.
+        let times = run_for(
+            &scenes::Scene::Translucent(scene.clone()),
+            options,
+            &["lighting.points", "ours.image"],
+            "times",
+        );
         let row = Row {
             paths,
             rel: r.relative_rmse(),

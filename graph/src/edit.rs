@@ -21,6 +21,7 @@ pub fn parse_override(text: &str) -> Result<Override, String> {
         .split_once('.')
         .filter(|(n, p)| !n.is_empty() && !p.is_empty())
         .ok_or_else(|| format!("`{text}`: expected id.param=value"))?;
+    check_target(node, param)?;
     Ok(Override {
         node: node.into(),
         param: param.into(),
@@ -33,9 +34,38 @@ pub fn parse_value(text: &str) -> Value {
     serde_json::from_str(text).unwrap_or_else(|_| Value::String(text.to_string()))
 }
 
+/// The most `.`-separated keys a parameter path may have: the deepest parameter object any kind
+/// declares is two levels (`camera.resolution`); a path of 200 000 dots once built as many nested
+/// objects and overflowed the stack (issue 43).
+pub const MAX_PARAM_DEPTH: usize = 8;
+/// The longest node id or parameter path, bytes.
+pub const MAX_NAME_BYTES: usize = 256;
+
+/// Refuses a node id or parameter path beyond [`MAX_NAME_BYTES`] or [`MAX_PARAM_DEPTH`], before
+/// any work is done with it.
+pub fn check_target(node: &str, param: &str) -> Result<(), String> {
+    let short = |t: &str| t.chars().take(40).collect::<String>();
+    if node.len() > MAX_NAME_BYTES || param.len() > MAX_NAME_BYTES {
+        return Err(format!(
+            "`{}….{}…`: a node id or parameter path is at most {MAX_NAME_BYTES} bytes",
+            short(node),
+            short(param)
+        ));
+    }
+    let depth = param.split('.').count();
+    if depth > MAX_PARAM_DEPTH {
+        return Err(format!(
+            "`{node}.{}…`: a parameter path has at most {MAX_PARAM_DEPTH} keys, this one {depth}",
+            short(param)
+        ));
+    }
+    Ok(())
+}
+
 impl GraphFile {
     /// Applies an override; the static check then validates the new value like any other.
     pub fn apply(&mut self, o: &Override) -> Result<(), String> {
+        check_target(&o.node, &o.param).map_err(|e| format!("--set {e}"))?;
         let ids: Vec<String> = self.nodes.iter().map(|(id, _)| id.clone()).collect();
         match self.node_mut(&o.node) {
             Some(decl) => {
@@ -98,6 +128,29 @@ mod tests {
         assert_eq!(p["light"], serde_json::json!({"intensity": 2}));
         let e = f.apply(&parse_override("r.n.x=1").unwrap()).unwrap_err();
         assert!(e.contains("`n` is not an object"), "{e}");
+    }
+
+    #[test]
+    fn a_path_too_deep_or_too_long_is_refused_before_any_work() {
+        let mut f = GraphFile::parse(r#"{"mesoflow": 1, "nodes": {"r": {"kind": "k"}}}"#).unwrap();
+        let deep = format!("r.{}=1", vec!["a"; 200_000].join("."));
+        assert!(parse_override(&deep).unwrap_err().contains("at most"));
+        let o = Override {
+            node: "r".into(),
+            param: vec!["a"; 100].join("."),
+            value: Value::from(1),
+        };
+        let e = f.apply(&o).unwrap_err();
+        assert!(e.contains("at most 8 keys"), "{e}");
+        let long = Override {
+            node: "r".repeat(300),
+            param: "x".into(),
+            value: Value::from(1),
+        };
+        assert!(f.apply(&long).unwrap_err().contains("256 bytes"));
+        // Eight keys are still a path.
+        let eight = parse_override(&format!("r.{}=1", vec!["a"; 8].join("."))).unwrap();
+        f.apply(&eight).unwrap();
     }
 
     #[test]

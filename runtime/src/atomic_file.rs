@@ -18,7 +18,13 @@ pub fn write_atomic(path: &Path, bytes: impl AsRef<[u8]>) -> std::io::Result<()>
         .unwrap_or_default();
     let suffix = crate::producer::unique_suffix(COUNTER.fetch_add(1, Ordering::Relaxed));
     let tmp = path.with_file_name(format!(".{name}.{suffix}.tmp"));
-    let result = std::fs::write(&tmp, bytes).and_then(|()| std::fs::rename(&tmp, path));
+    // `create_new`: the temporary is made here, never opened through a link planted at its name.
+    let result = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, bytes.as_ref()))
+        .and_then(|()| std::fs::rename(&tmp, path));
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

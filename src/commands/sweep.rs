@@ -79,6 +79,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
     let mut base_file = load::read(&args.graph)?;
     load::apply_sets(&mut base_file, &args.set)?;
     // Check every combination before running any, so a bad value fails fast with exit code 2.
+    crate::sweep_table::grid_size(&varies, args.max_runs).map_err(invalid)?;
     let combos = cartesian(&varies);
     let mut graphs = Vec::new();
     let mut texts = Vec::new();

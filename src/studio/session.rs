@@ -341,7 +341,10 @@ impl Studio {
             ));
         };
         let text = mesoflow_graph::source_edit::rewrite(&doc.disk_text, disk, &doc.file);
-        let changed = text != doc.disk_text;
+        // A graph file deleted (or replaced) behind the studio's back is written again: `saved`
+        // means the file holds the graph (issue 43).
+        let on_disk = std::fs::read_to_string(&self.graph_path).ok();
+        let changed = text != doc.disk_text || on_disk.as_deref() != Some(text.as_str());
         if changed {
             mesoflow_runtime::write_atomic(&self.graph_path, &text)
                 .map_err(|e| format!("cannot write {}: {e}", self.graph_path.display()))?;

@@ -93,6 +93,7 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
         return Err(refused(format!("versus {x}: measure it too")));
     }
     let base = studio.doc().file.clone();
+    sweep_table::grid_size(&varies, sweep_table::MAX_RUNS).map_err(refused)?;
     let combos = sweep_table::cartesian(&varies);
     let mut graphs = Vec::new();
     for combo in &combos {

@@ -32,6 +32,7 @@ def sweep(
     use_cache: bool = True,
     set: Optional[Mapping[str, Any]] = None,
     progress: bool = True,
+    max_runs: int = 10_000,
 ) -> Any:
     """Runs ``graph`` for every combination of ``vary`` (``{"node.param": [values]}``), in
     order, and measures scalar outputs or timings (``"node.port"``; ``"node.seconds"`` is the
@@ -40,7 +41,8 @@ def sweep(
     ``runs/NNN/report.json`` under ``out_dir`` (default ``out/<name>-sweep``).
 
     Returns the rows, the columns of ``sweep.csv`` (a list of dicts; a pandas DataFrame when
-    pandas is installed). Every combination is checked before any runs (GraphError).
+    pandas is installed). Every combination is checked before any runs (GraphError); a grid of
+    more than ``max_runs`` runs is refused before any is made (ValueError).
     """
     measures = [str(m) for m in measure]
     versus_ = [str(x) for x in versus]
@@ -51,6 +53,15 @@ def sweep(
     values = [list(vary[n]) for n in names]
     if any(not v for v in values):
         raise ValueError("vary: every parameter needs at least one value")
+    runs = 1
+    for v in values:
+        runs *= len(v)
+    if runs > max_runs:
+        sizes = " × ".join(str(len(v)) for v in values)
+        raise ValueError(
+            f"vary: the values make {runs} runs ({sizes}), more than max_runs={max_runs}: "
+            "vary fewer values, or raise max_runs"
+        )
     combos = list(itertools.product(*values))
 
     graphs: List[Graph] = []

@@ -23,6 +23,24 @@ pub(crate) fn write_artifacts(outputs: &Outputs, out_dir: &Path) -> Result<Vec<S
         if let Some(problem) = mesoflow_graph::params::output_path_problem(&a.path) {
             return Err(format!("cannot write: {problem}"));
         }
+        // A sub-folder planted as a link (`out/sub → a folder outside`) would carry the write out
+        // of the output folder: refused (issue 43). The file itself, a link or not, is replaced
+        // by the rename, never written through.
+        let mut at = out_dir.to_path_buf();
+        for part in Path::new(&a.path)
+            .parent()
+            .into_iter()
+            .flat_map(Path::components)
+        {
+            at.push(part);
+            if std::fs::symlink_metadata(&at).is_ok_and(|m| m.file_type().is_symlink()) {
+                return Err(format!(
+                    "cannot write {}: {} is a link, and the output folder's sub-folders must be its own",
+                    a.path,
+                    at.display()
+                ));
+            }
+        }
         let path = out_dir.join(&a.path);
         // Re-running into the same folder is the common case while tuning; a file that already
         // holds these bytes is left alone (a read is cheaper than a write and a rename).
@@ -62,6 +80,31 @@ mod tests {
             let err = write_artifacts(&one(bad), dir.path()).unwrap_err();
             assert!(err.contains("output folder"), "{bad}: {err}");
         }
+    }
+
+    #[test]
+    #[cfg(unix)]
+    fn a_planted_link_is_never_written_through() {
+        let dir = tempfile::tempdir().unwrap();
+        let outside = tempfile::tempdir().unwrap();
+        let out = dir.path().join("out");
+        std::fs::create_dir_all(&out).unwrap();
+        // A sub-folder that is a link out: refused, nothing written outside.
+        std::os::unix::fs::symlink(outside.path(), out.join("sub")).unwrap();
+        let err = write_artifacts(&one("sub/h.npy"), &out).unwrap_err();
+        assert!(err.contains("is a link"), "{err}");
+        assert!(!outside.path().join("h.npy").exists());
+        // A file that is a link out: replaced by the file, the target untouched.
+        let target = outside.path().join("precious.txt");
+        std::fs::write(&target, "keep").unwrap();
+        std::os::unix::fs::symlink(&target, out.join("r.txt")).unwrap();
+        write_artifacts(&one("r.txt"), &out).unwrap();
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "keep");
+        assert!(!std::fs::symlink_metadata(out.join("r.txt"))
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(out.join("r.txt")).unwrap(), b"abc");
     }
 
     #[test]
