@@ -149,7 +149,7 @@ mod tests {
         };
         assert!(f.apply(&long).unwrap_err().contains("256 bytes"));
         // Eight keys are still a path.
-        let eight = parse_override(&format!("r.{}=1", vec!["a"; 8].join("."))).unwrap();
+        let eight = parse_override(&format!("r.{}=1", ["a"; 8].join("."))).unwrap();
         f.apply(&eight).unwrap();
     }
 
