@@ -69,9 +69,9 @@ pub fn bench(options: &Options) {
             bias: r.metric("error", "bias"),
             noise: r.metric("truth", "noise"),
             warned: r.warned("lighting", "diffusion needs"),
-            ours_s: r.seconds("lighting").unwrap_or(f64::NAN)
-                + r.seconds("ours").unwrap_or(f64::NAN),
-            view_s: r.seconds("ours").unwrap_or(f64::NAN),
+            ours_s: times.seconds("lighting").unwrap_or(f64::NAN)
+                + times.seconds("ours").unwrap_or(f64::NAN),
+            view_s: times.seconds("ours").unwrap_or(f64::NAN),
             truth_s: r.seconds("truth").unwrap_or(f64::NAN),
             samples: options.samples,
             command: r.command,
