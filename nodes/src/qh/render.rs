@@ -104,7 +104,8 @@ impl Node for QhRender {
             // silhouette pixels covered in proportion. 6: the global term's `geometry`, `sources`,
             // `emission` and `bounces`, defaulting to sss.render's accurate configuration.
             // 7: the global term skips its bounces on an object that hardly sees itself.
-            version: 7,
+            // 8: the beams' kernels with `expneg` (within 4·10⁻¹⁶ of the library's exp).
+            version: 8,
             doc: "Quasi-homogeneous material on a mesh (thesis eq. 5.60): local reflectance (BTF) plus the homogeneous diffusion gather scaled by mesostructure entrance and exiting functions (images, or from a height field).",
             device: DevicePreference::Gpu,
             inputs: vec![

@@ -38,7 +38,7 @@
 //! the rest.
 
 use super::directional::refracted;
-use super::geometry::flux_kernel;
+use super::expneg::exp_neg;
 use crate::geometry::{add, dot, mul, sub, V3};
 use crate::raytrace::light::Light;
 use crate::raytrace::tracer::Tracer;
@@ -143,15 +143,22 @@ impl Beam {
     /// out through a plane.
     fn flux(&self, c: usize, xo: V3, no: V3, at: &Entry, points: &Points, total: f64) -> f64 {
         let s = self.sigma_tr[c];
-        let through = |p: V3| {
-            let v = sub(xo, p);
-            dot(v, no) * flux_kernel(s, dot(v, v).sqrt().max(1e-12))
-        };
+        // Distances first, then their exponentials, then the sum: loops that vectorise.
+        let (mut d, mut across) = ([0.0; 2 * NODES], [0.0; 2 * NODES]);
+        for k in 0..NODES {
+            let (real, virt) = self.pair(c, k, at, points);
+            for (j, p) in [(2 * k, real), (2 * k + 1, virt)] {
+                let v = sub(xo, p);
+                d[j] = dot(v, v).sqrt().max(1e-12);
+                across[j] = dot(v, no);
+            }
+        }
+        // The flux kernel (`geometry::flux_kernel`) through `no`.
+        let through: [f64; 2 * NODES] = std::array::from_fn(|j| {
+            across[j] * (1.0 + s * d[j]) * exp_neg(-s * d[j]) / (d[j] * d[j] * d[j])
+        });
         let sum: f64 = (0..NODES)
-            .map(|k| {
-                let (real, virt) = self.pair(c, k, at, points);
-                points.seconds[k].kept * (through(real) - through(virt))
-            })
+            .map(|k| points.seconds[k].kept * (through[2 * k] - through[2 * k + 1]))
             .sum();
         sum / total
     }
@@ -237,16 +244,18 @@ impl Beam {
     /// dipole does (as the gather's factor keeps the profile's energy).
     fn fluence_entered(&self, c: usize, x: V3, e: &Entered) -> f64 {
         let s = self.sigma_tr[c];
-        let term = |p: V3| {
-            let v = sub(x, p);
-            let r = dot(v, v).sqrt().max(1e-9);
-            (-s * r).exp() / r
-        };
+        // Distances first, then their exponentials, then the sum: loops that vectorise.
+        let mut d = [0.0; 2 * NODES];
+        for k in 0..NODES {
+            let (real, virt) = self.pair(c, k, &e.at, &e.points[c]);
+            for (j, p) in [(2 * k, real), (2 * k + 1, virt)] {
+                let v = sub(x, p);
+                d[j] = dot(v, v).sqrt().max(1e-9);
+            }
+        }
+        let g: [f64; 2 * NODES] = std::array::from_fn(|j| exp_neg(-s * d[j]) / d[j]);
         let sum: f64 = (0..NODES)
-            .map(|k| {
-                let (real, virt) = self.pair(c, k, &e.at, &e.points[c]);
-                e.points[c].seconds[k].kept * (term(real) - term(virt))
-            })
+            .map(|k| e.points[c].seconds[k].kept * (g[2 * k] - g[2 * k + 1]))
             .sum();
         sum * self.dipole_total[c] / e.total[c] * e.reaching[c]
     }

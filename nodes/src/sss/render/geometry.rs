@@ -86,7 +86,7 @@ impl ExitNormal {
 /// The diffusion flux of a unit point source per unit of the source's offset along the normal
 /// it crosses, d away: (1 + σtr d)e^(−σtr d)/d³ (the flux kernel of Jensen et al. 2001's Rd).
 pub(super) fn flux_kernel(sigma_tr: f64, d: f64) -> f64 {
-    (1.0 + sigma_tr * d) * (-sigma_tr * d).exp() / (d * d * d)
+    (1.0 + sigma_tr * d) * super::expneg::exp_neg(-sigma_tr * d) / (d * d * d)
 }
 
 #[cfg(test)]

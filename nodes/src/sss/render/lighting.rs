@@ -88,7 +88,8 @@ impl Node for Lighting {
     fn spec(&self) -> NodeSpec {
         NodeSpec {
             kind: "sss.lighting",
-            version: 1,
+            // 2: the shadow map kept; the beams' kernels with `expneg`.
+            version: 2,
             doc: "What a translucent render pays once for a mesh under a light, whatever the camera: the irradiance samples and their light, the bounces between parts, `geometry: body`'s grid. Connect it to sss.render's `lighting` input, so a camera move re-renders from the cache.",
             device: DevicePreference::Cpu,
             inputs: vec![

@@ -56,6 +56,7 @@ mod bounce;
 mod directional;
 mod emission;
 mod energy;
+mod expneg;
 pub(crate) mod gather;
 mod geometry;
 pub mod lighting;
@@ -197,8 +198,9 @@ impl Node for Render {
             // `emission: p1`, traced single scattering, two bounces; `Params::classic` the old).
             // 12: no bounces on an object that hardly sees itself (`bounce::NEGLIGIBLE`): a
             // convex mesh renders as with `bounces: 0`, in a quarter of the time.
-            // 12 still: the `lighting` input (images unchanged without it).
-            version: 12,
+            // 13: the `lighting` input (images unchanged without it); the beams' kernels with
+            // `expneg` (within 4·10⁻¹⁶ of the library's exp, a quarter less gather time).
+            version: 13,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![

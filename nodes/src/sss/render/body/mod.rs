@@ -313,7 +313,7 @@ fn fluence(octree: &Octree, dipoles: &[Dipole; 3], beam: Option<&Beams>, c: usiz
         let term = |z: f64| {
             let v = sub(x, add(p, mul(n, z)));
             let r = dot(v, v).sqrt().max(1e-9);
-            (-d.sigma_tr * r).exp() / r
+            super::expneg::exp_neg(-d.sigma_tr * r) / r
         };
         let mut out = [0.0; 3];
         out[c] = scale
