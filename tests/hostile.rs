@@ -25,6 +25,32 @@ fn fixtures(dir: &Path) {
     truncated.truncate(truncated.len() - 100);
     write("truncated.npy", truncated);
     write("fortran.npy", npy("<f4", true, &[8, 8], &f32s(64)));
+    // Issue 43: a shape whose element count wraps, a double beyond f32, a NaN.
+    write(
+        "wrapping_shape.npy",
+        npy("<f4", false, &[1 << 32, 1 << 32], &[]),
+    );
+    let big: Vec<u8> = [1e300f64, 1.0, 2.0, 3.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    write("big_double.npy", npy("<f8", false, &[2, 2], &big));
+    let nan: Vec<u8> = [0.0f32, f32::NAN, 1.0, 2.0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    write("nan.npy", npy("<f4", false, &[2, 2], &nan));
+    // UBO2003 folders: two links to the folder itself, a FIFO named like an image, an angle past
+    // what the names hold.
+    for d in ["ubo_loop", "ubo_fifo", "ubo_angle"] {
+        std::fs::create_dir_all(dir.join(d)).unwrap();
+    }
+    std::os::unix::fs::symlink(".", dir.join("ubo_loop/a")).unwrap();
+    std::os::unix::fs::symlink(".", dir.join("ubo_loop/b")).unwrap();
+    let fifo = dir.join("ubo_fifo/tl015_pl000_tv000_pv000.png");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|s| s.success()), "mkfifo");
+    std::fs::write(dir.join("ubo_angle/tl095_pl000_tv000_pv000.png"), b"x").unwrap();
     let be: Vec<u8> = (0..30).flat_map(|i| (i as f64).to_be_bytes()).collect();
     write("big_endian.npy", npy(">f8", false, &[10, 3], &be));
     write("fake.png", b"\x89PNG\r\n\x1a\nnot really".to_vec());

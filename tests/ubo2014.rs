@@ -156,7 +156,20 @@ fn bad_files_name_the_file_and_what_is_wrong() {
     let width_at = 10 + meta + 4 + 2 * (8 + 4 + 3 * 8);
     let mut wrong_size = good.clone();
     wrong_size[width_at] += 1;
+    // Issue 43: a width and height whose product with the channels wraps; a factor value that
+    // is infinite (the last S×V value, a half float).
+    let mut overflow = good.clone();
+    overflow[width_at..width_at + 8].copy_from_slice(&[0xff; 8]);
+    let mut infinite = good.clone();
+    let n = infinite.len();
+    infinite[n - 2..].copy_from_slice(&[0x00, 0x7c]);
     for (name, bytes, expect) in [
+        ("overflow", overflow, "overflow"),
+        (
+            "infinite",
+            infinite,
+            "is not a finite single-precision number",
+        ),
         (
             "truncated",
             truncated.to_vec(),

@@ -53,19 +53,36 @@ pub struct ReadUbo2003;
 
 const EXTENSIONS: &[&str] = &["jpg", "jpeg", "png", "exr", "hdr"];
 
-/// Every UBO2003-named image under `dir`, sorted by path.
+/// Every UBO2003-named image under `dir`, sorted by path. Each folder is walked once (a link
+/// back to one already walked is passed over: two links to `.` once walked forever, issue 43),
+/// at most [`DEPTH`] deep; only regular files are images (a FIFO named like one blocked the
+/// read); an angle past what UBO2003 names hold (θ over 90°, φ of 360° or more) is refused by
+/// file.
 fn list(dir: &Path) -> Result<Vec<(PathBuf, Name)>, NodeError> {
     if !dir.is_dir() {
         return Err(NodeError::file(dir, "no such folder"));
     }
     let mut out = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
+    let mut seen = std::collections::BTreeSet::new();
+    let mut stack = vec![(dir.to_path_buf(), 0usize)];
+    while let Some((d, depth)) = stack.pop() {
+        let Ok(real) = std::fs::canonicalize(&d) else {
+            continue;
+        };
+        if !seen.insert(real) || depth > DEPTH {
+            continue;
+        }
         let entries = std::fs::read_dir(&d).map_err(|e| NodeError::file(&d, e))?;
         for e in entries {
             let path = e.map_err(|e| NodeError::file(&d, e))?.path();
-            if path.is_dir() {
-                stack.push(path);
+            let Ok(meta) = std::fs::metadata(&path) else {
+                continue;
+            };
+            if meta.is_dir() {
+                stack.push((path, depth + 1));
+                continue;
+            }
+            if !meta.is_file() {
                 continue;
             }
             let ext = path
@@ -78,6 +95,13 @@ fn list(dir: &Path) -> Result<Vec<(PathBuf, Name)>, NodeError> {
                 .and_then(|n| n.to_str())
                 .and_then(ubo2003::parse);
             if let (true, Some(name)) = (EXTENSIONS.contains(&ext.as_str()), name) {
+                let [tl, pl, tv, pv] = name.angles;
+                if tl > 90 || tv > 90 || pl >= 360 || pv >= 360 {
+                    return Err(NodeError::file(
+                        &path,
+                        format!("its name's angles (light θ {tl}°, φ {pl}°, view θ {tv}°, φ {pv}°) are past θ 90° or φ 360°"),
+                    ));
+                }
                 out.push((path, name));
             }
         }
@@ -85,6 +109,9 @@ fn list(dir: &Path) -> Result<Vec<(PathBuf, Name)>, NodeError> {
     out.sort();
     Ok(out)
 }
+
+/// Folders below the named one that are walked at most.
+const DEPTH: usize = 16;
 
 fn matches(list: &Option<Vec<[f64; 2]>>, theta: u16, phi: u16) -> bool {
     list.as_ref().is_none_or(|l| {

@@ -159,6 +159,13 @@ pub fn read_grey(path: &Path) -> Result<Grid, NodeError> {
 
 fn read_npy_2d(path: &Path) -> Result<Grid, NodeError> {
     let a = super::npy_read::read(path, 2, "(H, W)")?;
+    // Finite as f64 is not finite as f32 (1e300 became inf).
+    if let Some(i) = a.data.iter().position(|v| v.abs() > f32::MAX as f64) {
+        return Err(NodeError::file(
+            path,
+            format!("value {i} is {}, beyond single precision", a.data[i]),
+        ));
+    }
     Ok(Grid {
         width: a.shape[1],
         height: a.shape[0],

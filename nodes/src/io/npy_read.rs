@@ -33,6 +33,19 @@ pub fn read(path: &Path, rank: usize, what: &str) -> Result<Array, NodeError> {
             format!("the array is empty (shape {shape:?}); expected {what} with no zero axis"),
         ));
     }
+    // The element count checked against the file before anything is read (issue 43: a shape of
+    // (2³², 2³²) wrapped to nothing and read as an empty array with exit 0).
+    let size = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    let count = shape
+        .iter()
+        .try_fold(1usize, |a, &b| a.checked_mul(b))
+        .filter(|&n| n.checked_mul(4).is_some_and(|b| (b as u64) <= size));
+    let Some(count) = count else {
+        return Err(NodeError::file(
+            path,
+            format!("the shape {shape:?} declares more values than the file's {size} bytes hold"),
+        ));
+    };
     let fortran = npy.order() == npyz::Order::Fortran;
     let descr = npy.dtype().descr();
     let ty = descr.trim_matches(|c| c == '\'' || c == '"').to_string();
@@ -51,6 +64,21 @@ pub fn read(path: &Path, rank: usize, what: &str) -> Result<Array, NodeError> {
             format!("expected float32 or float64 samples, got dtype {ty}"),
         ));
     };
+    if data.len() != count {
+        return Err(NodeError::file(
+            path,
+            format!(
+                "the shape {shape:?} declares {count} values, the file holds {}",
+                data.len()
+            ),
+        ));
+    }
+    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+        return Err(NodeError::file(
+            path,
+            format!("value {i} is {}: every value must be finite", data[i]),
+        ));
+    }
     let data = if fortran {
         to_row_major(&shape, &data)
     } else {

@@ -64,9 +64,12 @@ impl<'a> Cursor<'a> {
     }
 
     /// `n` scalars of `size` bytes (2: half, 4: single, 8: double) as f32.
+    /// A value that is not finite as f32 (inf, NaN, a double beyond f32's range) is refused
+    /// (issue 43: they passed into outputs with exit 0).
     fn scalars(&mut self, n: usize, size: u8, what: &str) -> Result<Vec<f32>, FormatError> {
+        let at = self.at;
         let bytes = self.take(n.saturating_mul(size as usize), what)?;
-        Ok(match size {
+        let values: Vec<f32> = match size {
             2 => bytes
                 .chunks_exact(2)
                 .map(|b| f16::from_le_bytes([b[0], b[1]]).to_f32())
@@ -79,7 +82,14 @@ impl<'a> Cursor<'a> {
                 .chunks_exact(8)
                 .map(|b| f64::from_le_bytes(b.try_into().unwrap_or([0; 8])) as f32)
                 .collect(),
-        })
+        };
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(FormatError {
+                offset: Some(at + i * size as usize),
+                what: format!("{what}: value {i} is not a finite single-precision number"),
+            });
+        }
+        Ok(values)
     }
 
     fn scalar_size(&mut self, what: &str) -> Result<u8, FormatError> {
@@ -350,13 +360,25 @@ fn pvf_slots(c: &mut Cursor, slots: usize, _k: usize) -> Result<Payload, FormatE
 /// The factor shapes against the header: one of the two layouts each variant allows.
 fn check_sizes(f: &Ubo2014) -> Result<(), FormatError> {
     let h = &f.header;
-    let (t, nl, nv, nc) = (
-        h.width * h.height,
-        h.lights.len(),
-        h.views.len(),
-        h.channels,
-    );
     let bad = |what: String| Err(FormatError { offset: None, what });
+    let (nl, nv, nc) = (h.lights.len(), h.views.len(), h.channels);
+    // Every size product checked (issue 43: 3·w·h wrapped, and a file declaring a tiny payload
+    // passed this check).
+    let product = |parts: &[usize]| {
+        parts
+            .iter()
+            .try_fold(1usize, |a, &b| a.checked_mul(b))
+            .filter(|&n| n <= isize::MAX as usize / 8)
+    };
+    let (Some(t), Some(_)) = (
+        product(&[h.width, h.height]),
+        product(&[nc, h.width, h.height, nl, nv]),
+    ) else {
+        return bad(format!(
+            "the header's sizes ({}×{} texels, {nc} channels, {nl} lights, {nv} views) overflow",
+            h.width, h.height
+        ));
+    };
     if t == 0 || nl == 0 || nv == 0 {
         return bad(format!(
             "the header describes {}×{} texels, {nv} views and {nl} lights: nothing to read",
@@ -365,6 +387,9 @@ fn check_sizes(f: &Ubo2014) -> Result<(), FormatError> {
     }
     match &f.payload {
         Payload::Fmf { factor, .. } => {
+            if factor.s.is_empty() {
+                return bad("the factorisation has rank 0: nothing to reconstruct".into());
+            }
             let ok = (factor.rows == nc * nl * nv && factor.cols == t)
                 || (factor.rows == nc * t && factor.cols == nl * nv);
             if !ok {
@@ -378,6 +403,9 @@ fn check_sizes(f: &Ubo2014) -> Result<(), FormatError> {
                 ));
             }
             for (i, ch) in channels.iter().enumerate() {
+                if ch.s.is_empty() {
+                    return bad(format!("channel {i} has rank 0: nothing to reconstruct"));
+                }
                 let ok =
                     (ch.rows == nl * nv && ch.cols == t) || (ch.rows == t && ch.cols == nl * nv);
                 if !ok {
