@@ -359,6 +359,16 @@ mod tests {
                 eta: 1.3,
                 g: 0.0,
             }),
+            Arc::new(SssLighting {
+                params: "{}".into(),
+                made_for: String::new(),
+                area_each: 1.0,
+                spacing_mm: 1.0,
+                sources: vec![0.0; 9],
+                bounced: None,
+                body: None,
+                shadow: None,
+            }),
         ]
     }
 

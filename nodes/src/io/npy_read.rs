@@ -76,7 +76,7 @@ pub fn read(path: &Path, rank: usize, what: &str) -> Result<Array, NodeError> {
     if let Some(i) = data.iter().position(|v| !v.is_finite()) {
         return Err(NodeError::file(
             path,
-            format!("value {i} is {}: every value must be finite", data[i]),
+            format!("element {i} is {}: not finite", data[i]),
         ));
     }
     let data = if fortran {
