@@ -270,6 +270,10 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         How::AsWritten,
     ),
     (
+        "plan graphs/family_translucent.json --render ours --against truth --budget rmse=0.1",
+        How::Slow("a truth probe and six candidates of the 64 × 48 scene, 28 s here"),
+    ),
+    (
         "sweep graphs/btf_compress.json --set surface.size=128 --vary pca.rank=1,2,4,8,16 \
          --vary pca.solver=exact,randomized --vary pca.layout=texels,per_view --measure pca.rmse \
          --measure pca.compression_ratio --out-dir docs/sweeps/btf_pca",

@@ -57,6 +57,7 @@ fn fixtures(dir: &Path) {
     write("zero.png", zero_size_png());
     // A 2 × 2 RGB EXR with one NaN, written with the exr crate's own writer.
     write("nan.exr", nan_exr());
+    write("huge_window.exr", huge_window_exr());
 }
 
 /// A PNG whose header says 0 × 0 pixels (the format forbids it; a reader must refuse it).
@@ -98,6 +99,23 @@ fn nan_exr() -> Vec<u8> {
         .to_buffered(&mut out)
         .unwrap();
     out.into_inner()
+}
+
+/// [`nan_exr`] with its data window claiming 100 000 × 100 000 pixels (issue 43: a 445-byte
+/// file like it aborted on a 40 GB allocation).
+fn huge_window_exr() -> Vec<u8> {
+    let mut bytes = nan_exr();
+    let tag = b"dataWindow\0box2i\0";
+    let at = bytes
+        .windows(tag.len())
+        .position(|w| w == tag)
+        .expect("a data window")
+        + tag.len()
+        + 4;
+    for (k, v) in [0i32, 0, 99_999, 99_999].iter().enumerate() {
+        bytes[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    bytes
 }
 
 struct Outcome {

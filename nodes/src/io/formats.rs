@@ -91,6 +91,18 @@ fn read_samples(path: &Path) -> Result<(Image, bool), NodeError> {
 
 fn read_exr(path: &Path) -> Result<Image, NodeError> {
     use exr::prelude::*;
+    // The header's window against the memory budget before any pixel is read (issue 43: a
+    // 445-byte file declaring 100 000² pixels aborted on a 40 GB allocation).
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| NodeError::file(path, format!("cannot decode EXR: {e}")))?;
+    if let Some(h) = meta.headers.first() {
+        let (w, hh) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+        let channels = h.channels.list.len().max(1) as u64;
+        // Decoded as f32, then interleaved into the image: two copies.
+        let bytes = crate::memory::product(&[w, hh, channels, 4, 2]);
+        crate::memory::check(bytes, &format!("the EXR image of {w} × {hh} pixels"), None)
+            .map_err(|e| NodeError::file(path, e.to_string()))?;
+    }
     let img = read_first_flat_layer_from_file(path)
         .map_err(|e| NodeError::file(path, format!("cannot decode EXR: {e}")))?;
     let layer = &img.layer_data;
