@@ -10,19 +10,24 @@ import mesoflow
 
 
 def test_a_plan_from_python_is_the_command_line_s(repo, cli, tmp_path):
+    # The measured model alone (no probe): a probed plan keeps a candidate only where its frame
+    # was not slower than the graph's in that run, and on the CPU the far BTF views' frames are a
+    # few milliseconds either way, so two runs may keep different ones (this test once compared
+    # two such runs and failed on timing alone).
     graph = repo / "graphs" / "plan_verify.json"
     sets = ["btf_view.camera.eye=[0.0,4.0,6.75]"]
     out = tmp_path / "cli" / "planned.json"
     subprocess.run(
         [str(cli), "plan", str(graph), "--render", "btf_view", "--budget", "flip=0.1",
-         "--set", sets[0], "-o", str(out), "--quiet", "--cache-dir", str(tmp_path / "cli-cache")],
+         "--set", sets[0], "-o", str(out), "--quiet", "--probe-budget", "0",
+         "--cache-dir", str(tmp_path / "cli-cache")],
         check=True,
     )
     cli_plan = json.loads((out.parent / "plan.json").read_text())
     cli_graph = json.loads(out.read_text())
 
     p = mesoflow.plan(graph, "btf_view", budget=0.1, set={"btf_view.camera.eye": [0.0, 4.0, 6.75]},
-                      cache_dir=tmp_path / "py-cache")
+                      probe_budget=0.0, cache_dir=tmp_path / "py-cache")
     assert isinstance(p, mesoflow.Plan)
     assert [d.stage for d in p.decisions] == [d["stage"] for d in cli_plan["decisions"]]
     assert [d.choice for d in p.decisions] == [d["choice"] for d in cli_plan["decisions"]]
