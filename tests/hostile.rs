@@ -147,26 +147,7 @@ fn run_case(dir: &Path, name: &str, text: &str, env: &serde_json::Map<String, Va
     for (k, v) in env {
         cmd.env(k, v.as_str().unwrap_or_default());
     }
-    let mut child = cmd.spawn().unwrap();
-    let start = Instant::now();
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break Some(s);
-        }
-        if start.elapsed() > LIMIT {
-            let _ = child.kill();
-            let _ = child.wait();
-            break None;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
-    let mut output = String::new();
-    if let Some(mut e) = child.stderr.take() {
-        let _ = e.read_to_string(&mut output);
-    }
-    if let Some(mut o) = child.stdout.take() {
-        let _ = o.read_to_string(&mut output);
-    }
+    let (status, mut output) = wait(cmd.spawn().unwrap());
     // A node's error is in the report as well as on stderr.
     if let Ok(report) = std::fs::read_to_string(out.join("report.json")) {
         output.push_str(&report);
@@ -230,15 +211,8 @@ fn every_hostile_input_gets_its_clear_error() {
     assert!(wrong.is_empty(), "{}", wrong.join("\n\n"));
 }
 
-/// Runs `mesoflow ARGS` in `dir` with [`LIMIT`]: exit code (None past the limit) and output.
-fn within_limit(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
-    let mut child = bin()
-        .args(args)
-        .current_dir(dir)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+/// Waits for `child` at most [`LIMIT`] (then kills it: `None`, a hang); its stderr then stdout.
+fn wait(mut child: std::process::Child) -> (Option<std::process::ExitStatus>, String) {
     let start = Instant::now();
     let status = loop {
         if let Some(s) = child.try_wait().unwrap() {
@@ -255,6 +229,22 @@ fn within_limit(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
     if let Some(mut e) = child.stderr.take() {
         let _ = e.read_to_string(&mut output);
     }
+    if let Some(mut o) = child.stdout.take() {
+        let _ = o.read_to_string(&mut output);
+    }
+    (status, output)
+}
+
+/// Runs `mesoflow ARGS` in `dir` with [`LIMIT`]: exit code (None past the limit) and output.
+fn within_limit(dir: &Path, args: &[&str]) -> (Option<i32>, String) {
+    let child = bin()
+        .args(args)
+        .current_dir(dir)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let (status, output) = wait(child);
     (status.and_then(|s| s.code()), output)
 }
 

@@ -23,13 +23,12 @@
 //! `render.mesh` and `qh.render` have no truth here yet (`mesh.displace` of the height field behind
 //! `btf.capture`, a medium for a quasi-homogeneous material): asking is an error that says so.
 
-use crate::verify::{camera_of, copy_options, probe_camera};
+use crate::verify::{camera_of, probe_camera, run_for as run};
 use crate::PlanError;
 use mesoflow_graph::{GraphFile, NodeDecl};
-use mesoflow_runtime::{Engine, NodeStatus, RunOptions, RunReport, SilentObserver};
+use mesoflow_runtime::{Engine, NodeStatus, RunOptions, RunReport};
 use serde_json::{json, Map, Value};
 use std::collections::{BTreeMap, BTreeSet};
-use std::sync::Arc;
 use std::time::Instant;
 
 /// The truth probe's node.
@@ -142,30 +141,6 @@ fn needed(file: &GraphFile, ids: &[&str]) -> BTreeSet<String> {
     ids.iter()
         .flat_map(|id| crate::probe::ancestors(file, id))
         .collect()
-}
-
-fn run(
-    engine: &Engine,
-    name: &str,
-    graph: &GraphFile,
-    outputs: &[(&str, &str)],
-    opts: &RunOptions,
-) -> Result<RunReport, PlanError> {
-    let checked = mesoflow_graph::check(name, graph, engine.registry())
-        .map_err(|e| PlanError::Probe(e.to_string().trim_end().to_string()))?;
-    let mut opts = copy_options(opts);
-    opts.outputs = outputs
-        .iter()
-        .map(|(n, p)| mesoflow_graph::PortRef {
-            node: n.to_string(),
-            port: p.to_string(),
-        })
-        .collect();
-    let report = engine
-        .run(&checked, &opts, Arc::new(SilentObserver))
-        .map_err(|e| PlanError::Probe(e.to_string()))?;
-    crate::probe::failed(&report)?;
-    Ok(report)
 }
 
 /// A node's compute time, a cache hit's as measured when it was computed.

@@ -293,6 +293,32 @@ pub fn copy_options(opts: &RunOptions) -> RunOptions {
     run
 }
 
+/// Runs `graph` through the engine for `outputs` (`(node, port)`), with `opts`' device, cache
+/// and cancel flag; a failed node is an error.
+pub(crate) fn run_for(
+    engine: &Engine,
+    name: &str,
+    graph: &GraphFile,
+    outputs: &[(&str, &str)],
+    opts: &RunOptions,
+) -> Result<RunReport, PlanError> {
+    let checked = mesoflow_graph::check(name, graph, engine.registry())
+        .map_err(|e| PlanError::Probe(e.to_string().trim_end().to_string()))?;
+    let mut opts = copy_options(opts);
+    opts.outputs = outputs
+        .iter()
+        .map(|(n, p)| mesoflow_graph::PortRef {
+            node: n.to_string(),
+            port: p.to_string(),
+        })
+        .collect();
+    let report = engine
+        .run(&checked, &opts, Arc::new(SilentObserver))
+        .map_err(|e| PlanError::Probe(e.to_string()))?;
+    crate::probe::failed(&report)?;
+    Ok(report)
+}
+
 /// What one probe run measured: (FLIP, the given's frame, the candidate's frame, seconds the
 /// candidate's nodes and the comparison computed).
 struct Measured {
@@ -311,27 +337,20 @@ fn measure(
     render: &str,
     opts: &RunOptions,
 ) -> Result<Measured, PlanError> {
-    let checked = mesoflow_graph::check(name, graph, engine.registry())
-        .map_err(|e| PlanError::Probe(e.to_string().trim_end().to_string()))?;
-    let mut opts = copy_options(opts);
     // Both renders asked for by name: a comparison served from the cache would otherwise
     // leave them out of the report, and their frames with them.
     let candidate = format!("{CANDIDATE}{render}");
-    opts.outputs = [
-        (FLIP, "mean"),
-        (render, "image"),
-        (candidate.as_str(), "image"),
-    ]
-    .iter()
-    .map(|(n, p)| mesoflow_graph::PortRef {
-        node: n.to_string(),
-        port: p.to_string(),
-    })
-    .collect();
-    let report = engine
-        .run(&checked, &opts, Arc::new(SilentObserver))
-        .map_err(|e| PlanError::Probe(e.to_string()))?;
-    crate::probe::failed(&report)?;
+    let report = run_for(
+        engine,
+        name,
+        graph,
+        &[
+            (FLIP, "mean"),
+            (render, "image"),
+            (candidate.as_str(), "image"),
+        ],
+        opts,
+    )?;
     let spent = report
         .nodes
         .iter()

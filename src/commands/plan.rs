@@ -165,36 +165,13 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         _ => anyhow::anyhow!("--render {}: {e}", args.render),
     })?;
 
-    let out_path = args.output.clone().unwrap_or_else(|| {
-        let stem = args
-            .graph
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "graph".into());
-        graph_dir(&args.graph).join(format!("{stem}.planned.json"))
-    });
     let mut planned_file = planned.plan.file.clone();
     planned_file.description = Some(format!(
         "{} — planned for `{}` at a FLIP budget of {budget}, {ppd:.1} pixels per degree (see plan.json)",
         file.description.clone().unwrap_or_default(),
         args.render
     ));
-    write(&out_path, &(planned_file.to_json() + "\n"))?;
-    let plan_path = out_path
-        .parent()
-        .map(|p| p.join("plan.json"))
-        .unwrap_or_else(|| PathBuf::from("plan.json"));
-    let mut doc = json!({
-        "graph": args.graph.display().to_string(),
-        "planned": out_path.display().to_string(),
-    });
-    if let (Some(o), Value::Object(rest)) = (doc.as_object_mut(), planned.to_json()) {
-        o.extend(rest);
-    }
-    write(
-        &plan_path,
-        &(serde_json::to_string_pretty(&doc).unwrap_or_default() + "\n"),
-    )?;
+    let (out_path, plan_path) = write_plan(args, &planned_file, planned.to_json())?;
     if !args.quiet {
         for d in &planned.plan.decisions {
             println!("{:4} {} — {}", d.stage, d.choice, d.reason);
@@ -219,16 +196,38 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     Ok(0)
 }
 
-/// The planned graph's path: `-o`, or `<graph>.planned.json` beside the graph.
-fn planned_path(args: &PlanArgs) -> PathBuf {
-    args.output.clone().unwrap_or_else(|| {
+/// Writes the planned graph (`-o`, or `<graph>.planned.json` beside the graph) and `plan.json`
+/// beside it (the graph's and the planned graph's paths, then `doc`'s fields); returns both paths.
+fn write_plan(
+    args: &PlanArgs,
+    planned: &mesoflow_graph::GraphFile,
+    doc: Value,
+) -> anyhow::Result<(PathBuf, PathBuf)> {
+    let out_path = args.output.clone().unwrap_or_else(|| {
         let stem = args
             .graph
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "graph".into());
         graph_dir(&args.graph).join(format!("{stem}.planned.json"))
-    })
+    });
+    write(&out_path, &(planned.to_json() + "\n"))?;
+    let plan_path = out_path
+        .parent()
+        .map(|p| p.join("plan.json"))
+        .unwrap_or_else(|| PathBuf::from("plan.json"));
+    let mut all = json!({
+        "graph": args.graph.display().to_string(),
+        "planned": out_path.display().to_string(),
+    });
+    if let (Some(o), Value::Object(rest)) = (all.as_object_mut(), doc) {
+        o.extend(rest);
+    }
+    write(
+        &plan_path,
+        &(serde_json::to_string_pretty(&all).unwrap_or_default() + "\n"),
+    )?;
+    Ok((out_path, plan_path))
 }
 
 /// `mesoflow plan --against truth`: every candidate measured against the truth the graph makes
@@ -276,29 +275,13 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
         plan::PlanError::Probe(_) => anyhow::anyhow!("{e}"),
         _ => invalid(format!("--render {}: {e}", args.render)),
     })?;
-    let out_path = planned_path(args);
     let mut planned_file = a.planned.clone();
     planned_file.description = Some(format!(
         "{} — planned for `{}` against the truth at a relative RMSE of {rmse} (see plan.json)",
         file.description.clone().unwrap_or_default(),
         args.render
     ));
-    write(&out_path, &(planned_file.to_json() + "\n"))?;
-    let plan_path = out_path
-        .parent()
-        .map(|p| p.join("plan.json"))
-        .unwrap_or_else(|| PathBuf::from("plan.json"));
-    let mut doc = json!({
-        "graph": args.graph.display().to_string(),
-        "planned": out_path.display().to_string(),
-    });
-    if let (Some(o), Value::Object(rest)) = (doc.as_object_mut(), a.to_json()) {
-        o.extend(rest);
-    }
-    write(
-        &plan_path,
-        &(serde_json::to_string_pretty(&doc).unwrap_or_default() + "\n"),
-    )?;
+    let (out_path, plan_path) = write_plan(args, &planned_file, a.to_json())?;
     if !args.quiet {
         println!(
             "truth probe {}×{}: {} samples a pixel, noise {}",
