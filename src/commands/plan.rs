@@ -116,15 +116,7 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     let ppd = viewer_ppd(args, &decl)?;
 
     // Measure the view (cached like any run), then decide.
-    let mut opts = RunOptions::new(
-        &args.graph.display().to_string(),
-        graph_dir(&args.graph),
-        std::env::temp_dir(),
-    );
-    opts.device = device_mode(args.device);
-    opts.require_gpu = require_gpu();
-    opts.use_cache = !args.cache.no_cache;
-    opts.cancel = super::run::cancel_flag();
+    let opts = run_options(args);
     if !args.quiet {
         eprintln!("plan: measuring the view of `{}`", args.render);
     }
@@ -196,6 +188,20 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     Ok(0)
 }
 
+/// The probes' run options: the command's device, cache and Ctrl-C.
+fn run_options(args: &PlanArgs) -> RunOptions {
+    let mut opts = RunOptions::new(
+        &args.graph.display().to_string(),
+        graph_dir(&args.graph),
+        std::env::temp_dir(),
+    );
+    opts.device = device_mode(args.device);
+    opts.require_gpu = require_gpu();
+    opts.use_cache = !args.cache.no_cache;
+    opts.cancel = super::run::cancel_flag();
+    opts
+}
+
 /// Writes the planned graph (`-o`, or `<graph>.planned.json` beside the graph) and `plan.json`
 /// beside it (the graph's and the planned graph's paths, then `doc`'s fields); returns both paths.
 fn write_plan(
@@ -244,15 +250,7 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
     let mut file = load::read(&args.graph)?;
     load::apply_sets(&mut file, &args.set)?;
     load::checked(&args.graph, &file, engine.registry())?;
-    let mut opts = RunOptions::new(
-        &args.graph.display().to_string(),
-        graph_dir(&args.graph),
-        std::env::temp_dir(),
-    );
-    opts.device = device_mode(args.device);
-    opts.require_gpu = require_gpu();
-    opts.use_cache = !args.cache.no_cache;
-    opts.cancel = super::run::cancel_flag();
+    let opts = run_options(args);
     if !args.quiet {
         eprintln!(
             "plan: `{}` against the truth at relative RMSE {rmse}: the truth probe, then each candidate",
