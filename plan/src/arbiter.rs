@@ -184,6 +184,20 @@ fn ports_read(file: &GraphFile, render: &str) -> BTreeSet<String> {
         .collect()
 }
 
+/// `sss.render`'s parameters that `Params::classic` sets apart from the defaults.
+fn classic() -> Vec<(String, Value)> {
+    use mesoflow_nodes::sss::render::Params;
+    let classic = serde_json::to_value(Params::classic()).unwrap_or_default();
+    let default = serde_json::to_value(Params::default()).unwrap_or_default();
+    classic
+        .as_object()
+        .into_iter()
+        .flatten()
+        .filter(|(k, v)| default.get(k.as_str()) != Some(*v))
+        .map(|(k, v)| (k.clone(), v.clone()))
+        .collect()
+}
+
 /// Plans `render` of `file` against the truth (see the module's doc).
 pub fn arbitrate(
     engine: &Engine,
@@ -302,10 +316,10 @@ pub fn arbitrate(
     };
 
     // The model candidates.
-    let sss = |overrides: &[(&str, Value)], camera: &Map<String, Value>| -> NodeDecl {
+    let sss = |overrides: &[(String, Value)], camera: &Map<String, Value>| -> NodeDecl {
         let mut p = params.clone();
         for (k, v) in overrides {
-            p.insert(k.to_string(), v.clone());
+            p.insert(k.clone(), v.clone());
         }
         p.insert("camera".into(), Value::Object(camera.clone()));
         NodeDecl {
@@ -314,25 +328,13 @@ pub fn arbitrate(
             inputs: inputs.clone(),
         }
     };
-    let variants: Vec<(&str, Vec<(&str, Value)>)> = vec![
+    let one = |k: &str, v: &str| vec![(k.to_string(), json!(v))];
+    let variants: Vec<(&str, Vec<(String, Value)>)> = vec![
         ("the render as given", vec![]),
-        ("energy: half_space", vec![("energy", json!("half_space"))]),
-        (
-            "geometry: exit_normal",
-            vec![("geometry", json!("exit_normal"))],
-        ),
-        (
-            "Jensen & Buhler's classic gather",
-            vec![
-                ("single_scattering", json!(false)),
-                ("single_scattering_shape", json!("half_space")),
-                ("bounces", json!(0)),
-                ("geometry", json!("planar")),
-                ("emission", json!("diffuse")),
-                ("sources", json!("point")),
-            ],
-        ),
-        ("mode: brdf", vec![("mode", json!("brdf"))]),
+        ("energy: half_space", one("energy", "half_space")),
+        ("geometry: exit_normal", one("geometry", "exit_normal")),
+        ("Jensen & Buhler's classic gather", classic()),
+        ("mode: brdf", one("mode", "brdf")),
     ];
     let mut candidates = Vec::new();
     let mut seen: Vec<Map<String, Value>> = Vec::new();
