@@ -153,11 +153,7 @@ fn light(
     profile: &DiffusionProfile,
     p: &Params,
 ) -> Result<(SssLighting, Vec<String>, Vec<(&'static str, f64)>), NodeError> {
-    mesh.check().map_err(|e| NodeError::input("mesh", e))?;
-    if profile.radii.len() < 2 {
-        return Err(NodeError::input("profile", "fewer than two radii"));
-    }
-    super::check_params(p)?;
+    super::check_inputs(mesh, profile, p)?;
     let light = Light::new(&p.light)?;
     let tracer = Tracer::new(mesh);
     let mut warnings = Vec::new();

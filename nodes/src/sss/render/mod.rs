@@ -388,11 +388,7 @@ pub(super) fn render_lit(
     watch: &Counter,
     lighting: Option<&SssLighting>,
 ) -> Result<Rendered, NodeError> {
-    mesh.check().map_err(|e| NodeError::input("mesh", e))?;
-    if profile.radii.len() < 2 {
-        return Err(NodeError::input("profile", "fewer than two radii"));
-    }
-    check_params(p)?;
+    check_inputs(mesh, profile, p)?;
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
     let light = Light::new(&p.light)?;
     let mut warnings = Vec::new();
@@ -604,6 +600,15 @@ impl Params {
             ..Params::default()
         }
     }
+}
+
+/// The mesh, the profile and the parameters checked before a render or a lighting starts.
+fn check_inputs(mesh: &Mesh, profile: &DiffusionProfile, p: &Params) -> Result<(), NodeError> {
+    mesh.check().map_err(|e| NodeError::input("mesh", e))?;
+    if profile.radii.len() < 2 {
+        return Err(NodeError::input("profile", "fewer than two radii"));
+    }
+    check_params(p)
 }
 
 /// The parameters' own rules: validated before any work (`Node::check`) and again by
