@@ -51,6 +51,16 @@ fn fixtures(dir: &Path) {
     let made = std::process::Command::new("mkfifo").arg(&fifo).status();
     assert!(made.is_ok_and(|s| s.success()), "mkfifo");
     std::fs::write(dir.join("ubo_angle/tl095_pl000_tv000_pv000.png"), b"x").unwrap();
+    // OBJ: a NaN normal; an `mtllib` naming /dev/zero (once read without bound).
+    let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n";
+    write(
+        "nan_normal.obj",
+        format!("{tri}vn nan 0 1\nf 1/1/1 2/2/1 3/3/1\n").into_bytes(),
+    );
+    write(
+        "mtllib_zero.obj",
+        format!("mtllib /dev/zero\n{tri}f 1/1 2/2 3/3\n").into_bytes(),
+    );
     let be: Vec<u8> = (0..30).flat_map(|i| (i as f64).to_be_bytes()).collect();
     write("big_endian.npy", npy(">f8", false, &[10, 3], &be));
     write("fake.png", b"\x89PNG\r\n\x1a\nnot really".to_vec());

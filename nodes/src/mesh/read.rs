@@ -77,7 +77,16 @@ pub fn load(path: &Path, generate: UvProjection) -> Result<Mesh, NodeError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, _materials) = tobj::load_obj(path, &options)
+    let file = std::fs::File::open(path).map_err(|e| NodeError::file(path, e))?;
+    if !file.metadata().is_ok_and(|m| m.is_file()) {
+        return Err(NodeError::file(path, "not a regular file"));
+    }
+    // Materials are never read: mesoflow takes the geometry alone, and an `mtllib` line may name
+    // any file, `/dev/zero` or a FIFO among them (issue 43).
+    let (models, _materials) =
+        tobj::load_obj_buf(&mut std::io::BufReader::new(file), &options, |_| {
+            Err(tobj::LoadError::OpenFileFailed)
+        })
         .map_err(|e| NodeError::file(path, format!("not a readable OBJ file: {e}")))?;
     let mut mesh = Mesh::default();
     let (mut with_normals, mut with_uvs) = (true, true);
@@ -101,6 +110,15 @@ pub fn load(path: &Path, generate: UvProjection) -> Result<Mesh, NodeError> {
     }
     if mesh.indices.is_empty() {
         return Err(NodeError::file(path, "the file has no faces"));
+    }
+    let values = [("position", &mesh.positions), ("normal", &mesh.normals)];
+    for (what, list) in values {
+        if let Some(i) = list.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
+            return Err(NodeError::file(
+                path,
+                format!("{what} {i} is {:?}: not finite", list[i]),
+            ));
+        }
     }
     if !with_normals {
         mesh.compute_normals();
