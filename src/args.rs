@@ -64,7 +64,7 @@ pub enum Command {
     /// changed re-run, look at every result.
     Serve(ServeArgs),
     /// Choose each stage's cheapest model for a render's view and a FLIP budget; write the
-    /// planned graph and plan.json.
+    /// planned graph and its plan (<graph>.plan.json).
     Plan(PlanArgs),
     /// The body of a cluster job: run one unit of a cluster run from the shared cache.
     Exec {
@@ -260,7 +260,7 @@ pub struct PlanArgs {
     pub against: Option<AgainstArg>,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,
-    /// The planned graph (default: <graph>.planned.json beside the graph; plan.json goes beside it).
+    /// The planned graph (default: <graph>.planned.json beside the graph; its plan, <graph>.plan.json, goes beside it).
     #[arg(short = 'o', long = "output", value_name = "OUT.json")]
     pub output: Option<PathBuf>,
     /// The viewer's pixels per degree the budget is judged at (default FLIP's 67: a 0.7 m wide

@@ -251,7 +251,7 @@ fn every_graph_runs_cold_then_warm_with_every_file_then_verifies_its_cache() {
         // What `mesoflow plan` writes beside a graph is the user's, not a shipped graph.
         .filter(|p| {
             let name = p.file_name().unwrap().to_string_lossy();
-            !name.ends_with(".planned.json") && name != "plan.json"
+            !name.ends_with(".planned.json") && !name.ends_with(".plan.json")
         })
         .collect();
     graphs.sort();

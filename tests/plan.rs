@@ -50,7 +50,8 @@ impl Planned {
             .unwrap()
     }
     fn plan(&self) -> Value {
-        serde_json::from_str(&std::fs::read_to_string(self.dir.join("plan.json")).unwrap()).unwrap()
+        serde_json::from_str(&std::fs::read_to_string(self.dir.join("planned.plan.json")).unwrap())
+            .unwrap()
     }
 }
 

@@ -53,7 +53,7 @@ fn run_ok(r: Run) {
 /// graph and measures it.
 fn cases(s: &Scratch, name: &str, budget: f64, extra: &[&str]) -> Vec<Case> {
     // The graph and its photograph copied together: a planned graph reads its files from
-    // its own folder, so it is written beside the graph (one case at a time: plan.json too).
+    // its own folder, so it is written beside the graph (with its plan, named after it).
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs");
     let graphs = s.path("graphs");
     std::fs::create_dir_all(graphs.join("data")).unwrap();
@@ -123,7 +123,7 @@ fn cases(s: &Scratch, name: &str, budget: f64, extra: &[&str]) -> Vec<Case> {
                 flip: metric(&r, "flip", "mean"),
                 full_s: frame(&r, "full"),
                 view_s: frame(&r, "view"),
-                plan: read(&graphs.join("plan.json")),
+                plan: read(&graphs.join(format!("{name}_{i}.plan.json"))),
                 planned: read(&planned),
             }
         })

@@ -48,8 +48,10 @@ fn plan(s: &Scratch, budget: &str) -> (Value, Value) {
     }
     let r = mesoflow(&args, s.dir.path());
     assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    let doc: Value =
-        serde_json::from_str(&std::fs::read_to_string(s.path("plan.json")).unwrap()).unwrap();
+    let doc: Value = serde_json::from_str(
+        &std::fs::read_to_string(s.path(&format!("planned-{budget}.plan.json"))).unwrap(),
+    )
+    .unwrap();
     let planned: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     (doc, planned)
 }

@@ -830,3 +830,24 @@ fn a_file_that_does_not_parse_is_shown_and_never_overwritten() {
     assert!(st["load_error"].is_null());
     assert_eq!(st["report"]["ok"], true);
 }
+
+#[test]
+fn a_fifo_or_a_link_in_the_graphs_folder_is_refused_without_blocking() {
+    let s = start(QUICKSTART);
+    s.settle();
+    let dir = s.graph.parent().unwrap().to_path_buf();
+    let fifo = dir.join("pipe.png");
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    assert!(made.is_ok_and(|st| st.success()), "mkfifo");
+    // A FIFO once held the request (and a server thread) forever: no writer ever comes.
+    let (code, body) = s.get("/api/file?path=../g/pipe.png");
+    assert_eq!(code, 403, "{body}");
+    assert!(body.to_string().contains("not a regular file"), "{body}");
+    // A link inside the folder to a file outside it is refused when opened.
+    let secret = s.scratch.write("secret.txt", "no");
+    std::os::unix::fs::symlink(&secret, dir.join("link.txt")).unwrap();
+    assert_eq!(s.get("/api/file?path=../g/link.txt").0, 403);
+    // A regular file beside them is served.
+    s.scratch.write("g/notes.txt", "yes");
+    assert_eq!(s.get("/api/file?path=../g/notes.txt").0, 200);
+}

@@ -16,7 +16,9 @@
 //! [--width W] [--samples S] [--out DIR] [--set ID.PARAM=VALUE]…` (the `--set`s measure another
 //! configuration of the same graph; defaults: seeds 0..12, the template's resolution and samples,
 //! `target/families` or `target/families-<name>`): the development seeds are 0.., the held-out
-//! ones `scenes::HELD_OUT`.. (`--held-out`), which no one tunes on.
+//! ones `scenes::HELD_OUT`.. (`--held-out`), which no one tunes on. `--widths 160,640` (the
+//! translucent family) times each scene again at those widths, ours against the path tracer at
+//! ours' error (`translucent.rs`).
 
 mod mesostructure;
 mod translucent;
@@ -27,6 +29,7 @@ use serde_json::Value;
 use std::path::PathBuf;
 
 /// What every family's bench takes from the command line.
+#[derive(Clone)]
 pub struct Options {
     pub first: u64,
     pub count: u64,
@@ -35,6 +38,8 @@ pub struct Options {
     pub out: PathBuf,
     /// `--set id.param=value` (repeatable): a configuration to measure in place of the defaults.
     pub extra: Vec<String>,
+    /// `--widths W,W,…`: larger images of each scene to time (the translucent family).
+    pub widths: Vec<u32>,
 }
 
 /// One scene run: its report, the command that makes it, its picture.
@@ -195,6 +200,10 @@ fn main() {
             .windows(2)
             .filter(|w| w[0] == "--set")
             .map(|w| w[1].clone())
+            .collect(),
+        widths: arg("--widths", String::new())
+            .split(',')
+            .filter_map(|w| w.trim().parse().ok())
             .collect(),
     };
     std::fs::create_dir_all(&options.out).expect("the output folder");

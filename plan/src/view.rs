@@ -1,6 +1,6 @@
 //! Planning one view end to end, as the command line, Python and the benches do: measure the
 //! render's view with the probe, decide each stage, check the planned graph, and describe the
-//! plan as `plan.json` holds it.
+//! plan as `<graph>.plan.json` holds it.
 
 use crate::verify::{prove, Ask, ProbeOptions, Proof};
 use crate::{btf_chain, plan, probe, Budget, Plan, PlanError, RenderKind, Scene, Split};
@@ -106,7 +106,7 @@ impl Planned {
         self.plan.decisions.iter().map(|d| d.predicted_error).sum()
     }
 
-    /// The plan as `plan.json` holds it (the caller adds where the graphs are).
+    /// The plan as `<graph>.plan.json` holds it (the caller adds where the graphs are).
     pub fn to_json(&self) -> Value {
         let decisions: Vec<Value> = self
             .plan

@@ -1,5 +1,5 @@
 //! `mesoflow.plan(graph, render, budget=…)`: the planner library on a graph from Python, on the
-//! same engine and cache as `Graph.run`. Returns the plan document (`plan.json`'s fields) and
+//! same engine and cache as `Graph.run`. Returns the plan document (`<graph>.plan.json`'s fields) and
 //! the planned graph's text; the Python layer makes them a `Plan` object.
 
 use crate::session::{device_mode, engine, parse_with_sets};

@@ -30,6 +30,12 @@ def test_graph_errors_name_node_and_field(tmp_path):
     with pytest.raises(mesoflow.GraphError):
         g.set("s.size", -1)
     assert g["s"].params["size"] == 8
+    # `run(set=...)` checks its values as `set` does (it once raised a bare ValueError).
+    with pytest.raises(mesoflow.GraphError) as e:
+        g.run(set={"s.size": -1}, out_dir=tmp_path / "out", use_cache=False)
+    assert e.value.node == "s" and g["s"].params["size"] == 8
+    with pytest.raises(mesoflow.GraphError):
+        g.run(set={"nope.size": 4}, out_dir=tmp_path / "out", use_cache=False)
 
 
 def test_load_reports_every_error_of_a_file(tmp_path):

@@ -65,3 +65,11 @@ def test_bad_arrays_are_node_errors(tmp_path, cache):
     g.add("heightfield.array", "h", data=np.array([[1.0, np.nan]]))
     with pytest.raises(mesoflow.NodeError, match="not finite"):
         g.run(out_dir=tmp_path / "o", cache_dir=cache)
+
+
+def test_complex_and_datetime_arrays_are_refused_not_converted(tmp_path):
+    g = mesoflow.Graph(base_dir=tmp_path)
+    for bad in (np.ones((4, 4), dtype=complex), np.zeros((4, 4), dtype="datetime64[s]")):
+        with pytest.raises(TypeError, match="not one of real numbers"):
+            g.add("heightfield.array", "h", data=bad)
+    assert "h" not in g

@@ -2,6 +2,7 @@
 planner is one library under both), as objects."""
 
 import json
+from pathlib import Path
 import subprocess
 
 import pytest
@@ -23,7 +24,7 @@ def test_a_plan_from_python_is_the_command_line_s(repo, cli, tmp_path):
          "--cache-dir", str(tmp_path / "cli-cache")],
         check=True,
     )
-    cli_plan = json.loads((out.parent / "plan.json").read_text())
+    cli_plan = json.loads((out.parent / "planned.plan.json").read_text())
     cli_graph = json.loads(out.read_text())
 
     p = mesoflow.plan(graph, "btf_view", budget=0.1, set={"btf_view.camera.eye": [0.0, 4.0, 6.75]},
@@ -35,9 +36,10 @@ def test_a_plan_from_python_is_the_command_line_s(repo, cli, tmp_path):
     assert p.scene == cli_plan["scene"] and p.budget == 0.1
     # The planned graph is the command line's, less the description naming the budget.
     assert p.graph.to_dict()["nodes"] == cli_graph["nodes"]
-    # It runs as any graph does, and saves with its plan.json beside it.
+    # It runs as any graph does, and saves with its plan beside it, named as the CLI names it.
     saved = p.save(tmp_path / "py" / "planned.json")
-    assert json.loads((saved.parent / "plan.json").read_text())["decisions"] == p.doc["decisions"]
+    assert json.loads((saved.parent / "planned.plan.json").read_text())["decisions"] == p.doc["decisions"]
+    assert mesoflow._plan.plan_file(Path("a/torus.planned.json")) == Path("a/torus.plan.json")
 
 
 def test_an_unknown_render_node_and_a_bad_budget_are_errors(repo):

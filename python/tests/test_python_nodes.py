@@ -116,16 +116,23 @@ def test_an_exception_is_a_node_error_naming_the_node(tmp_path, cache):
     def badshape(height):
         return np.zeros((2, 2, 2))
 
+    # A complex image was once cast to its real part without a word.
+    @mesoflow.node(kind="user.complex", inputs={"height": "HeightField"}, outputs={"image": "Image"})
+    def complex_image(height):
+        return np.zeros((2, 2), dtype=complex)
+
     g = mesoflow.Graph(base_dir=tmp_path)
     s = g.add("heightfield.procedural", pattern="weave", size=8)
     g.add("user.broken", "metric", height=s["height"])
     g.add("user.badshape", "shape", height=s["height"])
+    g.add("user.complex", "cplx", height=s["height"])
     g.add("heightfield.normals", "fine", height=s["height"])
     with pytest.raises(mesoflow.NodeError) as e:
         g.run(out_dir=tmp_path / "o", cache_dir=cache)
     text = str(e.value)
     assert "node `metric`" in text and "ValueError: the height field is too flat" in text
     assert "node `shape`" in text and "output `image`" in text and "(2, 2, 2)" in text
+    assert "node `cplx`" in text and "complex128 is not one of real numbers" in text, text
     # An independent branch still finished.
     statuses = {n["id"]: n["status"] for n in e.value.report["nodes"]}
     assert statuses["fine"] == "computed"

@@ -16,18 +16,18 @@ pub mod producer;
 pub mod progress;
 pub mod registry;
 pub mod report;
+mod resources;
+pub mod run;
 mod scheduler;
 pub mod value;
 
 pub use atomic_file::write_atomic;
-pub use engine::{
-    DeviceMode, Engine, EngineConfig, RunObserver, RunOptions, RunOutcome, SilentObserver,
-    NOT_IN_CACHE,
-};
+pub use engine::{Engine, EngineConfig, EngineError};
 pub use gpu::{Gpu, GpuProvider};
 pub use key::{Key, KEY_SCHEME};
 pub use node::{DynNode, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Prepared};
 pub use progress::ProgressSteps;
 pub use registry::Registry;
 pub use report::{NodeReport, NodeStatus, RunReport, Warning};
+pub use run::{DeviceMode, RunObserver, RunOptions, RunOutcome, SilentObserver, NOT_IN_CACHE};
 pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};

@@ -1,8 +1,8 @@
 //! `mesoflow plan GRAPH --render ID --budget flip=B`: the command line of the planner library
 //! (`mesoflow_plan`): parses the arguments, has the library measure the view (its probe, run
 //! through the engine and its cache) and decide each stage's model, and writes the planned graph
-//! (the same graph with the choices as ordinary parameters and connections) and `plan.json`
-//! beside it.
+//! (the same graph with the choices as ordinary parameters and connections) and its plan
+//! beside it (`<graph>.plan.json`, [`plan_file`]).
 
 use super::run::{device_mode, engine, graph_dir, require_gpu};
 use crate::args::PlanArgs;
@@ -14,7 +14,7 @@ use mesoflow_nodes::raytrace::camera::CameraParams;
 use mesoflow_plan as plan;
 use mesoflow_runtime::RunOptions;
 use serde_json::{json, Map, Value};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// `flip=B` → B.
 fn parse_budget(text: &str) -> anyhow::Result<f64> {
@@ -159,9 +159,10 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
 
     let mut planned_file = planned.plan.file.clone();
     planned_file.description = Some(format!(
-        "{} — planned for `{}` at a FLIP budget of {budget}, {ppd:.1} pixels per degree (see plan.json)",
+        "{} — planned for `{}` at a FLIP budget of {budget}, {ppd:.1} pixels per degree (see {})",
         file.description.clone().unwrap_or_default(),
-        args.render
+        args.render,
+        plan_name(args)
     ));
     let (out_path, plan_path) = write_plan(args, &planned_file, planned.to_json())?;
     if !args.quiet {
@@ -202,26 +203,50 @@ fn run_options(args: &PlanArgs) -> RunOptions {
     opts
 }
 
-/// Writes the planned graph (`-o`, or `<graph>.planned.json` beside the graph) and `plan.json`
-/// beside it (the graph's and the planned graph's paths, then `doc`'s fields); returns both paths.
-fn write_plan(
-    args: &PlanArgs,
-    planned: &mesoflow_graph::GraphFile,
-    doc: Value,
-) -> anyhow::Result<(PathBuf, PathBuf)> {
-    let out_path = args.output.clone().unwrap_or_else(|| {
+/// Where the planned graph goes: `-o`, or `<graph>.planned.json` beside the graph.
+fn planned_path(args: &PlanArgs) -> PathBuf {
+    args.output.clone().unwrap_or_else(|| {
         let stem = args
             .graph
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "graph".into());
         graph_dir(&args.graph).join(format!("{stem}.planned.json"))
-    });
+    })
+}
+
+/// The plan's file name, for the planned graph's description.
+fn plan_name(args: &PlanArgs) -> String {
+    plan_file(&planned_path(args))
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+/// Where the plan of a planned graph at `planned` goes: beside it, named after it
+/// (`torus.planned.json` → `torus.plan.json`, `-o out/near.json` → `out/near.plan.json`), so two
+/// plans in one folder do not collide. Python's `Plan.save` follows the same rule.
+pub fn plan_file(planned: &Path) -> PathBuf {
+    let name = planned
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "graph.json".into());
+    let stem = name.strip_suffix(".json").unwrap_or(&name);
+    let stem = stem.strip_suffix(".planned").unwrap_or(stem);
+    planned.with_file_name(format!("{stem}.plan.json"))
+}
+
+/// Writes the planned graph (`-o`, or `<graph>.planned.json` beside the graph) and its plan
+/// beside it ([`plan_file`]: the graph's and the planned graph's paths, then `doc`'s fields);
+/// returns both paths.
+fn write_plan(
+    args: &PlanArgs,
+    planned: &mesoflow_graph::GraphFile,
+    doc: Value,
+) -> anyhow::Result<(PathBuf, PathBuf)> {
+    let out_path = planned_path(args);
     write(&out_path, &(planned.to_json() + "\n"))?;
-    let plan_path = out_path
-        .parent()
-        .map(|p| p.join("plan.json"))
-        .unwrap_or_else(|| PathBuf::from("plan.json"));
+    let plan_path = plan_file(&out_path);
     let mut all = json!({
         "graph": args.graph.display().to_string(),
         "planned": out_path.display().to_string(),
@@ -275,9 +300,10 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
     })?;
     let mut planned_file = a.planned.clone();
     planned_file.description = Some(format!(
-        "{} — planned for `{}` against the truth at a relative RMSE of {rmse} (see plan.json)",
+        "{} — planned for `{}` against the truth at a relative RMSE of {rmse} (see {})",
         file.description.clone().unwrap_or_default(),
-        args.render
+        args.render,
+        plan_name(args)
     ));
     let (out_path, plan_path) = write_plan(args, &planned_file, a.to_json())?;
     if !args.quiet {

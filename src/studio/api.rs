@@ -510,7 +510,7 @@ fn file(studio: &Studio, path: &str) -> Response<std::io::Cursor<Vec<u8>>> {
         Ok(p) => p,
         Err((s, m)) => return error(s, &m),
     };
-    match std::fs::read(&real) {
+    match read_served(&studio.roots, &real) {
         Ok(bytes) => {
             let ext = real
                 .extension()
@@ -528,8 +528,59 @@ fn file(studio: &Studio, path: &str) -> Response<std::io::Cursor<Vec<u8>>> {
                 .with_header(content_type(ty))
                 .with_header(no_store())
         }
-        Err(e) => error(404, &format!("{path}: {e}")),
+        Err((s, m)) => error(s, &format!("{path}: {m}")),
     }
+}
+
+/// The most bytes `/api/file` serves: the studio shows pictures, reports and tables.
+const MOST_SERVED: u64 = 256 << 20;
+
+/// Reads the file at `real` (checked by [`allowed`]) as the studio serves it: opened without
+/// following a link at its last component and without blocking (a FIFO would hold the request
+/// forever), a regular file only, at most [`MOST_SERVED`] bytes, and — on Linux, asked of the
+/// open file itself — still inside the studio's folders: a link planted in a parent folder
+/// between the check and the open is caught when the file is opened.
+fn read_served(roots: &[PathBuf], real: &Path) -> Result<Vec<u8>, (u16, String)> {
+    let mut options = std::fs::OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(libc::O_NOFOLLOW | libc::O_NONBLOCK);
+    }
+    let f = options.open(real).map_err(|e| (404, e.to_string()))?;
+    let meta = f.metadata().map_err(|e| (404, e.to_string()))?;
+    if !meta.is_file() {
+        return Err((403, "not a regular file".into()));
+    }
+    if meta.len() > MOST_SERVED {
+        return Err((
+            413,
+            format!(
+                "{} bytes, over the {MOST_SERVED} the studio serves",
+                meta.len()
+            ),
+        ));
+    }
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let at = std::fs::read_link(format!("/proc/self/fd/{}", f.as_raw_fd()))
+            .map_err(|e| (403, format!("where the open file lies is unknown: {e}")))?;
+        if !roots.iter().any(|r| at.starts_with(r)) {
+            return Err((
+                403,
+                "outside the graph's folder, the output folder and the cache once opened".into(),
+            ));
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = roots;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    f.take(MOST_SERVED)
+        .read_to_end(&mut bytes)
+        .map_err(|e| (404, e.to_string()))?;
+    Ok(bytes)
 }
 
 /// The event stream: headers, then events until the client goes (or the server stops).

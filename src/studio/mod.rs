@@ -13,6 +13,7 @@ mod events;
 mod preview;
 mod session;
 mod sweep;
+mod sweep_state;
 
 use crate::args::ServeArgs;
 use crate::commands::run::{cache_dir, device_mode, engine, graph_name};

@@ -86,7 +86,7 @@ pub struct Studio {
     pub doc: Mutex<Doc>,
     runs: Mutex<RunState>,
     wake: Condvar,
-    pub sweep: Mutex<super::sweep::SweepState>,
+    pub sweep: Mutex<super::sweep_state::SweepState>,
 }
 
 /// Errors that a structural edit may leave behind: a node just added has no inputs yet, and a

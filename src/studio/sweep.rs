@@ -26,26 +26,6 @@ pub struct SweepSpec {
     pub versus: Vec<String>,
 }
 
-#[derive(Default)]
-pub struct SweepState {
-    pub id: u64,
-    pub running: bool,
-    pub total: usize,
-    pub columns: Vec<String>,
-    pub rows: Vec<Value>,
-    pub charts: Vec<String>,
-    pub error: Option<String>,
-    cancel: Option<Arc<AtomicBool>>,
-}
-
-impl SweepState {
-    pub fn json(&self) -> Value {
-        json!({ "id": self.id, "running": self.running, "total": self.total,
-                "columns": self.columns, "rows": self.rows, "charts": self.charts,
-                "error": self.error })
-    }
-}
-
 fn refused(m: impl Into<String>) -> Refused {
     Refused {
         errors: vec![Problem::plain(m)],

@@ -57,10 +57,10 @@ def direct_scene(mi, cfg, pixel_format="rgba"):
     }
 
 
-def main(scene_path, out_path):
-    mi.set_variant("scalar_rgb")
-    cfg = json.load(open(scene_path))
-    scene_dict = direct_scene(mi, cfg)
+def scene_of(mi, cfg, pixel_format="rgba"):
+    """The scene dict of `cfg`: `direct_scene`, or with a "medium" the volumetric one.
+    `benches/sss_peer.py` times the same scene."""
+    scene_dict = direct_scene(mi, cfg, pixel_format)
     medium = cfg.get("medium")
     if medium is not None:
         # Russian roulette past the fifth event, volpath's default, stops a path with
@@ -85,6 +85,13 @@ def main(scene_path, out_path):
             "albedo": {"type": "rgb", "value": medium["albedo"]},
             "phase": {"type": "hg", "g": medium["g"]},
         }
+    return scene_dict
+
+
+def main(scene_path, out_path):
+    mi.set_variant("scalar_rgb")
+    cfg = json.load(open(scene_path))
+    scene_dict = scene_of(mi, cfg)
     scene = mi.load_dict(scene_dict)
     image = np.array(mi.render(scene), dtype=np.float32)
     np.save(out_path, image)

@@ -88,6 +88,9 @@ impl Params {
             energy: sss_render::Energy::Profile,
             emission: self.emission,
             sources: self.sources,
+            // Per pixel, as before `gather` existed: what the samples would change here is
+            // measured on `sss.render`'s family only.
+            gather: sss_render::GatherAt::Pixels,
         }
     }
 }

@@ -5,6 +5,7 @@ pub mod material;
 pub mod reference;
 pub mod relief;
 pub mod relief_gpu;
+pub mod relief_scene;
 pub mod render_mesh;
 pub mod rings;
 pub mod scene_footprint;

@@ -14,6 +14,7 @@
 //! E·f(ωi, ωo)·max(0, n·ωi)·visibility, as `btf.capture` measures.
 
 use super::relief_gpu;
+pub use super::relief_scene::Relief;
 use super::shade::{surface_at, Surface};
 use crate::btf::brdf::{self, Model};
 use crate::geometry::{dot, mul, normalize, V3};
@@ -174,30 +175,6 @@ impl Node for RenderRelief {
 /// whose smooth normal faces the light — acne along every terminator, which moved with the
 /// search's resolution and kept renders at different step counts from converging.
 const NORMAL_SUPPORT: f64 = 1.0;
-
-/// Everything a pixel's shading reads, prepared once.
-pub struct Relief<'a> {
-    pub mesh: &'a Mesh,
-    pub width: usize,
-    pub height: usize,
-    /// Heights in texels, row-major.
-    pub heights: Vec<f32>,
-    pub top: f32,
-    /// max − min of the heights, texels (the search's depth).
-    pub depth: f32,
-    /// Per texel (∂h/∂x, ∂h/∂y) on the grid (y down), or the normal map's slopes.
-    pub grad: Vec<[f32; 2]>,
-    /// Per texel ρd RGB, ρs, α.
-    pub maps: Vec<[f32; 5]>,
-    /// Per vertex the texel aspect (k_u, k_v): 1 where the mapping keeps the tile's proportions.
-    pub aspect: Vec<[f32; 2]>,
-    pub tiling: [f64; 2],
-    pub light: Light,
-    pub linear_steps: u32,
-    pub binary_steps: u32,
-    pub shadows: bool,
-    pub background: [f64; 3],
-}
 
 impl<'a> Relief<'a> {
     pub fn new(

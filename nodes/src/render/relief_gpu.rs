@@ -2,7 +2,7 @@
 //! search and shading (`relief.wgsl`), into a float target read back as the image and mask.
 
 use super::gpu_render::{cam_block, raster_pass, raster_pipeline};
-use super::relief::Relief;
+use super::relief_scene::Relief;
 use crate::geometry::bounding_sphere;
 use crate::gpu::read_back;
 use crate::raytrace::camera::Camera;

@@ -18,6 +18,7 @@ import numpy as np
 
 from . import _native
 from ._catalog import signature
+from ._arrays import real_array
 from ._errors import GraphError, NodeError
 
 PathLike = Union[str, "os.PathLike[str]"]
@@ -74,11 +75,11 @@ class Node:
 
 
 def _array_bytes(a: np.ndarray) -> bytes:
-    """The NPY bytes of an array, f32 or f64, C order (what the array kinds read)."""
-    if a.dtype not in (np.float32, np.float64):
-        a = a.astype(np.float64)
+    """The NPY bytes of an array, f32 or f64, C order (what the array kinds read); real numbers
+    only (``real_array``)."""
+    a = real_array(a, a.dtype if a.dtype in (np.float32, np.float64) else np.float64)
     buf = io.BytesIO()
-    np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
+    np.save(buf, a, allow_pickle=False)
     return buf.getvalue()
 
 
@@ -196,6 +197,15 @@ class Graph:
             self._nodes[node] = old
             raise
 
+    def _check_sets(self, sets: Mapping[str, Any]) -> None:
+        """Checks ``run``'s ``set`` on a copy as :meth:`set` checks one value: an invalid one
+        raises :class:`GraphError` naming the node and parameter, and this graph is unchanged."""
+        trial = Graph(self.description, base_dir=self.base_dir, name=self.name)
+        trial._nodes = json.loads(json.dumps(self._nodes))
+        trial._extra = dict(self._extra)
+        for target, value in sets.items():
+            trial.set(target, value)
+
     def __getitem__(self, id: str) -> Node:
         if id not in self._nodes:
             raise KeyError(f"no node `{id}`; nodes are {', '.join(self._nodes)}")
@@ -289,6 +299,8 @@ class Graph:
         ``KeyboardInterrupt`` once it has stopped (``report.json`` is still written).
         """
         outs = [str(o) for o in (outputs or [])]
+        if set:
+            self._check_sets(set)
         sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
         if use_cache:
             cache = cache_dir if cache_dir is not None else os.environ.get("MESOFLOW_CACHE")

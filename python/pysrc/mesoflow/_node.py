@@ -11,6 +11,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
+from ._arrays import real_array
 from . import _native
 from ._catalog import _invalidate
 
@@ -66,8 +67,8 @@ def _to_output(value: Any, ty: str) -> Any:
     if ty == "Scalar":
         return float(value)
     if ty == "PointSet":
-        return np.ascontiguousarray(value, dtype=np.float64)
-    return np.ascontiguousarray(value, dtype=np.float32)
+        return real_array(value, np.float64)
+    return real_array(value, np.float32)
 
 
 def node(

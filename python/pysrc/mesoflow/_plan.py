@@ -12,10 +12,18 @@ from ._graph import Graph, load
 PathLike = Union[str, Path]
 
 
+def plan_file(planned: Path) -> Path:
+    """Where the plan of the planned graph at ``planned`` goes: beside it, named after it, as the
+    command line names it (``src/commands/plan.rs``, ``plan_file``)."""
+    stem = planned.name[:-5] if planned.name.endswith(".json") else planned.name
+    stem = stem[: -len(".planned")] if stem.endswith(".planned") else stem
+    return planned.with_name(stem + ".plan.json")
+
+
 @dataclass(frozen=True)
 class Decision:
     """One stage's choice: ``stage`` (``btf``, ``mdf``, ``sss``, ``shadows``, ``synthesis``…),
-    ``choice`` (what was chosen, as ``plan.json`` holds it), ``reason``, and the error and cost
+    ``choice`` (what was chosen, as ``<graph>.plan.json`` holds it), ``reason``, and the error and cost
     the measured model predicts (``None`` where it has nothing to say: unknown, never 0)."""
 
     stage: str
@@ -29,7 +37,7 @@ class Plan:
     """A planned view: :attr:`graph` (the graph with the decisions applied, ready to
     :meth:`Graph.run`), :attr:`decisions`, :attr:`predicted_error` (the stages' sum, ``None``
     when one is unknown), :attr:`scene` (what the probe measured), :attr:`budget`, :attr:`ppd`,
-    and :attr:`doc`, the whole ``plan.json`` document."""
+    and :attr:`doc`, the whole ``<graph>.plan.json`` document."""
 
     def __init__(self, doc: Dict[str, Any], graph: Graph) -> None:
         self.doc = doc
@@ -57,11 +65,12 @@ class Plan:
         self.plan_seconds: Optional[float] = (self.probe or {}).get("plan_seconds")
 
     def save(self, path: PathLike) -> Path:
-        """Writes the planned graph to ``path`` and ``plan.json`` beside it, as ``mesoflow plan
-        -o path`` does."""
+        """Writes the planned graph to ``path`` and its plan beside it, named after it
+        (``near.json`` → ``near.plan.json``, ``torus.planned.json`` → ``torus.plan.json``), as
+        ``mesoflow plan -o path`` does."""
         path = self.graph.save(path)
         doc = dict(self.doc, planned=str(path))
-        (path.parent / "plan.json").write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        plan_file(path).write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
         return path
 
     def __repr__(self) -> str:

@@ -7,16 +7,17 @@
 use super::plan::{writes_files, Plan};
 use super::{metrics, Sink, Slot};
 use crate::cache::Record;
-use crate::engine::{Engine, RunOptions};
 use crate::key::Key;
 use crate::node::Outputs;
 use crate::report::{NodeReport, NodeStatus};
+use crate::resources::Resources;
+use crate::run::RunOptions;
 use mesoflow_graph::CheckedGraph;
 use std::time::Instant;
 
 /// Marks the nodes to compute; fills the slots of cache hits with their outputs and reports.
 pub(crate) fn demand(
-    engine: &Engine,
+    shared: &Resources,
     graph: &CheckedGraph,
     plan: &Plan,
     slots: &mut [Option<Slot>],
@@ -46,7 +47,7 @@ pub(crate) fn demand(
         let Some(key) = slot.key else { continue };
         let cn = &graph.nodes[i];
         let hit = if opts.use_cache {
-            lookup(engine, &key, slot.node.spec().kind, cn.id.as_str(), sink)
+            lookup(shared, &key, slot.node.spec().kind, cn.id.as_str(), sink)
         } else {
             None
         };
@@ -89,20 +90,20 @@ pub(crate) fn demand(
 /// A cached value: from memory, else from disk (then kept in memory too). A disk entry that cannot
 /// be trusted is a warning, removed, and recomputed.
 fn lookup(
-    engine: &Engine,
+    shared: &Resources,
     key: &Key,
     kind: &str,
     node: &str,
     sink: &Sink,
 ) -> Option<(Outputs, NodeStatus, f64, Record)> {
-    if let Some((out, record)) = engine.memory.get(key) {
+    if let Some((out, record)) = shared.memory.get(key) {
         return Some((out, NodeStatus::Memory, 0.0, record));
     }
-    let disk = engine.disk.as_ref()?;
+    let disk = shared.disk.as_ref()?;
     let t = Instant::now();
-    match disk.get(key, kind, &engine.registry) {
+    match disk.get(key, kind, &shared.registry) {
         Ok(Some((outputs, record))) => {
-            engine.memory.insert(*key, outputs.clone(), record.clone());
+            shared.memory.insert(*key, outputs.clone(), record.clone());
             Some((outputs, NodeStatus::Disk, t.elapsed().as_secs_f64(), record))
         }
         Ok(None) => None,

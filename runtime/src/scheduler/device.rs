@@ -6,8 +6,9 @@
 //! that is how machines without a GPU test the GPU code. `MESOFLOW_REQUIRE_GPU=1` makes a GPU
 //! node that finds no adapter at all fail instead of falling back.
 
-use crate::engine::{DeviceMode, Engine, RunOptions};
 use crate::gpu_memo::Found;
+use crate::resources::Resources;
+use crate::run::{DeviceMode, RunOptions};
 use mesoflow_graph::DevicePreference;
 
 pub(crate) struct Choice {
@@ -40,8 +41,11 @@ fn planned(pref: DevicePreference, mode: DeviceMode) -> DevicePreference {
 }
 
 /// Where the probe is remembered: the disk cache, when this run uses it.
-pub(crate) fn memo_dir<'a>(engine: &'a Engine, opts: &RunOptions) -> Option<&'a std::path::Path> {
-    engine
+pub(crate) fn memo_dir<'a>(
+    shared: &'a Resources,
+    opts: &RunOptions,
+) -> Option<&'a std::path::Path> {
+    shared
         .disk
         .as_ref()
         .filter(|_| opts.use_cache)
@@ -50,7 +54,7 @@ pub(crate) fn memo_dir<'a>(engine: &'a Engine, opts: &RunOptions) -> Option<&'a 
 
 /// `Err` when a GPU was required (`--device gpu`, `MESOFLOW_REQUIRE_GPU=1`) and none can be had.
 pub(crate) fn choose(
-    engine: &Engine,
+    shared: &Resources,
     pref: DevicePreference,
     opts: &RunOptions,
 ) -> Result<Choice, String> {
@@ -61,7 +65,7 @@ pub(crate) fn choose(
             remembered: None,
         });
     }
-    let (found, remembered) = engine.gpu.found(memo_dir(engine, opts));
+    let (found, remembered) = shared.gpu.found(memo_dir(shared, opts));
     let choice = |gpu, fallback| Choice {
         gpu,
         fallback,
@@ -90,12 +94,12 @@ pub(crate) fn choose(
 /// Before a GPU node chosen from a remembered probe is computed: does the live probe agree?
 /// When it does not, the memo is rewritten and the caller keys the graph again (now from the
 /// live device), so no value is computed under a path its key does not name.
-pub(crate) fn confirm(engine: &Engine, opts: &RunOptions, remembered: &Found) -> bool {
-    let live = engine.gpu.found_live();
+pub(crate) fn confirm(shared: &Resources, opts: &RunOptions, remembered: &Found) -> bool {
+    let live = shared.gpu.found_live();
     if *remembered == live {
         return true;
     }
-    if let Some(dir) = memo_dir(engine, opts) {
+    if let Some(dir) = memo_dir(shared, opts) {
         crate::gpu_memo::write(dir, &live);
     }
     false

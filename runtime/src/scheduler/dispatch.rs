@@ -8,10 +8,11 @@ use super::verify::{check_outputs, compare, mismatch};
 use super::write::write_artifacts;
 use super::{cancel_dependants, failure, metrics, timings_of, Sink, Slot};
 use crate::cache::Record;
-use crate::engine::{Engine, RunObserver, RunOptions, NOT_IN_CACHE};
 use crate::key::Key;
 use crate::node::{DynNode, Inputs, NodeContext, NodeError, Outputs, Prepared};
 use crate::report::{NodeReport, NodeStatus};
+use crate::resources::Resources;
+use crate::run::{RunObserver, RunOptions, NOT_IN_CACHE};
 use mesoflow_graph::CheckedGraph;
 use std::collections::BTreeSet;
 use std::sync::atomic::Ordering;
@@ -35,7 +36,7 @@ pub(crate) struct Executed {
 
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_all(
-    engine: &Engine,
+    shared: &Resources,
     graph: &CheckedGraph,
     plan: &Plan,
     slots: &mut [Option<Slot>],
@@ -118,7 +119,7 @@ pub(crate) fn run_all(
             // The device itself is created here, at the first GPU node that computes: a run
             // whose GPU nodes are all cached never loads a driver. The path came from this same
             // device or from a remembered probe confirmed before dispatch, so it is there.
-            let gpu = (device == "gpu").then(|| engine.gpu.get().ok()).flatten();
+            let gpu = (device == "gpu").then(|| shared.gpu.get().ok()).flatten();
             if let Some(g) = &gpu {
                 adapter.get_or_insert_with(|| g.describe());
             }
@@ -139,9 +140,9 @@ pub(crate) fn run_all(
                     warnings: Default::default(),
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
-                memory: opts.use_cache.then(|| engine.memory.clone()),
+                memory: opts.use_cache.then(|| shared.memory.clone()),
                 disk: if opts.use_cache && (slot.node.spec().disk_cache || opts.cache_everything) {
-                    engine.disk.clone()
+                    shared.disk.clone()
                 } else {
                     None
                 },

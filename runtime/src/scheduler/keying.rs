@@ -6,6 +6,8 @@ use super::{failure, Slot};
 use crate::key::{self, Key, KeyParts};
 use crate::node::{DynNode, NodeError, Prepared};
 use crate::report::NodeStatus;
+use crate::resources::Resources;
+use crate::run::RunOptions;
 use mesoflow_graph::{CheckedNode, DevicePreference};
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
@@ -18,10 +20,10 @@ pub(crate) struct Keyed {
 }
 
 pub(crate) fn key_all(
-    engine: &crate::engine::Engine,
+    shared: &Resources,
     graph: &mesoflow_graph::CheckedGraph,
     plan: &super::plan::Plan,
-    opts: &crate::engine::RunOptions,
+    opts: &RunOptions,
 ) -> Keyed {
     let base_dir = opts.base_dir.as_path();
     let mut slots: Vec<Option<Slot>> = Vec::with_capacity(graph.nodes.len());
@@ -31,7 +33,7 @@ pub(crate) fn key_all(
             slots.push(None);
             continue;
         }
-        let Some(node) = engine.registry.node(&cn.kind).cloned() else {
+        let Some(node) = shared.registry.node(&cn.kind).cloned() else {
             slots.push(None);
             continue;
         };
@@ -44,7 +46,7 @@ pub(crate) fn key_all(
                 NodeStatus::Cancelled,
                 format!("not run: input node `{}` failed", graph.nodes[u].id),
             )),
-            None => super::device::choose(engine, slot.node.spec().device, opts)
+            None => super::device::choose(shared, slot.node.spec().device, opts)
                 .map_err(|e| (NodeStatus::Failed, e))
                 .and_then(|choice| {
                     let path =

@@ -18,10 +18,11 @@ mod verify;
 mod write;
 
 use crate::cache::Record;
-use crate::engine::{Engine, RunObserver, RunOptions, RunOutcome};
 use crate::key::Key;
 use crate::node::{DynNode, Outputs, Prepared, ProgressSink};
 use crate::report::{NodeReport, NodeStatus, RunReport, Warning};
+use crate::resources::Resources;
+use crate::run::{RunObserver, RunOptions, RunOutcome};
 use mesoflow_graph::{CheckedGraph, DevicePreference};
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
@@ -106,12 +107,12 @@ pub(crate) fn timings_of(record: &Record) -> BTreeMap<String, f64> {
 }
 
 pub(crate) fn keys(
-    engine: &Engine,
+    shared: &Resources,
     graph: &CheckedGraph,
     opts: &RunOptions,
 ) -> BTreeMap<String, Result<Key, String>> {
     let plan = plan::Plan::new(graph, opts);
-    let keyed = keying::key_all(engine, graph, &plan, opts);
+    let keyed = keying::key_all(shared, graph, &plan, opts);
     graph
         .nodes
         .iter()
@@ -129,7 +130,7 @@ pub(crate) fn keys(
 }
 
 pub(crate) fn execute(
-    engine: &Engine,
+    shared: &Resources,
     graph: &CheckedGraph,
     opts: &RunOptions,
     observer: Arc<dyn RunObserver>,
@@ -143,8 +144,8 @@ pub(crate) fn execute(
     let keying::Keyed {
         mut slots,
         mut read_files,
-    } = keying::key_all(engine, graph, &plan, opts);
-    let mut compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
+    } = keying::key_all(shared, graph, &plan, opts);
+    let mut compute = demand::demand(shared, graph, &plan, &mut slots, opts, &sink);
     // A GPU node keyed from the probe remembered in the disk cache and about to be computed:
     // the live probe must agree first, or the graph is keyed again from the live device.
     let remembered = (0..slots.len()).find_map(|i| {
@@ -154,7 +155,7 @@ pub(crate) fn execute(
             .flatten()
     });
     if let Some((i, found)) = remembered {
-        if !device::confirm(engine, opts, &found) {
+        if !device::confirm(shared, opts, &found) {
             sink.push(
                 &graph.nodes[i].id,
                 format!(
@@ -162,8 +163,8 @@ pub(crate) fn execute(
                      again from the live one"
                 ),
             );
-            keying::Keyed { slots, read_files } = keying::key_all(engine, graph, &plan, opts);
-            compute = demand::demand(engine, graph, &plan, &mut slots, opts, &sink);
+            keying::Keyed { slots, read_files } = keying::key_all(shared, graph, &plan, opts);
+            compute = demand::demand(shared, graph, &plan, &mut slots, opts, &sink);
         }
     }
 
@@ -190,7 +191,7 @@ pub(crate) fn execute(
     }
 
     let executed = dispatch::run_all(
-        engine, graph, &plan, &mut slots, &compute, opts, &sink, &observer, files,
+        shared, graph, &plan, &mut slots, &compute, opts, &sink, &observer, files,
     );
 
     let cancelled = opts.cancel.load(std::sync::atomic::Ordering::Relaxed);
@@ -298,6 +299,3 @@ pub(crate) fn cancel_dependants(
         }
     }
 }
-
-#[cfg(test)]
-mod tests;

@@ -1,7 +1,7 @@
 //! Phase 1, **plan**: the graph's edges as indices, the requested nodes (by default the sinks) and
 //! every ancestor they need.
 
-use crate::engine::RunOptions;
+use crate::run::RunOptions;
 use crate::value::{Artifact, Artifacts};
 use mesoflow_graph::CheckedGraph;
 use std::collections::{BTreeMap, BTreeSet};

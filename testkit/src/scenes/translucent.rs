@@ -78,7 +78,7 @@ impl Scene {
     }
 
     /// The camera's eye and the direction towards the light, from the drawn parameters.
-    fn view(&self) -> ([f64; 3], [f64; 3]) {
+    pub fn view(&self) -> ([f64; 3], [f64; 3]) {
         let reach = self.size
             + if self.shape == "torus" {
                 self.minor

@@ -50,7 +50,7 @@ impl Nearest {
     }
 
     /// The samples within `radius` of `p` (at most two cells away).
-    fn within(&self, p: V3, radius: f64) -> Vec<usize> {
+    pub(super) fn within(&self, p: V3, radius: f64) -> Vec<usize> {
         let c = Self::key(p, self.cell);
         let reach = (radius / self.cell).ceil().clamp(1.0, 2.0) as i64;
         let mut found = Vec::new();

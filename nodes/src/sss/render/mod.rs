@@ -50,6 +50,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
+mod at_samples;
 mod beam;
 mod body;
 mod bounce;
@@ -142,7 +143,26 @@ crate::view_params! {
         /// meant with a profile of multiple scattering alone (`pbd_multiple`) and
         /// `single_scattering`.
         pub sources: Sources = Sources::Beam,
+        /// Where the diffusion sum is gathered: `auto` (default) at the irradiance samples the
+        /// view needs, each pixel interpolated from the samples around it, where those are fewer
+        /// than the covered pixels (a view then costs the surface it sees, not its pixels), and
+        /// per pixel elsewhere; `pixels`: per pixel always; `samples`: at the samples always.
+        /// The pixel's own light (the near disc) is per pixel in every case (`at_samples.rs`).
+        pub gather: GatherAt = GatherAt::Auto,
     }
+}
+
+/// Where the diffusion sum is gathered.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum GatherAt {
+    /// At the samples where the view needs fewer of them than it covers pixels, else per pixel.
+    #[default]
+    Auto,
+    /// Per pixel.
+    Pixels,
+    /// At the samples, interpolated to the pixels.
+    Samples,
 }
 
 /// Where the light entering at a sample starts to diffuse.
@@ -200,7 +220,9 @@ impl Node for Render {
             // convex mesh renders as with `bounces: 0`, in a quarter of the time.
             // 13: the `lighting` input (images unchanged without it); the beams' kernels with
             // `expneg` (within 4·10⁻¹⁶ of the library's exp, a quarter less gather time).
-            version: 13,
+            // 14: `gather` (`auto`: through the samples where the view needs fewer than it
+            // covers pixels; per pixel as before elsewhere). 15: one sample in four gathers.
+            version: 15,
             doc: "Translucent mesh with a diffusion profile (Jensen & Buhler 2002): blue-noise irradiance samples, shadows, octree gather on the CPU or brute force on the GPU, optional single scattering; linear HDR image.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -214,7 +236,7 @@ impl Node for Render {
                 Port::output("exitance", Image::TYPE, "diffuse exitance M per pixel (transmitted flux per area)"),
                 Port::output("points", "Scalar", "irradiance samples used"),
                 Port::optional_output("spacing", "Scalar", "their spacing, mm (absent in `brdf` mode: no samples)"),
-                Port::output("terms", "Scalar", "mean profile evaluations per pixel"),
+                Port::output("terms", "Scalar", "mean profile evaluations per gather (a pixel's, or a sample's under `gather: samples`)"),
                 Port::optional_output("body_spacing", "Scalar", "the cell of `geometry: body`'s grid, mm (absent otherwise)"),
             ]
             .into_iter()
@@ -237,12 +259,17 @@ impl Node for Render {
             ),
             ("bounce_seconds", "the bounces' share of `setup_seconds`, s"),
             (
+                "gathers",
+                "the gathers the sum took: one a sample the view needs (`gather: samples`, and `auto` where they are fewer than the covered pixels), else one a covered pixel",
+            ),
+            ("covered_pixels", "the pixels that see the object"),
+            (
                 "shading_seconds",
                 "wall time of each pixel's own light and single scattering, s",
             ),
             (
                 "body_seconds",
-                "wall time of `geometry: body`'s grid, solve and share of each pixel's exitance, s (absent otherwise)",
+                "wall time of `geometry: body`'s grid, solve and share of each pixel's exitance, s (absent otherwise; through the samples the share is in `gather_seconds`)",
             ),
         ]
     }
@@ -268,6 +295,8 @@ impl Node for Render {
             ctx.warn(w);
         }
         ctx.timing("gather_seconds", r.gather_seconds);
+        ctx.timing("gathers", r.gathers as f64);
+        ctx.timing("covered_pixels", r.covered as f64);
         ctx.timing("setup_seconds", r.setup_seconds);
         ctx.timing("bounce_seconds", r.bounce_seconds);
         ctx.timing("shading_seconds", r.shading_seconds);
@@ -299,6 +328,11 @@ pub struct Rendered {
     pub spacing: Option<f64>,
     /// Mean profile evaluations per covered pixel.
     pub terms: f64,
+    /// The gathers the sum took: one a sample the view needs under `gather: samples`, else
+    /// one a covered pixel.
+    pub gathers: usize,
+    /// The pixels that see the object.
+    pub covered: usize,
     pub gather_seconds: f64,
     /// The BVH, the samples, their light, octree and beams, the bounces and the thickness
     /// (everything that does not depend on the camera but the body's grid), s.
@@ -429,19 +463,47 @@ pub(super) fn render_lit(
     let view = View::new(mesh, &camera, &tracer);
     let view_seconds = view_start.elapsed().as_secs_f64();
     let gather_start = Instant::now();
-    let (mut sums, terms) = match (p.mode, gpu) {
-        (Mode::Brdf, _) => (vec![[0.0; 3]; view.hits.len()], 0.0),
+    let covered = view.hits.iter().filter(|h| h.is_some()).count();
+    // Through the samples the gathers add the body's share themselves.
+    let mut body_in_sums = false;
+    let (mut sums, terms, gathers) = match (p.mode, gpu) {
+        (Mode::Brdf, _) => (vec![[0.0; 3]; view.hits.len()], 0.0, 0),
         // The GPU gather knows the planar profile only.
-        (Mode::Diffusion, Some(gpu)) if p.geometry == Geometry::Planar => {
-            (gather_gpu(gpu, &setup, &view)?, setup.sources.len() as f64)
+        (Mode::Diffusion, Some(gpu)) if p.geometry == Geometry::Planar => (
+            gather_gpu(gpu, &setup, &view)?,
+            setup.sources.len() as f64,
+            covered,
+        ),
+        (Mode::Diffusion, _) => {
+            let share = body.as_ref().map(|(b, _)| {
+                let octree = &setup.octree;
+                move |x: V3, n: V3| b.exitance(octree, x, n)
+            });
+            let share = share.as_ref().map(|f| f as &at_samples::Share);
+            let through = match p.gather {
+                GatherAt::Pixels => None,
+                at => at_samples::gather(
+                    &setup,
+                    &view,
+                    p.threshold,
+                    at == GatherAt::Auto,
+                    share,
+                    watch,
+                ),
+            };
+            body_in_sums = through.is_some();
+            through.unwrap_or_else(|| {
+                let (sums, terms) = gather_cpu(&setup, &view, p.threshold, watch);
+                (sums, terms, covered)
+            })
         }
-        (Mode::Diffusion, _) => gather_cpu(&setup, &view, p.threshold, watch),
     };
     if watch.stopped() {
         return Err(NodeError::Cancelled);
     }
     let gather_seconds = gather_start.elapsed().as_secs_f64();
     let body_seconds = match &body {
+        Some(_) if body_in_sums => Some(body_setup_seconds),
         Some((b, _)) => {
             let start = Instant::now();
             let octree = &setup.octree;
@@ -489,6 +551,8 @@ pub(super) fn render_lit(
         points: setup.sources.len(),
         spacing: (p.mode == Mode::Diffusion).then_some(setup.spacing_mm),
         terms,
+        gathers,
+        covered,
         gather_seconds,
         setup_seconds,
         bounce_seconds: setup.bounce_seconds,

@@ -12,6 +12,7 @@ use crate::optics::phase::henyey_greenstein;
 use crate::raytrace::light::Light;
 use crate::raytrace::shadow::ShadowMap;
 use crate::types::{Image, ScatteringMaterial};
+use rayon::prelude::*;
 
 /// Radiance and exitance images from the gathered sums.
 pub(super) fn finish(
@@ -24,56 +25,65 @@ pub(super) fn finish(
     traced: Option<&Traced>,
 ) -> (Image, Image) {
     let eta = setup.eta;
-    let mut radiance = Vec::with_capacity(3 * sums.len());
-    let mut exitance = Vec::with_capacity(3 * sums.len());
-    for (px, (h, s)) in view.hits.iter().zip(sums).enumerate() {
-        let Some((x, n, d, frag)) = h else {
-            radiance.extend(p.background.map(|v| v as f32));
-            exitance.extend([0.0f32; 3]);
-            continue;
-        };
-        let e0 = irradiance(light, setup.shadow.as_ref(), *x, *n, eta);
-        let to_light = light.at(*x).0;
-        // The near disc's light enters through the same entrance function as the samples'.
-        let f0 = if e0 > 0.0 {
-            let (f, k) = (
-                weights.entrance(frag, to_light),
-                setup.energy_at(dot(*n, to_light)),
-            );
-            [0, 1, 2].map(|c| f[c] * k[c])
-        } else {
-            [0.0; 3]
-        };
-        let bounced = setup.bounced_at(*x);
-        let m = [0, 1, 2].map(|c| s[c] + (e0 * f0[c] + bounced[c]) * setup.near_energy[c]);
-        let v = d.map(|c| -c);
-        let cos_o = dot(*n, v).clamp(0.0, 1.0);
-        let single = match (p.single_scattering, traced) {
-            (false, _) => [0.0; 3],
-            (true, Some(t)) => {
-                let (_, ng) = t.tracer.triangle(frag.tri as usize);
-                t.radiance(material, light, *x, ng, *d, cos_o)
-            }
-            (true, None) => single_scattering(material, light, setup.shadow.as_ref(), *x, *n, v),
-        };
-        let (exit, local) = weights.pixel(px, frag, v);
-        // A silhouette pixel shows the object over its covered share, the background elsewhere.
-        let cover = view.coverage[px];
-        // What the pixel's own irradiance would return from a plane: the light that leaves
-        // with the local shape under `emission: half_space`.
-        let own = (e0 > 0.0).then(|| Local {
-            mu0: dot(*n, to_light).clamp(0.0, 1.0),
-            exitance: [0, 1, 2].map(|c| e0 * f0[c] * setup.total[c] * exit[c]),
-        });
-        let leaving = setup
-            .exit
-            .leaving(cos_o, [0, 1, 2].map(|c| m[c] * exit[c]), own.as_ref());
-        radiance.extend([0, 1, 2].map(|c| {
-            let object = leaving[c] + single[c] + local[c];
-            (cover * object + (1.0 - cover) * p.background[c]) as f32
-        }));
-        exitance.extend(m.map(|v| v as f32));
-    }
+    // Each pixel on its own (in parallel, the same bits at any thread count).
+    let pixels: Vec<([f32; 3], [f32; 3])> = view
+        .hits
+        .par_iter()
+        .zip(sums)
+        .enumerate()
+        .map(|(px, (h, s))| {
+            let Some((x, n, d, frag)) = h else {
+                return (p.background.map(|v| v as f32), [0.0f32; 3]);
+            };
+            let e0 = irradiance(light, setup.shadow.as_ref(), *x, *n, eta);
+            let to_light = light.at(*x).0;
+            // The near disc's light enters through the same entrance function as the samples'.
+            let f0 = if e0 > 0.0 {
+                let (f, k) = (
+                    weights.entrance(frag, to_light),
+                    setup.energy_at(dot(*n, to_light)),
+                );
+                [0, 1, 2].map(|c| f[c] * k[c])
+            } else {
+                [0.0; 3]
+            };
+            let bounced = setup.bounced_at(*x);
+            let m = [0, 1, 2].map(|c| s[c] + (e0 * f0[c] + bounced[c]) * setup.near_energy[c]);
+            let v = d.map(|c| -c);
+            let cos_o = dot(*n, v).clamp(0.0, 1.0);
+            let single = match (p.single_scattering, traced) {
+                (false, _) => [0.0; 3],
+                (true, Some(t)) => {
+                    let (_, ng) = t.tracer.triangle(frag.tri as usize);
+                    t.radiance(material, light, *x, ng, *d, cos_o)
+                }
+                (true, None) => {
+                    single_scattering(material, light, setup.shadow.as_ref(), *x, *n, v)
+                }
+            };
+            let (exit, local) = weights.pixel(px, frag, v);
+            // A silhouette pixel shows the object over its covered share, the background
+            // elsewhere.
+            let cover = view.coverage[px];
+            // What the pixel's own irradiance would return from a plane: the light that leaves
+            // with the local shape under `emission: half_space`.
+            let own = (e0 > 0.0).then(|| Local {
+                mu0: dot(*n, to_light).clamp(0.0, 1.0),
+                exitance: [0, 1, 2].map(|c| e0 * f0[c] * setup.total[c] * exit[c]),
+            });
+            let leaving =
+                setup
+                    .exit
+                    .leaving(cos_o, [0, 1, 2].map(|c| m[c] * exit[c]), own.as_ref());
+            let radiance = [0, 1, 2].map(|c| {
+                let object = leaving[c] + single[c] + local[c];
+                (cover * object + (1.0 - cover) * p.background[c]) as f32
+            });
+            (radiance, m.map(|v| v as f32))
+        })
+        .collect();
+    let radiance: Vec<f32> = pixels.iter().flat_map(|p| p.0).collect();
+    let exitance: Vec<f32> = pixels.iter().flat_map(|p| p.1).collect();
     let image = |data| Image {
         width: view.width,
         height: view.height,

@@ -729,3 +729,46 @@ fn the_defaults_are_the_accurate_configuration_and_auto_follows_the_mesh() {
         tiny.warnings
     );
 }
+
+#[test]
+fn the_sum_through_the_samples_is_the_per_pixel_sum_interpolated() {
+    // The defaults (beams, body, bounces) on the sphere at 48 × 48: the gather at the samples the
+    // view needs, interpolated, against the gather at every pixel. Measured 2.33e-2 relative RMS
+    // of the exitance (1.7e-2 of the image) with one sample in four gathering (1.37e-2 with all
+    // of them); BOUND leaves twice that. Against the volumetric truth the family's errors moved
+    // by at most 0.004 (the translucency guide).
+    const BOUND: f64 = 0.05;
+    let m = medium();
+    let profile = profile_of(&m);
+    let sphere = mesh(Shape::Sphere, 1.0);
+    let at = |gather, side| {
+        let s = sphere_scene(0.05);
+        let p = Params {
+            gather,
+            camera: CameraParams {
+                resolution: [side, side],
+                ..s.camera
+            },
+            light: s.light,
+            mm_per_unit: s.mm_per_unit,
+            shadow_resolution: s.shadow_resolution,
+            ..Params::default()
+        };
+        render(None, &sphere, &m, &profile, &p).unwrap()
+    };
+    let (pixels, samples) = (at(GatherAt::Pixels, 48), at(GatherAt::Samples, 48));
+    let e = rel_rms(&samples.exitance.data, &pixels.exitance.data);
+    eprintln!(
+        "exitance through the samples against per pixel: relative RMS {e:.2e}; image {:.2e}",
+        rel_rms(&samples.image.data, &pixels.image.data)
+    );
+    assert!(e < BOUND, "{e}");
+    assert_eq!(pixels.gathers, pixels.covered);
+    // `auto` takes the cheaper path: through the samples where the view needs fewer of them than
+    // it covers pixels (here at 48 × 48), per pixel where more (at 12 × 12).
+    assert!(samples.gathers < samples.covered, "{}", samples.gathers);
+    assert_eq!(at(GatherAt::Auto, 48).image.data, samples.image.data);
+    let (auto, small) = (at(GatherAt::Auto, 12), at(GatherAt::Samples, 12));
+    assert!(small.gathers >= small.covered, "{}", small.gathers);
+    assert_eq!(auto.image.data, at(GatherAt::Pixels, 12).image.data);
+}

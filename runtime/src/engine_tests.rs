@@ -1,10 +1,11 @@
-//! The scheduler's behaviour on small test kinds: caching, verification, concurrency, failures,
+//! The engine's runs (the scheduler's behaviour) on small test kinds: caching, verification, concurrency, failures,
 //! files on warm runs.
 
-use crate::engine::{Engine, EngineConfig, RunOptions, SilentObserver};
+use crate::engine::{Engine, EngineConfig};
 use crate::node::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
 use crate::registry::Registry;
 use crate::report::NodeStatus;
+use crate::run::{RunOptions, SilentObserver};
 use crate::value::{Artifact, Scalar};
 use mesoflow_graph::{check, DevicePreference, GraphFile};
 use schemars::JsonSchema;
