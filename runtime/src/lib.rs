@@ -12,6 +12,7 @@ pub mod gpu;
 pub mod gpu_memo;
 pub mod key;
 pub mod node;
+mod node_panic;
 pub mod producer;
 pub mod progress;
 pub mod registry;

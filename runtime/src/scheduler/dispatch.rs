@@ -260,17 +260,15 @@ impl Task {
     fn run(self) {
         let t = Instant::now();
         let result = match &self.prepared {
-            Some(p) => std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                self.node.run(&self.ctx, p, &self.inputs)
-            }))
-            .unwrap_or_else(|panic| {
-                let msg = panic
-                    .downcast_ref::<String>()
-                    .cloned()
-                    .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
-                    .unwrap_or_default();
-                Err(NodeError::Failed(format!("internal error (panic): {msg}")))
-            }),
+            Some(p) => crate::node_panic::catching(|| self.node.run(&self.ctx, p, &self.inputs))
+                .unwrap_or_else(|panic| {
+                    let msg = panic
+                        .downcast_ref::<String>()
+                        .cloned()
+                        .or_else(|| panic.downcast_ref::<&str>().map(|s| s.to_string()))
+                        .unwrap_or_default();
+                    Err(NodeError::Failed(format!("internal error (panic): {msg}")))
+                }),
             None => Err(NodeError::Failed("internal: no prepared parameters".into())),
         };
         let record = Record {
