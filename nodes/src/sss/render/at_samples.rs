@@ -21,7 +21,7 @@ use crate::sss::octree::Source;
 use rayon::prelude::*;
 
 use super::bounce::Nearest;
-use super::gather::View;
+use super::gather::{in_blocks, sum_at, View};
 
 /// The interpolation's reach, in sample spacings.
 const REACH: f64 = 1.5;
@@ -129,8 +129,7 @@ pub(super) fn gather(
     }
     let unit = setup.unit;
     let at = |x: V3, n: V3| {
-        let rd = |key, q, nq, d2| setup.rd(x, n, key, q, nq, d2);
-        let (mut sum, terms) = setup.octree.gather_keyed(x, setup.near, threshold, &rd);
+        let (mut sum, terms) = sum_at(setup, x, n, threshold);
         if let Some(share) = share {
             let more = share(x, n);
             for c in 0..3 {
@@ -139,32 +138,14 @@ pub(super) fn gather(
         }
         (sum, terms)
     };
-    let at_sample = |j: u32| {
-        let s = &setup.sources[j as usize];
+    let at_needed = in_blocks(needed.len(), BLOCK, watch, &|i| {
+        let s = &setup.sources[needed[i] as usize];
         at(s.p, s.n)
-    };
-    let at_pixel = |px: usize| match &view.hits[px] {
+    });
+    let at_alone = in_blocks(alone.len(), BLOCK, watch, &|i| match &view.hits[alone[i]] {
         Some((p, n, ..)) => at(p.map(|v| v * unit), *n),
         None => ([0.0; 3], 0),
-    };
-    watch.grow((needed.len().div_ceil(BLOCK) + alone.len().div_ceil(BLOCK)) as u64);
-    let run = |count: usize, f: &(dyn Fn(usize) -> ([f64; 3], usize) + Sync)| {
-        (0..count)
-            .collect::<Vec<_>>()
-            .par_chunks(BLOCK)
-            .flat_map_iter(|block| {
-                let stopped = watch.stopped();
-                let out: Vec<([f64; 3], usize)> = block
-                    .iter()
-                    .map(|&i| if stopped { ([0.0; 3], 0) } else { f(i) })
-                    .collect();
-                watch.add(1);
-                out
-            })
-            .collect::<Vec<_>>()
-    };
-    let at_needed = run(needed.len(), &|i| at_sample(needed[i]));
-    let at_alone = run(alone.len(), &|i| at_pixel(alone[i]));
+    });
     let mut value = vec![[0.0; 3]; setup.sources.len()];
     for (&j, r) in needed.iter().zip(&at_needed) {
         value[j as usize] = r.0;

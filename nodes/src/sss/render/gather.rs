@@ -126,30 +126,44 @@ pub(super) fn gather_cpu(
 ) -> (Vec<[f64; 3]>, f64) {
     const BLOCK: usize = 1024;
     let unit = setup.unit;
-    watch.grow(view.hits.len().div_ceil(BLOCK) as u64);
-    let results: Vec<([f64; 3], usize)> = view
-        .hits
-        .par_chunks(BLOCK)
-        .flat_map_iter(|block| {
-            let stopped = watch.stopped();
-            let sums: Vec<([f64; 3], usize)> = block
-                .iter()
-                .map(|h| match h {
-                    Some((p, n, ..)) if !stopped => {
-                        let xo = p.map(|v| v * unit);
-                        let rd = |key, q, nq, d2| setup.rd(xo, *n, key, q, nq, d2);
-                        setup.octree.gather_keyed(xo, setup.near, threshold, &rd)
-                    }
-                    _ => ([0.0; 3], 0),
-                })
-                .collect();
-            watch.add(1);
-            sums
-        })
-        .collect();
+    let results = in_blocks(view.hits.len(), BLOCK, watch, &|px| match &view.hits[px] {
+        Some((p, n, ..)) => sum_at(setup, p.map(|v| v * unit), *n, threshold),
+        None => ([0.0; 3], 0),
+    });
     let hit = view.hits.iter().filter(|h| h.is_some()).count().max(1);
     let terms = results.iter().map(|r| r.1).sum::<usize>() as f64 / hit as f64;
     (results.into_iter().map(|r| r.0).collect(), terms)
+}
+
+/// Σ Rd·E·ΔA beyond the near disc at `x` (mm) with unit normal `n` over the octree, and the
+/// terms it took.
+pub(super) fn sum_at(setup: &Setup, x: V3, n: V3, threshold: f64) -> ([f64; 3], usize) {
+    let rd = |key, q, nq, d2| setup.rd(x, n, key, q, nq, d2);
+    setup.octree.gather_keyed(x, setup.near, threshold, &rd)
+}
+
+/// `f` of 0..`count` in parallel, in blocks of `block` each counted on `watch`; a stopped watch
+/// skips the remaining blocks (their entries are zero). In order, whatever the threads.
+pub(super) fn in_blocks(
+    count: usize,
+    block: usize,
+    watch: &Counter,
+    f: &(dyn Fn(usize) -> ([f64; 3], usize) + Sync),
+) -> Vec<([f64; 3], usize)> {
+    watch.grow(count.div_ceil(block) as u64);
+    (0..count)
+        .collect::<Vec<_>>()
+        .par_chunks(block)
+        .flat_map_iter(|chunk| {
+            let stopped = watch.stopped();
+            let out: Vec<([f64; 3], usize)> = chunk
+                .iter()
+                .map(|&i| if stopped { ([0.0; 3], 0) } else { f(i) })
+                .collect();
+            watch.add(1);
+            out
+        })
+        .collect()
 }
 
 pub(super) fn gather_gpu(
