@@ -94,8 +94,9 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
             }
             a.extend(viewer.iter().cloned());
             mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
-            let btf_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
-            std::fs::rename(case.join("plan.json"), case.join("plan_btf.json")).unwrap();
+            // `mesoflow plan` names the plan after the planned graph (`step.json` → `step.plan.json`).
+            let btf_plan = std::fs::read_to_string(case.join("step.plan.json")).unwrap();
+            std::fs::rename(case.join("step.plan.json"), case.join("plan_btf.json")).unwrap();
             let mut a: Vec<&str> = vec![
                 "plan",
                 step.to_str().unwrap(),
@@ -113,8 +114,8 @@ pub fn sweep(out: &Path, width: u32, split: &str, ppd: Option<f64>) -> Vec<Row> 
             ];
             a.extend(viewer.iter().map(String::as_str));
             mesoflow(&a);
-            let sss_plan = std::fs::read_to_string(case.join("plan.json")).unwrap();
-            std::fs::rename(case.join("plan.json"), case.join("plan_sss.json")).unwrap();
+            let sss_plan = std::fs::read_to_string(case.join("planned.plan.json")).unwrap();
+            std::fs::rename(case.join("planned.plan.json"), case.join("plan_sss.json")).unwrap();
             let run_out = case.join("out");
             // Ask for the measures, so that a run served wholly from the cache still reports them.
             mesoflow(&[
@@ -218,7 +219,7 @@ pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
             }
             mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
             let plan: Value =
-                serde_json::from_str(&std::fs::read_to_string(case.join("plan.json")).unwrap())
+                serde_json::from_str(&std::fs::read_to_string(case.join("planned.plan.json")).unwrap())
                     .unwrap();
             let run_out = case.join("out");
             mesoflow(&[
