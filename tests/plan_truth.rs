@@ -4,6 +4,8 @@
 //! within the budget. At a budget no model reaches, brute force is planned (a planner that never
 //! plans brute force fails here); at a lax one a model is, the fastest that fits (a planner that
 //! keeps the graph, or takes the cheapest whatever its error, fails here); the planned graph runs.
+//! The same for `render.mesh` whose BTF the graph captures from a height field: the truth is that
+//! height field displaced and path traced; brute force is planned with the displaced surface.
 //! A render the truth cannot be made for is a clear error.
 
 use crate::common::{mesoflow, Scratch};
@@ -68,11 +70,97 @@ fn chosen(doc: &Value) -> &Value {
         .expect("the chosen is a candidate")
 }
 
+/// The acceptance a plan is held to, on the candidates its document measured: the choice is
+/// within the budget where any candidate is, and the fastest of those (by the estimates the
+/// candidates were measured at). `pick` is the planner: the name of its choice.
+fn accepted(doc: &Value, pick: &dyn Fn(&[Value]) -> Option<String>) -> Result<(), String> {
+    let all = candidates(doc);
+    let budget = doc["budget"]["relative_rmse"].as_f64().unwrap();
+    let name = pick(all).ok_or("nothing chosen")?;
+    let c = all
+        .iter()
+        .find(|c| c["candidate"] == name.as_str())
+        .ok_or("not a candidate")?;
+    let time = |c: &Value| c["full_seconds_estimate"].as_f64().unwrap_or(f64::INFINITY);
+    let fits: Vec<&Value> = all.iter().filter(|c| c["within_budget"] == true).collect();
+    if fits.is_empty() {
+        return Ok(());
+    }
+    if c["relative_rmse"].as_f64().is_none_or(|e| e > budget) {
+        return Err(format!("{name} misses the budget {budget}"));
+    }
+    let fastest = fits.iter().map(|c| time(c)).fold(f64::INFINITY, f64::min);
+    if time(c) > fastest {
+        return Err(format!(
+            "{name} is slower than the fastest within the budget"
+        ));
+    }
+    Ok(())
+}
+
+/// A planner: the name of the candidate it chooses from a plan's measured candidates.
+type Planner = Box<dyn Fn(&[Value]) -> Option<String>>;
+
+/// The planners a test must tell from the real one.
+fn bad_planners() -> Vec<(&'static str, Planner)> {
+    let name = |c: &Value| c["candidate"].as_str().map(String::from);
+    let time = |c: &&Value| c["full_seconds_estimate"].as_f64().unwrap_or(f64::INFINITY);
+    let error = |c: &&Value| c["relative_rmse"].as_f64().unwrap_or(f64::INFINITY);
+    vec![
+        (
+            "never simplifies (the render as given)",
+            Box::new(move |all: &[Value]| all.first().and_then(name)),
+        ),
+        (
+            "always the cheapest, whatever its error",
+            Box::new(move |all: &[Value]| {
+                all.iter()
+                    .min_by(|a, b| time(a).total_cmp(&time(b)))
+                    .and_then(name)
+            }),
+        ),
+        (
+            "never brute force (the best model)",
+            Box::new(move |all: &[Value]| {
+                let models = all.iter().filter(|c| c["family"] == "model");
+                let fits: Vec<&Value> = models
+                    .clone()
+                    .filter(|c| c["within_budget"] == true)
+                    .collect();
+                if fits.is_empty() {
+                    models
+                        .min_by(|a, b| error(a).total_cmp(&error(b)))
+                        .and_then(name)
+                } else {
+                    fits.into_iter()
+                        .min_by(|a, b| time(a).total_cmp(&time(b)))
+                        .and_then(name)
+                }
+            }),
+        ),
+    ]
+}
+
+/// Each bad planner fails the acceptance on at least one of the budgets the real one passes.
+fn bad_planners_fail(docs: &[&Value]) {
+    for doc in docs {
+        let chosen = doc["chosen"].as_str().map(String::from);
+        accepted(doc, &|_| chosen.clone()).unwrap_or_else(|e| panic!("the planner: {e}\n{doc}"));
+    }
+    for (what, planner) in bad_planners() {
+        assert!(
+            docs.iter().any(|doc| accepted(doc, planner.as_ref()).is_err()),
+            "a planner that {what} passes the acceptance: the test cannot tell it from the real one"
+        );
+    }
+}
+
 #[test]
 fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
     let s = Scratch::new();
     // Tight: the models are 0.14-0.21 from the truth over the family; only brute force fits.
     let (doc, planned) = plan(&s, "rmse=0.06");
+    let tight = doc.clone();
     assert_eq!(doc["judge"], "truth");
     assert!(
         doc["truth"]["noise"].as_f64().unwrap() <= 0.06 / 3.0,
@@ -118,6 +206,7 @@ fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
     );
     assert!(c["relative_rmse"].as_f64().unwrap() <= 0.5);
     assert_eq!(planned["nodes"]["ours"]["kind"], c["kind"]);
+    bad_planners_fail(&[&tight, &doc]);
 
     // The planned graph runs and renders the view.
     let path = s.path("planned-rmse=0.5.json");
@@ -141,13 +230,14 @@ fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
 #[test]
 fn a_render_without_a_truth_and_a_flip_budget_against_the_truth_are_clear_errors() {
     let s = Scratch::new();
-    let mesh = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/mdf_render.json");
+    // qh.render: no single homogeneous medium stands for its measured material.
+    let qh = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/plan_qh.json");
     let r = mesoflow(
         &[
             "plan",
-            mesh.to_str().unwrap(),
+            qh.to_str().unwrap(),
             "--render",
-            "torus_mdf",
+            "qh_view",
             "--against",
             "truth",
             "--budget",
@@ -158,7 +248,7 @@ fn a_render_without_a_truth_and_a_flip_budget_against_the_truth_are_clear_errors
         s.dir.path(),
     );
     assert_eq!(r.code, 2, "{}{}", r.stdout, r.stderr);
-    assert!(r.stderr.contains("truth is not built yet"), "{}", r.stderr);
+    assert!(r.stderr.contains("truth is not built"), "{}", r.stderr);
     let r = mesoflow(
         &[
             "plan",
@@ -174,4 +264,134 @@ fn a_render_without_a_truth_and_a_flip_budget_against_the_truth_are_clear_errors
     );
     assert_eq!(r.code, 2, "{}{}", r.stdout, r.stderr);
     assert!(r.stderr.contains("rmse=B"), "{}", r.stderr);
+}
+
+/// A small mesostructure scene: a bumps tile captured at a few directions (so that every model
+/// is visibly off the truth), its MDF, a sphere, 40 × 30; only the image is read from the render.
+fn mesh_graph(s: &Scratch) -> PathBuf {
+    let dirs = serde_json::json!({ "thetas": [0, 30, 60], "phis": [0, 90, 180, 270] });
+    let camera = serde_json::json!({ "eye": [0.0, 0.8, 2.6], "target": [0.0, 0.0, 0.0], "fov": 40.0, "resolution": [40, 30] });
+    let g = serde_json::json!({
+        "mesoflow": 1,
+        "nodes": {
+            "surface": { "kind": "heightfield.procedural", "params": { "pattern": "bumps", "size": 16, "count": 2, "depth": 3.0 } },
+            "capture": { "kind": "btf.capture", "inputs": { "height": "surface.height" },
+                         "params": { "views": dirs, "lights": dirs, "albedo": [0.7, 0.5, 0.3] } },
+            "mdf": { "kind": "mdf.tabulate", "inputs": { "height": "surface.height" },
+                     "params": { "depth": 3.0, "views": dirs } },
+            "sphere": { "kind": "mesh.primitive", "params": { "shape": "sphere", "size": 0.8, "segments": [32, 16] } },
+            "ours": { "kind": "render.mesh", "inputs": { "mesh": "sphere.mesh", "btf": "capture.btf", "mdf": "mdf.mdf" },
+                      "params": { "camera": camera, "light": { "direction": [0.5, 0.6, 0.6], "intensity": 3.0 },
+                                  "tiling": [6.0, 3.0], "shell": 0.04, "shadows": true, "shadow_resolution": 128 } },
+            "picture": { "kind": "image.write", "inputs": { "image": "ours.image" }, "params": { "path": "ours.exr" } }
+        }
+    });
+    let path = s.path("mesh.json");
+    std::fs::write(&path, g.to_string()).unwrap();
+    path
+}
+
+fn plan_mesh(s: &Scratch, graph: &Path, budget: &str) -> (Value, Value) {
+    let out = s.path(&format!("mesh-{budget}.json"));
+    let cache = s.path("cache");
+    let r = mesoflow(
+        &[
+            "plan",
+            graph.to_str().unwrap(),
+            "--render",
+            "ours",
+            "--against",
+            "truth",
+            "--budget",
+            budget,
+            "--probe-share",
+            "0.5",
+            "-o",
+            out.to_str().unwrap(),
+            "--cache-dir",
+            cache.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let doc: Value = serde_json::from_str(
+        &std::fs::read_to_string(s.path(&format!("mesh-{budget}.plan.json"))).unwrap(),
+    )
+    .unwrap();
+    let planned: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    (doc, planned)
+}
+
+#[test]
+fn a_captured_mesostructure_is_judged_against_its_displaced_truth() {
+    let s = Scratch::new();
+    let graph = mesh_graph(&s);
+    // Tight: the BTF from 12 × 12 directions is far from the truth; only brute force fits.
+    let (doc, planned) = plan_mesh(&s, &graph, "rmse=0.05");
+    let tight = doc.clone();
+    assert_eq!(doc["judge"], "truth");
+    assert!(
+        doc["judge_why"].as_str().unwrap().contains("mesh.displace"),
+        "{doc}"
+    );
+    let all = candidates(&doc);
+    let models: Vec<&Value> = all.iter().filter(|c| c["family"] == "model").collect();
+    // As given, shadows off, the other interpolation, without the MDF.
+    assert_eq!(models.len(), 4, "{doc}");
+    assert!(
+        models.iter().all(|c| c["within_budget"] == false),
+        "a model within 0.05 here would make this test not a test of brute force: {doc}"
+    );
+    let c = chosen(&doc);
+    assert_eq!(c["family"], "brute force", "{doc}");
+    assert!(c["relative_rmse"].as_f64().unwrap() <= 0.05, "{doc}");
+    // The brute-force plan traces the displaced surface, the capture and the MDF pruned.
+    assert_eq!(planned["nodes"]["ours"]["kind"], "render.reference");
+    assert_eq!(
+        planned["nodes"]["ours"]["inputs"]["mesh"],
+        "plan_true_surface.mesh"
+    );
+    assert_eq!(
+        planned["nodes"]["plan_true_surface"]["kind"],
+        "mesh.displace"
+    );
+    assert!(planned["nodes"].get("capture").is_none(), "{planned}");
+    assert!(planned["nodes"].get("mdf").is_none(), "{planned}");
+    let run = |path: &Path| {
+        let r = mesoflow(
+            &[
+                "run",
+                path.to_str().unwrap(),
+                "--quiet",
+                "--out-dir",
+                s.path("out").to_str().unwrap(),
+                "--cache-dir",
+                s.path("cache").to_str().unwrap(),
+            ],
+            s.dir.path(),
+        );
+        assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    };
+    run(&s.path("mesh-rmse=0.05.json"));
+
+    // Lax: the fastest candidate within it, a model.
+    let (doc, planned) = plan_mesh(&s, &graph, "rmse=0.9");
+    let fits: Vec<&Value> = candidates(&doc)
+        .iter()
+        .filter(|c| c["within_budget"] == true)
+        .collect();
+    assert!(fits.len() >= 2, "{doc}");
+    let fastest = fits
+        .iter()
+        .map(|c| c["full_seconds_estimate"].as_f64().unwrap())
+        .fold(f64::INFINITY, f64::min);
+    let c = chosen(&doc);
+    assert_eq!(
+        c["full_seconds_estimate"].as_f64().unwrap(),
+        fastest,
+        "{doc}"
+    );
+    assert_eq!(planned["nodes"]["ours"]["kind"], c["kind"]);
+    run(&s.path("mesh-rmse=0.9.json"));
+    bad_planners_fail(&[&tight, &doc]);
 }

@@ -1,27 +1,38 @@
 //! The planner as the arbiter (issue 57): `mesoflow plan --against truth --budget rmse=B`. Where
-//! the graph can make the truth itself — an `sss.render` whose mesh and medium are in the graph:
-//! volumetric path tracing of the same mesh filled with the same medium (`render.reference`) —
-//! every candidate, across model families, is measured against that truth on a probe of the
-//! user's own view, and the cheapest within the budget wins, brute force included:
+//! the graph can make the truth itself, every candidate, across model families, is measured
+//! against that truth on a probe of the user's own view, and the cheapest within the budget
+//! wins, brute force included. The truth and the candidates by kind:
 //!
-//! - the render as given (its `sss.lighting`'s parameters, where it has one, inlined);
-//! - the model switches that exist: `energy: half_space`, `geometry: exit_normal`, Jensen &
-//!   Buhler's classic configuration, `mode: brdf`;
-//! - brute force: `render.reference` with the medium at the samples a pixel its own measured
-//!   noise says meet the budget (noise falls as 1/√samples: a 16-sample pilot measures the
-//!   constant, the candidate asks for 0.8 of the budget).
+//! - `sss.render` whose mesh and medium are in the graph: the truth is volumetric path tracing
+//!   of the same mesh filled with the same medium (`render.reference`). Candidates: the render as
+//!   given (its `sss.lighting`'s parameters, where it has one, inlined); the model switches that
+//!   exist: `energy: half_space`, `geometry: exit_normal`, Jensen & Buhler's classic
+//!   configuration, `mode: brdf`.
+//! - `render.mesh` whose BTF is captured in the graph (`btf.capture` of a height field, through
+//!   any `btf.pca` and `btf.lod`): the truth is the true mesostructure, `mesh.displace` of the
+//!   same height field on the same mesh (the render's tiling and shell, the MDF's depth), path
+//!   traced with the capture's reflectance (`render.reference`, exact shadows). Candidates: the
+//!   render as given; shadows switched; the other direction interpolation; without the MDF. A
+//!   BTF read from a file, or a capture whose reflectance `render.reference` cannot represent
+//!   (per-texel lobe maps, an anisotropic αv, a Fresnel index other than 1.5), has no truth
+//!   here: the error says so, and the plan is against the graph's own model.
+//! - both: brute force, `render.reference` of the truth's scene at the samples a pixel its own
+//!   measured noise says meet the budget (noise falls as 1/√samples: a 16-sample pilot measures
+//!   the constant, the candidate asks for 0.8 of the budget). Where the graph reads an output of
+//!   the render that `render.reference` does not make, brute force is listed and refused.
 //!
 //! The truth probe is rendered at enough samples that its own noise is a third of the budget or
 //! less (from 256 a pixel, raised from its measured noise, at most [`MOST_TRUTH_SAMPLES`]); each
 //! candidate's error is its relative RMSE against it over the truth's coverage with the truth's
 //! noise taken out (the families' measure). The probe is the centre of the view at the same pixels
 //! per degree (`verify::probe_camera`); each candidate's time on the full view is estimated from
-//! its probe: brute force in proportion to the pixels, `sss.render` as its camera-independent part
-//! once plus its per-pixel stages (gather and shading) in proportion. Where no candidate meets the
-//! budget the most accurate is chosen and the plan says so.
+//! its probe: brute force in proportion to the pixels, a model as its camera-independent part
+//! once plus its per-pixel stages (`sss.render`: gather and shading; `render.mesh`: its frame) in
+//! proportion. Where no candidate meets the budget the most accurate is chosen and the plan says
+//! so.
 //!
-//! `render.mesh` and `qh.render` have no truth here yet (`mesh.displace` of the height field behind
-//! `btf.capture`, a medium for a quasi-homogeneous material): asking is an error that says so.
+//! `qh.render` has no truth here (one homogeneous medium does not stand for a quasi-homogeneous
+//! material's measured profile): asking is an error that says so.
 
 use crate::verify::{camera_of, probe_camera, run_for as run};
 use crate::PlanError;
@@ -36,6 +47,8 @@ pub const TRUTH: &str = "plan_truth";
 /// The candidate's node and its comparison.
 pub const CANDIDATE: &str = "plan_candidate";
 const COMPARE: &str = "plan_candidate_error";
+/// The true mesostructure the truth and brute force trace (`render.mesh`'s truth).
+pub const TRUE_SURFACE: &str = "plan_true_surface";
 /// The truth's samples a pixel at most (its noise then decides nothing more).
 pub const MOST_TRUTH_SAMPLES: u32 = 16_384;
 /// The truth's first samples a pixel.
@@ -72,12 +85,17 @@ pub struct Candidate {
     pub fits: bool,
     /// Why it was not measured or cannot be used, where so.
     pub note: Option<String>,
+    /// What the render warned of on the probe (its validity: where the scene is outside the
+    /// model's domain, with numbers).
+    pub warnings: Vec<String>,
 }
 
 /// The outcome.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Arbitration {
     pub render: String,
+    /// What the truth is, in words.
+    pub judge_why: String,
     pub budget: f64,
     pub resolution: [u32; 2],
     pub share: f64,
@@ -114,13 +132,16 @@ impl Arbitration {
                 if let Some(n) = &c.note {
                     o.insert("note".into(), json!(n));
                 }
+                if !c.warnings.is_empty() {
+                    o.insert("warnings".into(), json!(c.warnings));
+                }
                 Value::Object(o)
             })
             .collect();
         let mut doc = json!({
             "render": self.render,
             "judge": "truth",
-            "judge_why": "the graph holds the mesh and the medium: the truth is volumetric path tracing of them (render.reference)",
+            "judge_why": self.judge_why,
             "budget": { "relative_rmse": self.budget },
             "probe": { "resolution": self.resolution, "share": self.share },
             "truth": { "samples": self.truth_samples },
@@ -150,6 +171,16 @@ fn seconds(report: &RunReport, id: &str) -> Option<f64> {
         .get("seconds")
         .copied()
         .or(Some(n.seconds).filter(|_| n.status == NodeStatus::Computed))
+}
+
+/// What node `id` warned of in the run.
+fn warnings(report: &RunReport, id: &str) -> Vec<String> {
+    report
+        .warnings
+        .iter()
+        .filter(|w| w.node == id)
+        .map(|w| w.message.clone())
+        .collect()
 }
 
 fn metric(report: &RunReport, id: &str, m: &str) -> Option<f64> {
@@ -198,6 +229,203 @@ fn classic() -> Vec<(String, Value)> {
         .collect()
 }
 
+/// What the arbiter needs of one render kind: the truth's scene and the model candidates.
+struct Setting {
+    /// The render's parameters (an `sss.lighting`'s inlined) and inputs.
+    params: Map<String, Value>,
+    inputs: BTreeMap<String, String>,
+    /// Nodes the truth adds before its `render.reference` (the displaced surface), which a
+    /// brute-force plan keeps.
+    extra: Vec<(String, NodeDecl)>,
+    /// `render.reference`'s parameters (not the camera, samples or seed) and inputs.
+    reference_params: Map<String, Value>,
+    reference_inputs: BTreeMap<String, String>,
+    /// The model switches: a label and the parameters it sets.
+    variants: Vec<(String, Vec<(String, Value)>)>,
+    /// The render's timings that grow with the pixels, and their unit in seconds.
+    per_pixel: &'static [(&'static str, f64)],
+    /// What the graph may read from the render for brute force to stand in for it.
+    readable: &'static [&'static str],
+    judge_why: String,
+}
+
+/// `sss.render`: the mesh filled with the medium.
+fn sss_setting(file: &GraphFile, decl: &NodeDecl, render: &str) -> Result<Setting, PlanError> {
+    let (Some(mesh), Some(material)) = (decl.inputs.get("mesh"), decl.inputs.get("material"))
+    else {
+        return Err(PlanError::NoRender(format!(
+            "`{render}` has no mesh or material input to make the truth from"
+        )));
+    };
+    let (params, inputs) = inlined(file, decl);
+    let one = |k: &str, v: &str| vec![(k.to_string(), json!(v))];
+    Ok(Setting {
+        extra: Vec::new(),
+        reference_params: Map::new(),
+        reference_inputs: BTreeMap::from([
+            ("mesh".to_string(), mesh.clone()),
+            ("medium".to_string(), material.clone()),
+        ]),
+        variants: vec![
+            ("the render as given".into(), vec![]),
+            ("energy: half_space".into(), one("energy", "half_space")),
+            ("geometry: exit_normal".into(), one("geometry", "exit_normal")),
+            ("Jensen & Buhler's classic gather".into(), classic()),
+            ("mode: brdf".into(), one("mode", "brdf")),
+        ],
+        per_pixel: &[("gather_seconds", 1.0), ("shading_seconds", 1.0)],
+        readable: &["image", "coverage", "covered", "noise"],
+        judge_why: "the graph holds the mesh and the medium: the truth is volumetric path tracing of them (render.reference)".into(),
+        params,
+        inputs,
+    })
+}
+
+/// `render.mesh`: the captured height field displaced on the mesh, with the capture's
+/// reflectance.
+fn mesh_setting(
+    file: &GraphFile,
+    decl: &NodeDecl,
+    render: &str,
+    catalog: &dyn mesoflow_graph::Catalog,
+) -> Result<Setting, PlanError> {
+    let no_truth = |why: String| {
+        PlanError::NoRender(format!(
+            "`{render}`: no truth can be made here: {why}; plan it against its own model (--budget flip=B without --against)"
+        ))
+    };
+    let mesh = decl
+        .inputs
+        .get("mesh")
+        .ok_or_else(|| no_truth("it has no mesh input".into()))?;
+    let chain = crate::edit::btf_chain(file, render, "btf")
+        .ok_or_else(|| no_truth("its btf input is not connected to a node".into()))?;
+    let capture_id = chain.raw.split_once('.').map_or("", |(n, _)| n);
+    let capture = file
+        .node(capture_id)
+        .filter(|n| n.kind == "btf.capture")
+        .ok_or_else(|| {
+            no_truth(format!(
+                "its BTF comes from `{}`, not from a btf.capture of a height field in the graph (a measured BTF has no geometry to trace)",
+                chain.raw
+            ))
+        })?;
+    if capture.inputs.contains_key("maps") {
+        return Err(no_truth(format!(
+            "`{capture_id}` captures per-texel lobe maps, which render.reference cannot represent"
+        )));
+    }
+    let height = capture
+        .inputs
+        .get("height")
+        .ok_or_else(|| no_truth(format!("`{capture_id}` has no height input")))?;
+    let cap = |p: &str| {
+        capture
+            .params
+            .get(p)
+            .cloned()
+            .or_else(|| crate::probe::kind_default(catalog, "btf.capture", p))
+    };
+    let roughness_v = cap("roughness_v").filter(|v| !v.is_null());
+    if roughness_v.is_some() && roughness_v != cap("roughness") {
+        return Err(no_truth(format!(
+            "`{capture_id}`'s anisotropic roughness_v, which render.reference cannot represent"
+        )));
+    }
+    if cap("brdf") == Some(json!("ggx")) && cap("ior").and_then(|v| v.as_f64()) != Some(1.5) {
+        return Err(no_truth(format!(
+            "`{capture_id}`'s GGX Fresnel index other than 1.5, which render.reference cannot represent"
+        )));
+    }
+    let params = decl.params.clone();
+    let view = |p: &str| {
+        params
+            .get(p)
+            .cloned()
+            .or_else(|| crate::probe::kind_default(catalog, "render.mesh", p))
+    };
+    // The shell's depth in texels: the MDF's, where it tabulates one (its default, the height
+    // range, is mesh.displace's too).
+    let depth = decl
+        .inputs
+        .get("mdf")
+        .and_then(|f| file.node(f.split_once('.')?.0))
+        .filter(|n| n.kind == "mdf.tabulate")
+        .and_then(|n| n.params.get("depth").cloned())
+        .unwrap_or(Value::Null);
+    let mut displace = Map::new();
+    for k in ["tiling", "shell"] {
+        if let Some(v) = view(k) {
+            displace.insert(k.into(), v);
+        }
+    }
+    displace.insert("depth".into(), depth);
+    // Two vertices a texel, as the mesostructure family's truth.
+    displace.insert("density".into(), json!(2.0));
+    let mut reference_params = Map::new();
+    for k in ["tiling", "background"] {
+        if let Some(v) = view(k) {
+            reference_params.insert(k.into(), v);
+        }
+    }
+    for k in ["brdf", "albedo", "specular", "roughness"] {
+        if let Some(v) = cap(k) {
+            reference_params.insert(k.into(), v);
+        }
+    }
+    let mut reference_inputs =
+        BTreeMap::from([("mesh".to_string(), format!("{TRUE_SURFACE}.mesh"))]);
+    if let Some(albedo) = capture.inputs.get("albedo") {
+        reference_inputs.insert("albedo".into(), albedo.clone());
+    }
+    let flag = |k: &str| view(k).and_then(|v| v.as_bool()).unwrap_or(false);
+    let mut variants: Vec<(String, Vec<(String, Value)>)> =
+        vec![("the render as given".into(), vec![])];
+    let shadows = flag("shadows");
+    variants.push((
+        format!("shadows: {}", !shadows),
+        vec![("shadows".into(), json!(!shadows))],
+    ));
+    let other = if view("interpolation") == Some(json!("nearest")) {
+        "rings"
+    } else {
+        "nearest"
+    };
+    variants.push((
+        format!("interpolation: {other}"),
+        vec![("interpolation".into(), json!(other))],
+    ));
+    if decl.inputs.contains_key("mdf") && flag("use_mdf") {
+        variants.push((
+            "without the MDF (use_mdf: false)".into(),
+            vec![("use_mdf".into(), json!(false))],
+        ));
+    }
+    Ok(Setting {
+        extra: vec![(
+            TRUE_SURFACE.into(),
+            NodeDecl {
+                kind: "mesh.displace".into(),
+                params: displace,
+                inputs: BTreeMap::from([
+                    ("mesh".to_string(), mesh.clone()),
+                    ("height".to_string(), height.clone()),
+                ]),
+            },
+        )],
+        reference_params,
+        reference_inputs,
+        variants,
+        per_pixel: &[("frame_ms", 1e-3)],
+        readable: &["image"],
+        judge_why: format!(
+            "the graph captures the BTF from a height field (`{capture_id}`): the truth is that height field displaced on the mesh (mesh.displace), path traced with the capture's reflectance (render.reference)"
+        ),
+        params,
+        inputs: decl.inputs.clone(),
+    })
+}
+
 /// Plans `render` of `file` against the truth (see the module's doc).
 pub fn arbitrate(
     engine: &Engine,
@@ -218,36 +446,47 @@ pub fn arbitrate(
         .node(render)
         .ok_or_else(|| PlanError::NoRender(format!("no node `{render}`")))?
         .clone();
-    if decl.kind != "sss.render" {
-        return Err(PlanError::NoRender(format!(
-            "`{render}` is a {}: --against truth plans sss.render nodes, whose truth (the mesh filled with the medium, path traced) the graph holds; {}'s truth is not built yet: plan it against its own model (--budget flip=B without --against)",
-            decl.kind, decl.kind
-        )));
-    }
-    let (Some(mesh), Some(material)) = (decl.inputs.get("mesh"), decl.inputs.get("material"))
-    else {
-        return Err(PlanError::NoRender(format!(
-            "`{render}` has no mesh or material input to make the truth from"
-        )));
-    };
-    let (params, inputs) = inlined(file, &decl);
     let catalog = engine.registry();
-    let default = |p: &str| crate::probe::kind_default(catalog, "sss.render", p);
+    let setting = match decl.kind.as_str() {
+        "sss.render" => sss_setting(file, &decl, render)?,
+        "render.mesh" => mesh_setting(file, &decl, render, catalog)?,
+        other => {
+            return Err(PlanError::NoRender(format!(
+                "`{render}` is a {other}: --against truth plans sss.render (its mesh and medium path traced) and render.mesh (its captured height field displaced and path traced); {other}'s truth is not built: plan it against its own model (--budget flip=B without --against)"
+            )))
+        }
+    };
+    let Setting {
+        params,
+        inputs,
+        extra,
+        reference_params,
+        reference_inputs,
+        variants,
+        per_pixel,
+        readable,
+        judge_why,
+    } = setting;
+    let default = |p: &str| crate::probe::kind_default(catalog, &decl.kind, p);
     let view = |p: &str| params.get(p).cloned().or_else(|| default(p));
     let full_camera = camera_of(file, render, catalog);
     let (camera, resolution, share) = probe_camera(full_camera.clone(), o.share);
-    // The scene's nodes, the candidates' inputs.
+    // The scene's nodes: the candidates' inputs and the truth's.
     let base: Vec<&str> = inputs
         .values()
+        .chain(extra.iter().flat_map(|(_, d)| d.inputs.values()))
+        .chain(reference_inputs.values())
         .filter_map(|f| f.split_once('.').map(|(n, _)| n))
+        .filter(|n| extra.iter().all(|(id, _)| id.as_str() != *n))
         .collect();
     let keep = needed(file, &base);
     let mut scene = file.clone();
     scene.nodes.retain(|(id, _)| keep.contains(id));
+    scene.nodes.extend(extra.iter().cloned());
     scene.description = None;
 
     let reference = |samples: u32, seed: u64, camera: &Map<String, Value>| -> NodeDecl {
-        let mut p = Map::new();
+        let mut p = reference_params.clone();
         p.insert("camera".into(), Value::Object(camera.clone()));
         for k in ["light", "mm_per_unit", "background"] {
             if let Some(v) = view(k) {
@@ -259,10 +498,7 @@ pub fn arbitrate(
         NodeDecl {
             kind: "render.reference".into(),
             params: p,
-            inputs: BTreeMap::from([
-                ("mesh".to_string(), mesh.clone()),
-                ("medium".to_string(), material.clone()),
-            ]),
+            inputs: reference_inputs.clone(),
         }
     };
 
@@ -316,51 +552,46 @@ pub fn arbitrate(
     };
 
     // The model candidates.
-    let sss = |overrides: &[(String, Value)], camera: &Map<String, Value>| -> NodeDecl {
+    let model = |overrides: &[(String, Value)], camera: &Map<String, Value>| -> NodeDecl {
         let mut p = params.clone();
         for (k, v) in overrides {
             p.insert(k.clone(), v.clone());
         }
         p.insert("camera".into(), Value::Object(camera.clone()));
         NodeDecl {
-            kind: "sss.render".into(),
+            kind: decl.kind.clone(),
             params: p,
             inputs: inputs.clone(),
         }
     };
-    let one = |k: &str, v: &str| vec![(k.to_string(), json!(v))];
-    let variants: Vec<(&str, Vec<(String, Value)>)> = vec![
-        ("the render as given", vec![]),
-        ("energy: half_space", one("energy", "half_space")),
-        ("geometry: exit_normal", one("geometry", "exit_normal")),
-        ("Jensen & Buhler's classic gather", classic()),
-        ("mode: brdf", one("mode", "brdf")),
-    ];
     let mut candidates = Vec::new();
     let mut seen: Vec<Map<String, Value>> = Vec::new();
     for (label, overrides) in variants {
-        let probe = sss(&overrides, &camera);
+        let probe = model(&overrides, &camera);
         if seen.contains(&probe.params) {
             continue;
         }
         seen.push(probe.params.clone());
-        let full = sss(&overrides, &full_camera);
-        let (error, probe_s, note, full_s) = match measure(&probe) {
+        let full = model(&overrides, &full_camera);
+        let (error, probe_s, note, full_s, warned) = match measure(&probe) {
             Ok((error, probe_s, r)) => {
                 // The camera-independent part once, the per-pixel stages in proportion.
-                let t = |k: &str| {
-                    r.node(CANDIDATE)
-                        .and_then(|n| n.timings.get(k).copied())
-                        .unwrap_or(0.0)
-                };
-                let per_pixel = t("gather_seconds") + t("shading_seconds");
+                let per_pixel: f64 = per_pixel
+                    .iter()
+                    .map(|(k, unit)| {
+                        r.node(CANDIDATE)
+                            .and_then(|n| n.timings.get(*k).copied())
+                            .unwrap_or(0.0)
+                            * unit
+                    })
+                    .sum();
                 let full_s = probe_s.map(|s| s + per_pixel * (1.0 / share - 1.0));
-                (error, probe_s, None, full_s)
+                (error, probe_s, None, full_s, warnings(&r, CANDIDATE))
             }
-            Err(e) => (None, None, Some(e.to_string()), None),
+            Err(e) => (None, None, Some(e.to_string()), None, Vec::new()),
         };
         candidates.push(Candidate {
-            name: label.to_string(),
+            name: label,
             family: "model",
             decl: full,
             fits: error.is_some_and(|e| e <= o.rmse),
@@ -368,14 +599,12 @@ pub fn arbitrate(
             probe_s,
             full_s,
             note,
+            warnings: warned,
         });
     }
 
     // Brute force, where what the graph reads from the render, render.reference makes too.
-    let readable: BTreeSet<String> = ["image", "coverage", "covered", "noise"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
+    let readable: BTreeSet<String> = readable.iter().map(|s| s.to_string()).collect();
     let missing: Vec<String> = ports_read(file, render)
         .difference(&readable)
         .cloned()
@@ -386,11 +615,18 @@ pub fn arbitrate(
         let samples = noise.map_or(PILOT, |n| {
             ((PILOT as f64 * (n / (AIM * o.rmse)).powi(2)).ceil() as u32).clamp(1, 65_536)
         });
-        let (error, probe_s, _) = if samples == PILOT {
+        let (error, probe_s, r) = if samples == PILOT {
             pilot
         } else {
             measure(&reference(samples, 1, &camera))?
         };
+        let mut warned = warnings(&r, CANDIDATE);
+        // A brute-force plan states its noise (its seed is fixed, so frames do not flicker).
+        if let Some(n) = metric(&r, CANDIDATE, "noise") {
+            warned.push(format!(
+                "its own noise on the probe: relative RMSE {n:.3} at {samples} samples a pixel (seed fixed: the same noise every frame)"
+            ));
+        }
         Candidate {
             name: format!("brute force: render.reference at {samples} samples a pixel"),
             family: "brute force",
@@ -400,6 +636,7 @@ pub fn arbitrate(
             full_s: probe_s.map(|s| s / share),
             probe_s,
             note: None,
+            warnings: warned,
         }
     } else {
         Candidate {
@@ -414,6 +651,7 @@ pub fn arbitrate(
                 "not a candidate: the graph reads {} from `{render}`, which render.reference does not make",
                 missing.join(", ")
             )),
+            warnings: Vec::new(),
         }
     };
     candidates.push(brute);
@@ -457,13 +695,28 @@ pub fn arbitrate(
     };
     let mut planned = file.clone();
     if let Some(i) = chosen {
+        let c = &candidates[i];
+        if c.family == "brute force" {
+            // The truth's own nodes (the displaced surface) go in before the render.
+            let at = planned
+                .nodes
+                .iter()
+                .position(|(id, _)| id == render)
+                .unwrap_or(planned.nodes.len());
+            for (k, node) in extra.iter().enumerate() {
+                if planned.node(&node.0).is_none() {
+                    planned.nodes.insert(at + k, node.clone());
+                }
+            }
+        }
         if let Some(n) = planned.node_mut(render) {
-            *n = candidates[i].decl.clone();
+            *n = c.decl.clone();
         }
         crate::edit::prune(&mut planned, file, render);
     }
     Ok(Arbitration {
         render: render.to_string(),
+        judge_why,
         budget: o.rmse,
         resolution,
         share,

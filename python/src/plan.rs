@@ -1,10 +1,12 @@
 //! `mesoflow.plan(graph, render, budget=…)`: the planner library on a graph from Python, on the
 //! same engine and cache as `Graph.run`. Returns the plan document (`<graph>.plan.json`'s fields) and
-//! the planned graph's text; the Python layer makes them a `Plan` object.
+//! the planned graph's text; the Python layer makes them a `Plan` object. `plan_truth` is
+//! `against="truth"`: every candidate, brute force included, judged against the truth the graph
+//! makes (`mesoflow_plan::arbitrate`).
 
 use crate::session::{device_mode, engine, parse_with_sets};
 use mesoflow_graph::check;
-use mesoflow_plan::{plan_view, Budget, PlanError, ProbeOptions, Split};
+use mesoflow_plan::{arbitrate, plan_view, Budget, PlanError, ProbeOptions, Split, TruthOptions};
 use mesoflow_runtime::RunOptions;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -88,4 +90,62 @@ pub fn plan(
     let doc = serde_json::to_string(&planned.to_json())
         .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
     Ok((doc, planned.plan.file.to_json()))
+}
+
+/// Plans node `render` of the graph `text` against the truth the graph makes, for a relative
+/// RMSE `budget` (`mesoflow plan --against truth --budget rmse=B`). Returns
+/// `(plan_json, planned_graph_json)`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (text, name, base_dir, render, budget, sets, device="auto", cache_dir=None, use_cache=true, probe_share=0.25))]
+pub fn plan_truth(
+    py: Python<'_>,
+    text: &str,
+    name: &str,
+    base_dir: PathBuf,
+    render: &str,
+    budget: f64,
+    sets: Vec<String>,
+    device: &str,
+    cache_dir: Option<String>,
+    use_cache: bool,
+    probe_share: f64,
+) -> PyResult<(String, String)> {
+    if !(probe_share > 0.0 && probe_share <= 1.0) {
+        return Err(PyValueError::new_err(format!(
+            "probe_share={probe_share}: a fraction of the frame in (0, 1]"
+        )));
+    }
+    let file = parse_with_sets(text, &sets)?;
+    let engine = engine(cache_dir.as_deref());
+    check(name, &file, engine.registry())
+        .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
+    let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
+    opts.device = device_mode(device)?;
+    opts.require_gpu = std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    opts.use_cache = use_cache;
+    let cancel = Arc::new(AtomicBool::new(false));
+    opts.cancel = cancel.clone();
+    let (name, render) = (name.to_string(), render.to_string());
+    let worker = engine.clone();
+    let options = TruthOptions {
+        rmse: budget,
+        share: probe_share,
+    };
+    let (result, interrupted) = crate::wait::run_interruptibly(
+        py,
+        "the plan",
+        move || arbitrate(&worker, &name, &file, &render, &opts, options),
+        || cancel.store(true, Ordering::Relaxed),
+    )?;
+    if let Some(e) = interrupted {
+        return Err(e);
+    }
+    let a = result.map_err(|e| match e {
+        PlanError::Probe(_) => PyRuntimeError::new_err(e.to_string()),
+        _ => PyValueError::new_err(e.to_string()),
+    })?;
+    let doc =
+        serde_json::to_string(&a.to_json()).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
+    Ok((doc, a.planned.to_json()))
 }

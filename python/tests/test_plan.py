@@ -48,3 +48,30 @@ def test_an_unknown_render_node_and_a_bad_budget_are_errors(repo):
         mesoflow.plan(graph, "btf_veiw", budget=0.1)
     with pytest.raises(ValueError, match="budget"):
         mesoflow.plan(graph, "btf_view", budget=-1.0)
+
+
+def test_a_plan_against_the_truth_from_python_judges_every_candidate(repo, tmp_path):
+    # The translucent family's seed 0 at test size (tests/plan_truth.rs's sets): at a lax budget
+    # several candidates fit and the fastest of them is planned, as on the command line.
+    graph = repo / "graphs" / "family_translucent.json"
+    sets = {
+        "mesh.segments": [32, 16],
+        "ours.camera.resolution": [32, 24],
+        "lighting.max_points": 2000,
+        "lighting.shadow_resolution": 128,
+        "truth.camera.resolution": [32, 24],
+    }
+    p = mesoflow.plan(graph, "ours", budget=0.5, against="truth", set=sets, probe_share=0.5,
+                      cache_dir=tmp_path / "cache")
+    assert isinstance(p, mesoflow.TruthPlan)
+    assert p.doc["judge"] == "truth" and "medium" in p.judge_why
+    families = {c["family"] for c in p.candidates}
+    assert families == {"model", "brute force"}
+    fits = [c for c in p.candidates if c["within_budget"]]
+    chosen = next(c for c in p.candidates if c["candidate"] == p.chosen)
+    assert chosen["full_seconds_estimate"] == min(c["full_seconds_estimate"] for c in fits)
+    assert p.graph.to_dict()["nodes"]["ours"]["kind"] == chosen["kind"]
+    saved = p.save(tmp_path / "planned.json")
+    assert json.loads((saved.parent / "planned.plan.json").read_text())["chosen"] == p.chosen
+    with pytest.raises(ValueError, match="against="):
+        mesoflow.plan(graph, "ours", budget=0.5, against="model")

@@ -325,6 +325,9 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
                 if c.fits { ", within budget" } else { "" },
                 c.note.as_ref().map_or(String::new(), |n| format!(" ({n})"))
             );
+            for w in &c.warnings {
+                println!("      warning: {w}");
+            }
         }
         println!("{} ({:.1} s planning)", a.why, a.plan_s);
         println!("wrote {} and {}", out_path.display(), plan_path.display());

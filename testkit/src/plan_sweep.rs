@@ -218,9 +218,10 @@ pub fn sweep_qh(out: &Path, width: u32) -> Vec<Row> {
                 a.push(format!("{id}.camera.resolution=[{width},{height}]"));
             }
             mesoflow(&a.iter().map(String::as_str).collect::<Vec<_>>());
-            let plan: Value =
-                serde_json::from_str(&std::fs::read_to_string(case.join("planned.plan.json")).unwrap())
-                    .unwrap();
+            let plan: Value = serde_json::from_str(
+                &std::fs::read_to_string(case.join("planned.plan.json")).unwrap(),
+            )
+            .unwrap();
             let run_out = case.join("out");
             mesoflow(&[
                 "run",

@@ -115,7 +115,7 @@ impl Mesh {
     }
 
     /// Triangle `t`'s ∂P/∂u and ∂P/∂v; `None` where its UVs are degenerate.
-    fn uv_derivatives(&self, t: usize) -> Option<([f32; 3], [f32; 3])> {
+    pub fn uv_derivatives(&self, t: usize) -> Option<([f32; 3], [f32; 3])> {
         let [a, b, c] = self.corners(t);
         let (e1, e2) = (
             sub(self.positions[b], self.positions[a]),

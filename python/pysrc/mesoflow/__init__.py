@@ -23,7 +23,7 @@ from ._catalog import describe, kinds, signature  # noqa: E402
 from ._errors import GraphError, MesoflowError, NodeError  # noqa: E402
 from ._graph import Graph, Node, Output, Result, load  # noqa: E402
 from ._node import node  # noqa: E402
-from ._plan import Decision, Plan, plan  # noqa: E402
+from ._plan import Decision, Plan, TruthPlan, plan  # noqa: E402
 from ._sweep import sweep  # noqa: E402
 
 
@@ -46,6 +46,7 @@ __all__ = [
     "NodeError",
     "Output",
     "Plan",
+    "TruthPlan",
     "Result",
     "__version__",
     "cli",

@@ -80,11 +80,44 @@ class Plan:
         return f"<mesoflow plan at FLIP {self.budget} (predicted {e}{probed}): {stages}>"
 
 
+class TruthPlan:
+    """A plan judged against the truth (``against="truth"``): :attr:`graph` (the render node
+    replaced by the chosen candidate, ready to :meth:`Graph.run`), :attr:`candidates` (each
+    ``candidate``, ``family`` — ``model`` or ``brute force`` —, ``kind``, ``params``,
+    ``relative_rmse`` against the truth probe, ``probe_seconds``, ``full_seconds_estimate``,
+    ``within_budget``, and where so ``note`` and ``warnings``), :attr:`chosen` (its name),
+    :attr:`why`, :attr:`judge_why` (what the truth is), :attr:`truth` (its samples a pixel and
+    noise), :attr:`budget` (relative RMSE), :attr:`plan_seconds` and :attr:`doc`, the whole
+    ``<graph>.plan.json`` document."""
+
+    def __init__(self, doc: Dict[str, Any], graph: Graph) -> None:
+        self.doc = doc
+        self.graph = graph
+        self.candidates: List[Dict[str, Any]] = doc["candidates"]
+        self.chosen: Optional[str] = doc.get("chosen")
+        self.why: str = doc["why"]
+        self.judge_why: str = doc["judge_why"]
+        self.truth: Dict[str, Any] = doc["truth"]
+        self.budget: float = doc["budget"]["relative_rmse"]
+        self.plan_seconds: float = doc["plan_seconds"]
+
+    def save(self, path: PathLike) -> Path:
+        """Writes the planned graph to ``path`` and its plan beside it, as :meth:`Plan.save`."""
+        path = self.graph.save(path)
+        doc = dict(self.doc, planned=str(path))
+        plan_file(path).write_text(json.dumps(doc, indent=2) + "\n", encoding="utf-8")
+        return path
+
+    def __repr__(self) -> str:
+        return f"<mesoflow plan against the truth at relative RMSE {self.budget}: {self.chosen}>"
+
+
 def plan(
     graph: Union[Graph, PathLike],
     render: str,
     budget: float = 0.05,
     *,
+    against: Optional[str] = None,
     ppd: Optional[float] = None,
     split: str = "joint",
     device: str = "auto",
@@ -104,7 +137,16 @@ def plan(
     spend ``probe_budget`` renders of the full view (0: no probe, the measured model alone).
     Raises :class:`GraphError` for an invalid graph or render node, ``ValueError`` for
     a plan that cannot be made (camera inside the mesh, a bad budget), ``RuntimeError`` when the
-    view cannot be measured."""
+    view cannot be measured.
+
+    With ``against="truth"`` (``mesoflow plan --against truth``) ``budget`` is a relative RMSE
+    against the truth the graph makes (an ``sss.render``'s mesh filled with its medium, a
+    ``render.mesh``'s captured height field displaced), every candidate — the render as given,
+    its model switches, brute force — is measured against it on a probe of the view, and the
+    fastest within the budget is planned: a :class:`TruthPlan`. ``ppd``, ``split`` and
+    ``probe_budget`` do not apply there."""
+    if against not in (None, "truth"):
+        raise ValueError(f"against={against!r}: None (the graph's own model) or \"truth\"")
     g = graph if isinstance(graph, Graph) else load(graph)
     sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
     errors = _native.validate(g.to_json(), g.name)
@@ -117,6 +159,24 @@ def plan(
         cache = str(cache) if cache else str(g.base_dir / ".mesoflow" / "cache")
     else:
         cache = None
+    if against == "truth":
+        doc_text, planned_text = _native.plan_truth(
+            g.to_json(),
+            g.name,
+            str(g.base_dir),
+            render,
+            float(budget),
+            sets,
+            device=device,
+            cache_dir=cache,
+            use_cache=use_cache,
+            probe_share=float(probe_share),
+        )
+        d = json.loads(planned_text)
+        planned = Graph(d.get("description", ""), base_dir=g.base_dir, name=g.name)
+        planned._nodes = d.get("nodes", {})
+        planned._extra = {k: v for k, v in d.items() if k not in ("mesoflow", "description", "nodes")}
+        return TruthPlan(json.loads(doc_text), planned)
     doc_text, planned_text = _native.plan(
         g.to_json(),
         g.name,

@@ -7,6 +7,8 @@
 //! `gpu_ms` is the time between timestamps at the start of the first pass and the end of the
 //! last, where the adapter supports timestamp queries.
 
+pub mod validity;
+
 use super::material::{Material, MdfLookup, Source};
 use super::shade::{shell_sides, texel_aspect, Scene};
 use crate::geometry::{bounding_sphere, normalize, sub};
@@ -75,7 +77,9 @@ impl Node for RenderMesh {
             // 3: the mask output; lights beyond the sampled cone extrapolated, not clamped.
             // 4: directions looked up in the tile's own proportions where the UVs stretch it,
             // the MDF's shadows, shell sides rays enter by. 5: light past the macro horizon.
-            version: 5,
+            // 6: the validity warnings (images unchanged; a cache hit repeats the warnings its
+            // entry stored, so older entries rerun once to have them).
+            version: 6,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -184,6 +188,20 @@ impl Node for RenderMesh {
         let degenerate = mesh.degenerate_triangles();
         if degenerate > 0 {
             ctx.warn(format!("{degenerate} zero-area triangles are skipped"));
+        }
+        let validity = validity::measure(
+            mesh,
+            &p.camera,
+            &p.light,
+            p.tiling,
+            validity::Sampled {
+                texels: [material.width, material.height],
+                views: &material.views,
+                lights: &material.lights,
+            },
+        );
+        for w in validity.warnings(mdf_lookup.is_some().then_some(p.shell)) {
+            ctx.warn(w);
         }
         let scene = scene_for(mesh, &material, mdf_lookup, p)?;
         let (data, mask, ms, gpu_ms) = match ctx.gpu() {
