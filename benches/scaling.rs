@@ -478,6 +478,36 @@ fn charts(rows: &[Value], out: &Path) {
             },
         ),
     ];
+    // The translucent albedo axis (measured by the families bench, its rows added to the file
+    // with that bench's command): each material's ratio at equal error, in the order given.
+    let albedo: Vec<&Value> = rows.iter().filter(|r| r["axis"] == "albedo").collect();
+    let ratio_of = |k: &str| -> Vec<(f64, f64)> {
+        albedo
+            .iter()
+            .enumerate()
+            .filter_map(|(i, r)| Some((i as f64, r[k].as_f64()?)))
+            .collect()
+    };
+    let albedo_chart = (
+        "scaling_albedo",
+        Chart {
+            title: "Translucency at 640 × 480: the path tracers' time at ours' error over ours'"
+                .into(),
+            x_label: "material (Jensen's presets, low to high albedo)",
+            y_label: "path tracer's time at ours' error / ours' first frame",
+            series: vec![
+                series("Mitsuba 3 volpathmis", ratio_of("mitsuba_ratio")),
+                series("render.reference", ratio_of("reference_ratio")),
+            ],
+            x_names: Some(
+                albedo
+                    .iter()
+                    .map(|r| r["material"].as_str().unwrap_or("?").to_string())
+                    .collect(),
+            ),
+        },
+    );
+    let made = made.into_iter().chain([albedo_chart]);
     for (name, c) in made {
         if c.series.iter().all(|s| s.points.is_empty()) {
             continue;

@@ -274,6 +274,10 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         How::Slow("a truth probe and six candidates of the 64 × 48 scene, 28 s here"),
     ),
     (
+        "plan graphs/mdf_render.json --render torus_mdf --against truth --budget rmse=0.2",
+        How::Slow("the torus's true mesostructure displaced and path traced, then five candidates, 30 s here"),
+    ),
+    (
         "sweep graphs/btf_compress.json --set surface.size=128 --vary pca.rank=1,2,4,8,16 \
          --vary pca.solver=exact,randomized --vary pca.layout=texels,per_view --measure pca.rmse \
          --measure pca.compression_ratio --out-dir docs/sweeps/btf_pca",
