@@ -133,6 +133,17 @@ pub(crate) fn cam_block(c: &Camera, centre: [f64; 3], radius: f64) -> Vec<f32> {
     .concat()
 }
 
+/// One frame's stages on the GPU, ms, from timestamp queries: the shadow map (its peel passes
+/// and resolve, with shadows on), the view's peel passes (its visibility layers), the shading
+/// resolve, and the whole frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GpuStages {
+    pub total_ms: f64,
+    pub shadow_ms: Option<f64>,
+    pub layers_ms: f64,
+    pub shade_ms: f64,
+}
+
 pub struct GpuRenderer<'a> {
     gpu: &'a Gpu,
     scene: &'a Scene<'a>,
@@ -155,7 +166,8 @@ pub struct GpuRenderer<'a> {
     triangles: u32,
     centre: [f64; 3],
     radius: f64,
-    /// Two timestamps (start of the first pass, end of the last) where the device has them.
+    /// Four timestamps where the device has them: the shadow map's first pass begins (0), the
+    /// view's first peel pass begins (1), its last ends (2), the shading resolve ends (3).
     stamps: Option<wgpu::QuerySet>,
 }
 
@@ -265,9 +277,9 @@ impl<'a> GpuRenderer<'a> {
             .contains(wgpu::Features::TIMESTAMP_QUERY)
             .then(|| {
                 device.create_query_set(&wgpu::QuerySetDescriptor {
-                    label: Some("frame time"),
+                    label: Some("frame stages"),
                     ty: wgpu::QueryType::Timestamp,
-                    count: 2,
+                    count: 4,
                 })
             });
         Ok(GpuRenderer {
@@ -339,13 +351,16 @@ impl<'a> GpuRenderer<'a> {
         })
     }
 
-    /// Encodes the peeling passes for `cam`; returns the layer array (2·count layers).
+    /// Encodes the peeling passes for `cam`; returns the layer array (2·count layers). The
+    /// first pass writes timestamp `begin` at its start and the last `end` at its end, where
+    /// given and the device has timestamps.
     fn encode_layers(
         &self,
         enc: &mut wgpu::CommandEncoder,
         cam: &Camera,
         count: u32,
-        stamp_start: bool,
+        begin: Option<u32>,
+        end: Option<u32>,
     ) -> wgpu::Texture {
         let device = &self.gpu.device;
         let (w, h) = (cam.width, cam.height);
@@ -415,14 +430,18 @@ impl<'a> GpuRenderer<'a> {
                 ],
             });
             let view = target.create_view(&Default::default());
+            let (b, e) = (
+                begin.filter(|_| i == 0),
+                end.filter(|_| i + 1 == targets.len()),
+            );
             let stamp = self
                 .stamps
                 .as_ref()
-                .filter(|_| stamp_start && i == 0)
+                .filter(|_| b.is_some() || e.is_some())
                 .map(|query_set| wgpu::RenderPassTimestampWrites {
                     query_set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: None,
+                    beginning_of_pass_write_index: b,
+                    end_of_pass_write_index: e,
                 });
             let mut pass = raster_pass(
                 enc,
@@ -608,7 +627,7 @@ impl<'a> GpuRenderer<'a> {
                 wgpu::ComputePassTimestampWrites {
                     query_set,
                     beginning_of_pass_write_index: None,
-                    end_of_pass_write_index: Some(1),
+                    end_of_pass_write_index: Some(3),
                 }
             }),
         });
@@ -620,25 +639,25 @@ impl<'a> GpuRenderer<'a> {
     }
 
     /// One frame: (RGBA per pixel, a = 1 where mesostructure was hit; empty when `read` is
-    /// false, for timing frames) and the GPU time from timestamp queries, ms, where the device
-    /// has them.
+    /// false, for timing frames) and its stages' GPU times from timestamp queries, where the
+    /// device has them.
     pub fn frame(
         &self,
         cam: &Camera,
         shadow_cam: Option<(&Camera, f64)>,
         count: u32,
         read: bool,
-    ) -> Result<(Vec<f32>, Option<f64>), NodeError> {
+    ) -> Result<(Vec<f32>, Option<GpuStages>), NodeError> {
         let device = &self.gpu.device;
         let mut enc = device.create_command_encoder(&Default::default());
         let shadow_buf = shadow_cam.map(|(sc, bias)| {
-            let layers = self.encode_layers(&mut enc, sc, count, true);
+            let layers = self.encode_layers(&mut enc, sc, count, Some(0), None);
             (
                 self.encode_resolve(&mut enc, sc, None, &layers, count, false, None),
                 bias,
             )
         });
-        let layers = self.encode_layers(&mut enc, cam, count, shadow_cam.is_none());
+        let layers = self.encode_layers(&mut enc, cam, count, Some(1), Some(2));
         let out = self.encode_resolve(
             &mut enc,
             cam,
@@ -664,13 +683,16 @@ impl<'a> GpuRenderer<'a> {
         let stamps = self.stamps.as_ref().map(|qs| {
             let resolved = device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("timestamps"),
-                size: 16,
+                size: 32,
                 usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             });
-            enc.resolve_query_set(qs, 0..2, &resolved, 0);
-            let staging = readback(16);
-            enc.copy_buffer_to_buffer(&resolved, 0, &staging, 0, 16);
+            // Without shadows timestamp 0 is never written: resolve only what was, to the
+            // buffer's start (a resolve's offset must be aligned to 256 bytes).
+            let from = if shadow_cam.is_some() { 0 } else { 1 };
+            enc.resolve_query_set(qs, from..4, &resolved, 0);
+            let staging = readback(32);
+            enc.copy_buffer_to_buffer(&resolved, 0, &staging, 0, 32);
             staging
         });
         self.gpu.queue.submit([enc.finish()]);
@@ -681,9 +703,22 @@ impl<'a> GpuRenderer<'a> {
         let gpu_ms = match &stamps {
             Some(b) => {
                 let bytes = self.read_buffer(b)?;
-                let t: &[u64] = bytemuck::cast_slice(&bytes);
-                let ticks = t[1].saturating_sub(t[0]) as f64;
-                Some(ticks * self.gpu.queue.get_timestamp_period() as f64 * 1e-6)
+                let got: &[u64] = bytemuck::cast_slice(&bytes);
+                // Timestamps 0..4, the unwritten first one as 0 without shadows.
+                let t: Vec<u64> = if shadow_cam.is_some() {
+                    got[..4].to_vec()
+                } else {
+                    [0].into_iter().chain(got[..3].iter().copied()).collect()
+                };
+                let period = self.gpu.queue.get_timestamp_period() as f64 * 1e-6;
+                let ms = |a: u64, b: u64| b.saturating_sub(a) as f64 * period;
+                let shadow_ms = shadow_cam.map(|_| ms(t[0], t[1]));
+                Some(GpuStages {
+                    total_ms: shadow_ms.unwrap_or(0.0) + ms(t[1], t[3]),
+                    shadow_ms,
+                    layers_ms: ms(t[1], t[2]),
+                    shade_ms: ms(t[2], t[3]),
+                })
             }
             None => {
                 device

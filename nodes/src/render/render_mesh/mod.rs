@@ -151,8 +151,9 @@ impl Node for RenderMesh {
             ("frame_ms", "mean wall time per frame, ms"),
             ("gpu_ms", "mean GPU time per frame from timestamp queries, ms; absent where the adapter has none, and on the CPU"),
             ("fps", "frames per second (from frame_ms)"),
-            ("layers_ms", "CPU: the view's visibility layers (ray-cast depth peeling), ms a frame"),
-            ("shade_ms", "CPU: the shading pass (shell test, MDF and BTF lookups, the shadow texels it traces), ms a frame"),
+            ("layers_ms", "the view's visibility layers, ms a frame: on the CPU ray-cast depth peeling (wall time), on the GPU the peel passes (GPU time, where the adapter has timestamp queries)"),
+            ("shade_ms", "the shading pass (shell test, MDF and BTF lookups, shadows), ms a frame: on the CPU wall time (with the shadow texels it traces), on the GPU the resolve pass's GPU time"),
+            ("shadow_ms", "GPU, shadows on: the shadow map's peel passes and resolve, GPU time, ms a frame"),
             ("shadow_setup_ms", "CPU, shadows on: binning the mesh for the light camera and allocating the lazy map, ms a frame"),
             ("shadow_thread_ms", "CPU, shadows on: time spent tracing shadow texels, summed over threads (its share of shade_ms × threads is the shadows' share), ms a frame"),
             ("shadow_texels", "CPU, shadows on: shadow-map texels traced a frame (the rest of the map is never traced)"),
@@ -446,18 +447,28 @@ pub fn render_gpu(
     // render the same image without reading it back.
     let (rgba, _) = r.frame(camera, sc, count, true)?;
     let timed = p.frames.max(1);
-    let (mut gpu_total, mut gpu_frames) = (0.0, 0);
+    let mut stages: Vec<super::gpu_render::GpuStages> = Vec::new();
     let start = Instant::now();
     for k in 0..timed {
         ctx.check_cancel()?;
         if let (_, Some(g)) = r.frame(camera, sc, count, false)? {
-            gpu_total += g;
-            gpu_frames += 1;
+            stages.push(g);
         }
         ctx.progress(k as u64 + 1, timed as u64);
     }
     let ms = start.elapsed().as_secs_f64() * 1e3 / timed as f64;
-    let gpu_ms = (gpu_frames > 0).then(|| gpu_total / gpu_frames as f64);
+    // The same stage breakdown as the CPU path's, in GPU time (means over the timed frames).
+    let mean = |f: &dyn Fn(&super::gpu_render::GpuStages) -> f64| {
+        stages.iter().map(f).sum::<f64>() / stages.len().max(1) as f64
+    };
+    if !stages.is_empty() {
+        ctx.timing("layers_ms", mean(&|s| s.layers_ms));
+        ctx.timing("shade_ms", mean(&|s| s.shade_ms));
+        if p.shadows {
+            ctx.timing("shadow_ms", mean(&|s| s.shadow_ms.unwrap_or(0.0)));
+        }
+    }
+    let gpu_ms = (!stages.is_empty()).then(|| mean(&|s| s.total_ms));
     let mask = rgba
         .chunks_exact(4)
         .map(|c| (c[3] > 0.5) as u8 as f32)

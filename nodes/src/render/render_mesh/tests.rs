@@ -526,9 +526,24 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
         let cam = Camera::new(&p.camera).unwrap();
         let ctx = NodeContext::detached(None);
         match gpu {
-            Some(g) => {
-                render_gpu(&ctx, g, &scene, &cam, p).map(|(d, m, _, t)| (d, coverage(&m), t))
-            }
+            Some(g) => render_gpu(&ctx, g, &scene, &cam, p).map(|(d, m, _, t)| {
+                // The stages' timings add up to the frame's GPU time (the same timestamps).
+                let st = ctx.timings();
+                if let Some(total) = t {
+                    let parts = ["layers_ms", "shade_ms", "shadow_ms"]
+                        .iter()
+                        .filter_map(|k| st.get(*k))
+                        .sum::<f64>();
+                    assert!(st.contains_key("layers_ms") && st.contains_key("shade_ms"));
+                    assert_eq!(st.contains_key("shadow_ms"), p.shadows);
+                    // Sums of the same per-frame differences: equal up to rounding.
+                    assert!(
+                        (parts - total).abs() <= 1e-9 * total.max(1.0),
+                        "{st:?} {total}"
+                    );
+                }
+                (d, coverage(&m), t)
+            }),
             None => {
                 render_cpu(&scene, &cam, p, &Counter::none()).map(|(d, m)| (d, coverage(&m), None))
             }
