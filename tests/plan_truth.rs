@@ -162,6 +162,10 @@ fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
     let (doc, planned) = plan(&s, "rmse=0.06");
     let tight = doc.clone();
     assert_eq!(doc["judge"], "truth");
+    // The planning time, and its ratio to the longer full render (the graph as given or
+    // brute force), are reported.
+    let ratio = doc["plan_time"]["ratio"].as_f64().expect("plan_time.ratio");
+    assert!(ratio > 0.0 && ratio.is_finite(), "{doc}");
     assert!(
         doc["truth"]["noise"].as_f64().unwrap() <= 0.06 / 3.0,
         "{doc}"

@@ -277,22 +277,6 @@ pub fn frame_seconds(report: &RunReport, id: &str) -> Option<f64> {
         .filter(|t| t.is_finite() && *t >= 0.0)
 }
 
-/// `opts` for a probe run: the same device, cache use and cancel flag; every sink (the probe
-/// graph's one) as output.
-pub fn copy_options(opts: &RunOptions) -> RunOptions {
-    let mut run = RunOptions::new(
-        &opts.graph_name,
-        opts.base_dir.clone(),
-        opts.out_dir.clone(),
-    );
-    run.device = opts.device;
-    run.require_gpu = opts.require_gpu;
-    run.use_cache = opts.use_cache;
-    run.verify_cache = opts.verify_cache;
-    run.cancel = opts.cancel.clone();
-    run
-}
-
 /// Runs `graph` through the engine for `outputs` (`(node, port)`), with `opts`' device, cache
 /// and cancel flag; a failed node is an error.
 pub(crate) fn run_for(
@@ -304,7 +288,7 @@ pub(crate) fn run_for(
 ) -> Result<RunReport, PlanError> {
     let checked = mesoflow_graph::check(name, graph, engine.registry())
         .map_err(|e| PlanError::Probe(e.to_string().trim_end().to_string()))?;
-    let mut opts = copy_options(opts);
+    let mut opts = opts.same_policy();
     opts.outputs = outputs
         .iter()
         .map(|(n, p)| mesoflow_graph::PortRef {

@@ -54,14 +54,7 @@ pub fn plan_view(
     let start = Instant::now();
     let kind = render_kind(file, render)?;
     budget.check()?;
-    let scene = probe::measure(
-        engine,
-        name,
-        file,
-        render,
-        kind,
-        crate::verify::copy_options(&opts),
-    )?;
+    let scene = probe::measure(engine, name, file, render, kind, opts.same_policy())?;
     let chain = kind
         .btf_port()
         .and_then(|port| btf_chain(file, render, port));

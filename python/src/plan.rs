@@ -68,7 +68,7 @@ pub fn plan(
         .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
     let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
     opts.device = device_mode(device)?;
-    opts.require_gpu = std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
     opts.use_cache = use_cache;
     let cancel = Arc::new(AtomicBool::new(false));
     opts.cancel = cancel.clone();
@@ -122,7 +122,7 @@ pub fn plan_truth(
         .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
     let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
     opts.device = device_mode(device)?;
-    opts.require_gpu = std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
     opts.use_cache = use_cache;
     let cancel = Arc::new(AtomicBool::new(false));
     opts.cancel = cancel.clone();

@@ -260,7 +260,7 @@ pub fn run<'py>(
         })
         .collect::<PyResult<_>>()?;
     opts.device = device_mode(device)?;
-    opts.require_gpu = std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1");
+    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
     opts.use_cache = use_cache;
     opts.verify_cache = verify_cache;
     let cancel = Arc::new(AtomicBool::new(false));

@@ -30,5 +30,8 @@ pub use node::{DynNode, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs,
 pub use progress::ProgressSteps;
 pub use registry::Registry;
 pub use report::{NodeReport, NodeStatus, RunReport, Warning};
-pub use run::{DeviceMode, RunObserver, RunOptions, RunOutcome, SilentObserver, NOT_IN_CACHE};
+pub use run::{
+    require_gpu_from_env, DeviceMode, RunObserver, RunOptions, RunOutcome, SilentObserver,
+    NOT_IN_CACHE,
+};
 pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};

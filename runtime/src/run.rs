@@ -58,6 +58,13 @@ pub struct RunOptions {
     pub cache_everything: bool,
 }
 
+/// Whether `MESOFLOW_REQUIRE_GPU=1` asks that GPU nodes never fall back to their CPU path: the
+/// one place the variable is read (the command line, the studio, the cluster and Python all ask
+/// here; the command line also refuses a value other than 0 or 1 at start-up).
+pub fn require_gpu_from_env() -> bool {
+    std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1")
+}
+
 /// The start of the error of a node that a `compute_only` run would have had to compute.
 pub const NOT_IN_CACHE: &str = "not in the cache, and not computed here";
 
@@ -75,6 +82,24 @@ impl RunOptions {
             cancel: Arc::new(AtomicBool::new(false)),
             compute_only: None,
             cache_everything: false,
+        }
+    }
+
+    /// Options for another run of the same session: this one's graph name and folders and its
+    /// policy (device, require_gpu, caches, verification, cancel flag), none of its per-run
+    /// fields (outputs, compute_only, cache_everything).
+    pub fn same_policy(&self) -> RunOptions {
+        RunOptions {
+            device: self.device,
+            require_gpu: self.require_gpu,
+            use_cache: self.use_cache,
+            verify_cache: self.verify_cache,
+            cancel: self.cancel.clone(),
+            ..RunOptions::new(
+                &self.graph_name,
+                self.base_dir.clone(),
+                self.out_dir.clone(),
+            )
         }
     }
 }

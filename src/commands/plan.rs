@@ -329,7 +329,14 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
                 println!("      warning: {w}");
             }
         }
-        println!("{} ({:.1} s planning)", a.why, a.plan_s);
+        let doc = a.to_json();
+        match doc["plan_time"]["ratio"].as_f64() {
+            Some(r) => println!(
+                "{} ({:.1} s planning, {r:.1}× the longer full render of the graph as given and of brute force)",
+                a.why, a.plan_s
+            ),
+            None => println!("{} ({:.1} s planning)", a.why, a.plan_s),
+        }
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }
     Ok(0)

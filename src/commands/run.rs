@@ -88,7 +88,7 @@ pub fn device_mode(d: DeviceArg) -> DeviceMode {
 }
 
 pub fn require_gpu() -> bool {
-    std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1")
+    mesoflow_runtime::require_gpu_from_env()
 }
 
 /// `--output` targets checked against the graph, with a did-you-mean for a node or port.
