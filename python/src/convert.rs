@@ -206,6 +206,17 @@ fn shaped<T: pyo3::buffer::Element + Copy>(
     let py = obj.py();
     let buf = PyBuffer::<T>::get(obj).map_err(|e| e.to_string())?;
     let shape = buf.shape().to_vec();
+    // The copy made here against the memory budget (issue 43: what a Python node returned was
+    // never held to it).
+    let bytes = buf.len_bytes() as u64;
+    let budget = mesoflow_nodes::memory::budget_bytes(None);
+    if bytes > budget {
+        return Err(format!(
+            "the array of shape {shape:?} is {:.2} GB, over the memory budget of {:.2} GB (MESOFLOW_MEMORY_BUDGET_GB)",
+            bytes as f64 / 1e9,
+            budget as f64 / 1e9
+        ));
+    }
     let data = buf.to_vec(py).map_err(|e| e.to_string())?;
     Ok((shape, data))
 }

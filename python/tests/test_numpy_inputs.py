@@ -73,3 +73,26 @@ def test_complex_and_datetime_arrays_are_refused_not_converted(tmp_path):
         with pytest.raises(TypeError, match="not one of real numbers"):
             g.add("heightfield.array", "h", data=bad)
     assert "h" not in g
+
+
+def test_the_memory_budget_holds_for_array_inputs_and_python_nodes_outputs(tmp_path, monkeypatch):
+    # 10 kB: a 64 x 64 height field is 49 kB read (f64) and kept (f32); the budget is read when
+    # the array is, so setting it here reaches the engine in this process.
+    monkeypatch.setenv("MESOFLOW_MEMORY_BUDGET_GB", "0.00001")
+    cache = tmp_path / "cache"
+    g = mesoflow.Graph(base_dir=tmp_path)
+    g.add("heightfield.array", "h", data=np.zeros((64, 64)))
+    with pytest.raises(mesoflow.NodeError) as e:
+        g.run(out_dir=tmp_path / "o", cache_dir=cache)
+    assert e.value.node == "h" and "over the memory budget" in str(e.value)
+
+    @mesoflow.node(kind="user.huge", inputs={"height": "HeightField"}, outputs={"image": "Image"})
+    def huge(height):
+        return np.zeros((64, 64, 3), dtype=np.float32)
+
+    g = mesoflow.Graph(base_dir=tmp_path)
+    s = g.add("heightfield.procedural", pattern="weave", size=8)
+    g.add("user.huge", "big", height=s["height"])
+    with pytest.raises(mesoflow.NodeError) as e:
+        g.run(out_dir=tmp_path / "o2", cache_dir=cache)
+    assert e.value.node == "big" and "over the memory budget" in str(e.value)

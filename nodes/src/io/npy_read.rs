@@ -46,6 +46,14 @@ pub fn read(path: &Path, rank: usize, what: &str) -> Result<Array, NodeError> {
             format!("the shape {shape:?} declares more values than the file's {size} bytes hold"),
         ));
     };
+    // Against the memory budget before anything is read (issue 43: it applied to the readers'
+    // parameters, not to the arrays themselves): the f64 copy read here and the f32 value a
+    // node keeps, 12 bytes a value.
+    crate::memory::check_param(
+        crate::memory::product(&[count as u64, 12]),
+        &format!("the {shape:?} array"),
+        "path",
+    )?;
     let fortran = npy.order() == npyz::Order::Fortran;
     let descr = npy.dtype().descr();
     let ty = descr.trim_matches(|c| c == '\'' || c == '"').to_string();
