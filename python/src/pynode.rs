@@ -2,6 +2,10 @@
 //! `DynNode` face. Its cache key holds the kind's version and a hash of the function's source
 //! (in the canonical parameters), so editing the function recomputes it; it runs on the CPU lane,
 //! holding the GIL only while the function runs; an exception becomes the node's error.
+//! Cancellation reaches the function: when the run is cancelled (Ctrl-C) while it runs, a
+//! `KeyboardInterrupt` is raised in its thread (`PyThreadState_SetAsyncExc`), which stops Python
+//! code at its next bytecode (a call blocked inside C returns first), and the node reports
+//! `cancelled`.
 
 use crate::convert::{from_python, to_python};
 use mesoflow_graph::{DevicePreference, InputSpec, KindSignature, OutputSpec, TypeSet};
@@ -168,7 +172,11 @@ impl DynNode for PyNode {
             }
             let json = py.import("json").map_err(py_err)?;
             let params = json.call_method1("loads", (params_text,)).map_err(py_err)?;
-            let result = self.func.bind(py).call1((args, params)).map_err(py_err)?;
+            let result = call_cancellable(py, ctx, self.func.bind(py), (args, params));
+            let result = match result {
+                Err(_) if ctx.is_cancelled() => return Err(NodeError::Cancelled),
+                r => r.map_err(py_err)?,
+            };
             let (values, warnings) = result
                 .cast::<PyTuple>()
                 .ok()
@@ -197,4 +205,53 @@ impl DynNode for PyNode {
             Ok(out)
         })
     }
+}
+
+/// Calls `func(args)` on this thread, watching the run's cancel flag from another: once it is
+/// set, a `KeyboardInterrupt` is raised in this thread asynchronously. An interrupt that was
+/// raised but not yet delivered when the call returned is withdrawn, so it never lands in
+/// Python code run later on this thread.
+fn call_cancellable<'py>(
+    py: Python<'py>,
+    ctx: &NodeContext,
+    func: &Bound<'py, PyAny>,
+    args: (Bound<'py, PyDict>, Bound<'py, PyAny>),
+) -> PyResult<Bound<'py, PyAny>> {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    // SAFETY: reads this thread's identifier; the GIL is held (`py`).
+    let ident = unsafe { pyo3::ffi::PyThread_get_thread_ident() } as std::os::raw::c_long;
+    let (done, fired) = (AtomicBool::new(false), AtomicBool::new(false));
+    std::thread::scope(|scope| {
+        let watcher = scope.spawn(|| {
+            while !done.load(Ordering::Acquire) {
+                if ctx.is_cancelled() {
+                    Python::attach(|_| {
+                        if !done.load(Ordering::Acquire) {
+                            // SAFETY: the GIL is held; the exception object is a static type.
+                            unsafe {
+                                pyo3::ffi::PyThreadState_SetAsyncExc(
+                                    ident,
+                                    pyo3::ffi::PyExc_KeyboardInterrupt,
+                                );
+                            }
+                            fired.store(true, Ordering::Release);
+                        }
+                    });
+                    return;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+        });
+        let result = func.call1(args);
+        done.store(true, Ordering::Release);
+        // The watcher may be waiting for the GIL: wait for it without holding it.
+        let _ = py.detach(|| watcher.join());
+        if fired.load(Ordering::Acquire) {
+            // SAFETY: the GIL is held; a null exception withdraws a pending one.
+            unsafe {
+                pyo3::ffi::PyThreadState_SetAsyncExc(ident, std::ptr::null_mut());
+            }
+        }
+        result
+    })
 }

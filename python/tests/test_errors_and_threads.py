@@ -144,3 +144,34 @@ def test_progress_events_reach_a_callback(tmp_path, cache):
     steps = [e for e in events if e[0] == "progress" and e[1] == "cap"]
     # 81 views report as they go; forwarded in 5% steps, so at most 21 of them reach Python.
     assert 1 <= len(steps) <= 21 and steps[-1][3] <= steps[-1][4]
+
+
+def test_ctrl_c_reaches_a_python_node_that_never_returns(tmp_path, cache, ctrl_c):
+    # It once ignored two Ctrl-Cs and the process had to be killed: the cancel now raises a
+    # KeyboardInterrupt in the node's thread, and the run ends cancelled.
+    @mesoflow.node(kind="user.forever", inputs={"x": "Scalar"}, outputs={"y": "Scalar"})
+    def forever(x):
+        while True:
+            pass
+
+    g = mesoflow.Graph(base_dir=tmp_path)
+    c = g.add("scalar.constant", "c", value=1.0)
+    g.add("user.forever", "spin", x=c["value"])
+    timer = threading.Timer(1.0, os.kill, (os.getpid(), signal.SIGINT))
+    t0 = time.monotonic()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        g.run(out_dir=tmp_path / "o", cache_dir=cache)
+    assert time.monotonic() - t0 < 20
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["cancelled"] is True
+    assert {n["id"]: n["status"] for n in report["nodes"]}["spin"] == "cancelled"
+    # The thread is left clean: the next run of a Python node is not interrupted.
+    @mesoflow.node(kind="user.quick", inputs={"x": "Scalar"}, outputs={"y": "Scalar"})
+    def quick(x):
+        return x + 1.0
+
+    g = mesoflow.Graph(base_dir=tmp_path)
+    c = g.add("scalar.constant", "c", value=1.0)
+    g.add("user.quick", "q", x=c["value"])
+    assert g.run(["q.y"], out_dir=tmp_path / "o2", cache_dir=cache)["q.y"] == 2.0
