@@ -109,6 +109,20 @@ pub struct Arbitration {
 }
 
 impl Arbitration {
+    /// The longer of one full render of the graph as given (the first candidate) and of brute
+    /// force at the budget, estimated, s, and the planning time over it (issue 57 asks for at
+    /// most 2×); `None` where neither was measured.
+    pub fn plan_time(&self) -> Option<(f64, f64)> {
+        let given = self.candidates.first().and_then(|c| c.full_s);
+        let brute = self
+            .candidates
+            .iter()
+            .find(|c| c.family == "brute force")
+            .and_then(|c| c.full_s);
+        let longest = given.into_iter().chain(brute).fold(0.0, f64::max);
+        (longest > 0.0).then(|| (longest, self.plan_s / longest))
+    }
+
     pub fn to_json(&self) -> Value {
         let candidates: Vec<Value> = self
             .candidates
@@ -150,21 +164,11 @@ impl Arbitration {
             "why": self.why,
             "plan_seconds": self.plan_s,
         });
-        // The planning time against one full render of the graph as given (the first
-        // candidate) or of brute force at the budget, whichever is longer (issue 57 asks for at
-        // most 2×); absent where neither was measured.
-        let given = self.candidates.first().and_then(|c| c.full_s);
-        let brute = self
-            .candidates
-            .iter()
-            .find(|c| c.family == "brute force")
-            .and_then(|c| c.full_s);
-        let longest = given.into_iter().chain(brute).fold(0.0, f64::max);
-        if longest > 0.0 {
+        if let Some((longest, ratio)) = self.plan_time() {
             doc["plan_time"] = json!({
                 "seconds": self.plan_s,
                 "longer_full_render_seconds": longest,
-                "ratio": self.plan_s / longest,
+                "ratio": ratio,
             });
         }
         if let Some(n) = self.truth_noise {

@@ -14,6 +14,28 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+/// The engine (on `cache_dir`) with `file` checked against its kinds, and the options of a
+/// plan's runs with their cancel flag: the session both planners share.
+fn session(
+    name: &str,
+    file: &mesoflow_graph::GraphFile,
+    base_dir: PathBuf,
+    device: &str,
+    cache_dir: Option<String>,
+    use_cache: bool,
+) -> PyResult<(Arc<mesoflow_runtime::Engine>, RunOptions, Arc<AtomicBool>)> {
+    let engine = engine(cache_dir.as_deref());
+    check(name, file, engine.registry())
+        .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
+    let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
+    opts.device = device_mode(device)?;
+    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
+    opts.use_cache = use_cache;
+    let cancel = Arc::new(AtomicBool::new(false));
+    opts.cancel = cancel.clone();
+    Ok((engine, opts, cancel))
+}
+
 /// Plans node `render` of the graph `text` for a FLIP `budget` at `ppd` pixels per degree
 /// (FLIP's default 67 when `None`). Returns `(plan_json, planned_graph_json)`.
 #[pyfunction]
@@ -63,15 +85,7 @@ pub fn plan(
         flip: budget,
         ppd: ppd.unwrap_or(mesoflow_nodes::image::flip::DEFAULT_PPD),
     };
-    let engine = engine(cache_dir.as_deref());
-    check(name, &file, engine.registry())
-        .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
-    let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
-    opts.device = device_mode(device)?;
-    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
-    opts.use_cache = use_cache;
-    let cancel = Arc::new(AtomicBool::new(false));
-    opts.cancel = cancel.clone();
+    let (engine, opts, cancel) = session(name, &file, base_dir, device, cache_dir, use_cache)?;
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();
     let (result, interrupted) = crate::wait::run_interruptibly(
@@ -117,15 +131,7 @@ pub fn plan_truth(
         )));
     }
     let file = parse_with_sets(text, &sets)?;
-    let engine = engine(cache_dir.as_deref());
-    check(name, &file, engine.registry())
-        .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
-    let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
-    opts.device = device_mode(device)?;
-    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
-    opts.use_cache = use_cache;
-    let cancel = Arc::new(AtomicBool::new(false));
-    opts.cancel = cancel.clone();
+    let (engine, opts, cancel) = session(name, &file, base_dir, device, cache_dir, use_cache)?;
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();
     let options = TruthOptions {

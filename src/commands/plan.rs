@@ -329,8 +329,7 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
                 println!("      warning: {w}");
             }
         }
-        let doc = a.to_json();
-        match doc["plan_time"]["ratio"].as_f64() {
+        match a.plan_time().map(|(_, r)| r) {
             Some(r) => println!(
                 "{} ({:.1} s planning, {r:.1}× the longer full render of the graph as given and of brute force)",
                 a.why, a.plan_s
