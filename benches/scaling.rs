@@ -28,7 +28,9 @@
 //! capture) are measured (relative RMSE over the pixels either image covers, the truth's noise
 //! taken out; mean FLIP beside it where `flip_evaluator` is installed), and Mitsuba's own time to
 //! the same error (the samples a pixel its measured noise needs, at least one; the frame
-//! interpolated between its 1-sample and `--spp` frames). Every figure is from the same run.
+//! interpolated between its 1-sample and `--spp` frames); and our own path tracer on the same
+//! true geometry (`render.reference`, 4 samples a pixel, its time at ours' error from its own
+//! noise; `--no-reference` skips it). Every figure is from the same run.
 //! Ours' and the cheaper models' times are their frames (render.mesh's `frame_ms`; the others'
 //! node seconds, one frame), Mitsuba's its frame, scene loading (PLY, BVH) and JIT beside it.
 //!
@@ -177,7 +179,13 @@ fn graph(p: Point, frames: u32) -> Value {
             "save_normal_mapped": { "kind": "npy.write", "inputs": { "value": "normal_mapped.image" }, "params": { "path": "normal_mapped.npy" } },
             "save_normal_mapped_mask": { "kind": "npy.write", "inputs": { "value": "normal_mapped.coverage" }, "params": { "path": "normal_mapped_mask.npy" } },
             "save_relief": { "kind": "npy.write", "inputs": { "value": "relief.image" }, "params": { "path": "relief.npy" } },
-            "save_relief_mask": { "kind": "npy.write", "inputs": { "value": "relief.mask" }, "params": { "path": "relief_mask.npy" } }
+            "save_relief_mask": { "kind": "npy.write", "inputs": { "value": "relief.mask" }, "params": { "path": "relief_mask.npy" } },
+            // Our own path tracer on the same true geometry (brute force beside Mitsuba), at 4
+            // samples a pixel: its noise from its own two halves sets its time at ours' error.
+            "reference": { "kind": "render.reference", "inputs": { "mesh": "true_surface.mesh" },
+                           "params": { "camera": camera, "light": light, "albedo": ALBEDO, "samples": 4 } },
+            "save_reference": { "kind": "npy.write", "inputs": { "value": "reference.image" }, "params": { "path": "reference.npy" } },
+            "save_reference_mask": { "kind": "npy.write", "inputs": { "value": "reference.coverage" }, "params": { "path": "reference_mask.npy" } }
         }
     })
 }
@@ -615,6 +623,8 @@ fn main() {
     let max_plane: u32 = arg("--max-plane-tiles", 128);
     let truth_spp: u32 = arg("--truth-spp", 256);
     let limit_s: f64 = arg("--peer-limit-s", 600.0);
+    // Our own path tracer beside Mitsuba (slow on millions of triangles; `--no-reference` skips it).
+    let with_reference = !std::env::args().any(|a| a == "--no-reference");
     let out: PathBuf = arg("--out", cli::repo().join("target/scaling"));
     let cache = out.join("cache");
     // Measured in a process of its own: a child's peak resident set starts from its parent's
@@ -735,8 +745,28 @@ fn main() {
             }
         };
         let (normal_s, relief_s) = (cheap("normal_mapped"), cheap("relief"));
+        // The true geometry (where mesh.displace makes it), and our path tracer on it.
+        let (truth, displace_rss) = run(&dir, &cache, "ply.file");
+        let (reference_s, reference_noise) = if truth.is_ok() && with_reference {
+            match fresh(&dir, &cache, "reference.image") {
+                (Ok(r), _) => {
+                    let n = cli::node(&r, "reference");
+                    (n["seconds"].as_f64(), n["metrics"]["noise"].as_f64())
+                }
+                (Err(e), _) => {
+                    eprintln!("scaling: {name} {p:?}: reference: {e}");
+                    (None, None)
+                }
+            }
+        } else {
+            (None, None)
+        };
         // Every image and mask as .npy for the peer's comparison (all cached by now).
-        let saves = "save_ours.files,save_ours_mask.files,save_normal_mapped.files,save_normal_mapped_mask.files,save_relief.files,save_relief_mask.files";
+        let mut saves = "save_ours.files,save_ours_mask.files,save_normal_mapped.files,save_normal_mapped_mask.files,save_relief.files,save_relief_mask.files".to_string();
+        if reference_s.is_some() {
+            saves.push_str(",save_reference.files,save_reference_mask.files");
+        }
+        let saves = saves.as_str();
         let saved = out_dir(&dir, saves);
         let compare = match run(&dir, &cache, saves).0 {
             Ok(_) => {
@@ -744,11 +774,15 @@ fn main() {
                     json!({ "image": saved.join(format!("{name}.npy")),
                             "mask": saved.join(format!("{name}_mask.npy")), "seconds": seconds })
                 };
-                Some(json!({
+                let mut c = json!({
                     "ours": entry("ours", frame.map(|f| f / 1e3)),
                     "normal_mapped": entry("normal_mapped", normal_s),
                     "relief": entry("relief", relief_s),
-                }))
+                });
+                if reference_s.is_some() {
+                    c["reference"] = entry("reference", reference_s);
+                }
+                Some(c)
             }
             Err(e) => {
                 eprintln!("scaling: {name} {p:?}: no images to compare: {e}");
@@ -756,7 +790,6 @@ fn main() {
             }
         };
         let compare = compare.as_ref().map(|c| (c, truth_spp));
-        let (truth, displace_rss) = run(&dir, &cache, "ply.file");
         let whole_ply = out_dir(&dir, "ply.file").join("truth.ply");
         // The truth from the whole geometry where mesh.displace makes it; on the plane one
         // displaced tile instanced is timed beside it (the same triangles), and is the truth's
@@ -787,6 +820,14 @@ fn main() {
             .filter(|m| m.get("compared").is_some())
             .or(inst.filter(|m| m.get("compared").is_some()));
         let cmp = |who: &str, k: &str| judged.and_then(|j| j["compared"][who][k].as_f64());
+        // render.reference's time at ours' error: its 4-sample time × (its noise / ours' error)²,
+        // at least one sample a pixel (the families bench's rule).
+        let reference_equal_ms = match (reference_s, reference_noise, cmp("ours", "rel")) {
+            (Some(t), Some(n), Some(e)) if e > 0.0 => {
+                Some(t * 1e3 * (n / e).powi(2).clamp(0.25, f64::INFINITY))
+            }
+            _ => None,
+        };
         let row = json!({
             "axis": name, "plane": p.plane, "tiles": p.tiles, "image": p.resolution, "spp": spp,
             "ours_ms": frame, "btf_limit_ms": limit, "layers_ms": t["layers_ms"], "shade_ms": t["shade_ms"],
@@ -811,6 +852,17 @@ fn main() {
             "relief_ms": relief_s.map(|s| s * 1e3), "relief_rel": cmp("relief", "rel"),
             "relief_flip": cmp("relief", "flip"), "relief_equal_ratio": cmp("relief", "equal_ratio"),
         });
+        // Set apart: one json! of every field passes the macro's recursion limit.
+        let mut row = row;
+        for (k, v) in [
+            ("reference_ms", reference_s.map(|s| s * 1e3)),
+            ("reference_noise", reference_noise),
+            ("reference_rel", cmp("reference", "rel")),
+            ("reference_equal_ms", reference_equal_ms),
+            ("reference_equal_ratio", frame.zip(reference_equal_ms).map(|(a, b)| a / b)),
+        ] {
+            row[k] = json!(v);
+        }
         if let Err(e) = &mitsuba {
             eprintln!("scaling: {name} {p:?}: no Mitsuba frame of the whole geometry: {e}");
         }
@@ -848,7 +900,7 @@ fn main() {
             f("instanced_mib", 0),
         );
         equal.push(format!(
-            "| {name} | {} × {} | {} × {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {name} | {} × {} | {} × {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             p.tiles[0],
             p.tiles[1],
             p.resolution[0],
@@ -867,14 +919,18 @@ fn main() {
             f("relief_rel", 3),
             f("relief_ms", 0),
             row["relief_equal_ratio"].as_f64().map_or("absent".into(), |x| format!("{x:.2}×")),
+            f("reference_noise", 3),
+            f("reference_rel", 3),
+            f("reference_equal_ms", 0),
+            row["reference_equal_ratio"].as_f64().map_or("absent".into(), |x| format!("{x:.2}×")),
         ));
         rows.push(row);
     }
     println!();
     println!("At equal error (each image against Mitsuba's converged truth, the truth's noise taken out; Mitsuba's time at the samples a pixel its noise needs to match):");
     println!();
-    println!("| axis | tiles | image | truth spp | ours' relative RMSE | ours' FLIP | ours' frame, ms | Mitsuba noise at {spp} spp | Mitsuba spp at ours' error | Mitsuba at ours' error, ms | ours / Mitsuba | normal mapping: error | ms | / Mitsuba at its error | relief: error | ms | / Mitsuba at its error |");
-    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
+    println!("| axis | tiles | image | truth spp | ours' relative RMSE | ours' FLIP | ours' frame, ms | Mitsuba noise at {spp} spp | Mitsuba spp at ours' error | Mitsuba at ours' error, ms | ours / Mitsuba | normal mapping: error | ms | / Mitsuba at its error | relief: error | ms | / Mitsuba at its error | render.reference: noise at 4 spp | its error | at ours' error, ms | ours / it |");
+    println!("|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|");
     for l in &equal {
         println!("{l}");
     }
