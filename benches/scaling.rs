@@ -859,7 +859,10 @@ fn main() {
             ("reference_noise", reference_noise),
             ("reference_rel", cmp("reference", "rel")),
             ("reference_equal_ms", reference_equal_ms),
-            ("reference_equal_ratio", frame.zip(reference_equal_ms).map(|(a, b)| a / b)),
+            (
+                "reference_equal_ratio",
+                frame.zip(reference_equal_ms).map(|(a, b)| a / b),
+            ),
         ] {
             row[k] = json!(v);
         }

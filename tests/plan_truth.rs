@@ -26,8 +26,21 @@ const SETS: [&str; 5] = [
 ];
 
 fn plan(s: &Scratch, budget: &str) -> (Value, Value) {
-    let out = s.path(&format!("planned-{budget}.json"));
-    let graph = graph();
+    plan_named(s, &graph(), "planned", budget, &SETS)
+}
+
+/// `mesoflow plan GRAPH --render ours --against truth --budget BUDGET --probe-share 0.5` with
+/// `sets`, into `<stem>-<budget>.json` in the scratch folder: the plan document and the planned
+/// graph.
+fn plan_named(
+    s: &Scratch,
+    graph: &Path,
+    stem: &str,
+    budget: &str,
+    sets: &[&str],
+) -> (Value, Value) {
+    let out = s.path(&format!("{stem}-{budget}.json"));
+    let cache = s.path("cache");
     let mut args = vec![
         "plan",
         graph.to_str().unwrap(),
@@ -42,16 +55,15 @@ fn plan(s: &Scratch, budget: &str) -> (Value, Value) {
         "-o",
         out.to_str().unwrap(),
         "--cache-dir",
+        cache.to_str().unwrap(),
     ];
-    let cache = s.path("cache");
-    args.push(cache.to_str().unwrap());
-    for set in SETS {
+    for set in sets {
         args.extend(["--set", set]);
     }
     let r = mesoflow(&args, s.dir.path());
     assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
     let doc: Value = serde_json::from_str(
-        &std::fs::read_to_string(s.path(&format!("planned-{budget}.plan.json"))).unwrap(),
+        &std::fs::read_to_string(s.path(&format!("{stem}-{budget}.plan.json"))).unwrap(),
     )
     .unwrap();
     let planned: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
@@ -296,34 +308,7 @@ fn mesh_graph(s: &Scratch) -> PathBuf {
 }
 
 fn plan_mesh(s: &Scratch, graph: &Path, budget: &str) -> (Value, Value) {
-    let out = s.path(&format!("mesh-{budget}.json"));
-    let cache = s.path("cache");
-    let r = mesoflow(
-        &[
-            "plan",
-            graph.to_str().unwrap(),
-            "--render",
-            "ours",
-            "--against",
-            "truth",
-            "--budget",
-            budget,
-            "--probe-share",
-            "0.5",
-            "-o",
-            out.to_str().unwrap(),
-            "--cache-dir",
-            cache.to_str().unwrap(),
-        ],
-        s.dir.path(),
-    );
-    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    let doc: Value = serde_json::from_str(
-        &std::fs::read_to_string(s.path(&format!("mesh-{budget}.plan.json"))).unwrap(),
-    )
-    .unwrap();
-    let planned: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
-    (doc, planned)
+    plan_named(s, graph, "mesh", budget, &[])
 }
 
 #[test]

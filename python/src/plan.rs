@@ -88,22 +88,12 @@ pub fn plan(
     let (engine, opts, cancel) = session(name, &file, base_dir, device, cache_dir, use_cache)?;
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();
-    let (result, interrupted) = crate::wait::run_interruptibly(
+    let planned = interruptible(
         py,
-        "the plan",
         move || plan_view(&worker, &name, &file, &render, budget, split, opts, probe),
-        || cancel.store(true, Ordering::Relaxed),
+        &cancel,
     )?;
-    if let Some(e) = interrupted {
-        return Err(e);
-    }
-    let planned = result.map_err(|e| match e {
-        PlanError::Probe(_) => PyRuntimeError::new_err(e.to_string()),
-        _ => PyValueError::new_err(e.to_string()),
-    })?;
-    let doc = serde_json::to_string(&planned.to_json())
-        .map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    Ok((doc, planned.plan.file.to_json()))
+    Ok((json_text(&planned.to_json())?, planned.plan.file.to_json()))
 }
 
 /// Plans node `render` of the graph `text` against the truth the graph makes, for a relative
@@ -138,20 +128,34 @@ pub fn plan_truth(
         rmse: budget,
         share: probe_share,
     };
-    let (result, interrupted) = crate::wait::run_interruptibly(
+    let a = interruptible(
         py,
-        "the plan",
         move || arbitrate(&worker, &name, &file, &render, &opts, options),
-        || cancel.store(true, Ordering::Relaxed),
+        &cancel,
     )?;
+    Ok((json_text(&a.to_json())?, a.planned.to_json()))
+}
+
+/// Runs a planner off the Python thread (Ctrl-C cancels it through `cancel` and is raised
+/// once it stopped); a plan that cannot be made is a `ValueError`, a probe that failed a
+/// `RuntimeError`.
+fn interruptible<T: Send + 'static>(
+    py: Python<'_>,
+    work: impl FnOnce() -> Result<T, PlanError> + Send + 'static,
+    cancel: &AtomicBool,
+) -> PyResult<T> {
+    let (result, interrupted) = crate::wait::run_interruptibly(py, "the plan", work, || {
+        cancel.store(true, Ordering::Relaxed)
+    })?;
     if let Some(e) = interrupted {
         return Err(e);
     }
-    let a = result.map_err(|e| match e {
+    result.map_err(|e| match e {
         PlanError::Probe(_) => PyRuntimeError::new_err(e.to_string()),
         _ => PyValueError::new_err(e.to_string()),
-    })?;
-    let doc =
-        serde_json::to_string(&a.to_json()).map_err(|e| PyRuntimeError::new_err(e.to_string()))?;
-    Ok((doc, a.planned.to_json()))
+    })
+}
+
+fn json_text(v: &serde_json::Value) -> PyResult<String> {
+    serde_json::to_string(v).map_err(|e| PyRuntimeError::new_err(e.to_string()))
 }

@@ -172,11 +172,7 @@ def plan(
             use_cache=use_cache,
             probe_share=float(probe_share),
         )
-        d = json.loads(planned_text)
-        planned = Graph(d.get("description", ""), base_dir=g.base_dir, name=g.name)
-        planned._nodes = d.get("nodes", {})
-        planned._extra = {k: v for k, v in d.items() if k not in ("mesoflow", "description", "nodes")}
-        return TruthPlan(json.loads(doc_text), planned)
+        return TruthPlan(json.loads(doc_text), _planned_graph(planned_text, g))
     doc_text, planned_text = _native.plan(
         g.to_json(),
         g.name,
@@ -192,8 +188,13 @@ def plan(
         probe_budget=float(probe_budget),
         probe_share=float(probe_share),
     )
+    return Plan(json.loads(doc_text), _planned_graph(planned_text, g))
+
+
+def _planned_graph(planned_text: str, g: Graph) -> Graph:
+    """The planned graph's text as a :class:`Graph` beside ``g`` (its folder and name)."""
     d = json.loads(planned_text)
     planned = Graph(d.get("description", ""), base_dir=g.base_dir, name=g.name)
     planned._nodes = d.get("nodes", {})
     planned._extra = {k: v for k, v in d.items() if k not in ("mesoflow", "description", "nodes")}
-    return Plan(json.loads(doc_text), planned)
+    return planned

@@ -5,6 +5,7 @@
 //! rings there). Each is measured without rendering, from the mesh, the camera and the light, and
 //! becomes a warning with its numbers where it passes its threshold.
 
+use crate::geometry::{cross, dot, length, normalize as unit, sub, V3};
 use crate::raytrace::camera::CameraParams;
 use crate::raytrace::light::LightParams;
 use crate::types::Mesh;
@@ -42,26 +43,9 @@ pub struct Validity {
     pub light_beyond: Option<(f64, f64)>,
 }
 
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f64; 3] {
-    [
-        f64::from(a[0]) - f64::from(b[0]),
-        f64::from(a[1]) - f64::from(b[1]),
-        f64::from(a[2]) - f64::from(b[2]),
-    ]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-fn unit(a: [f64; 3]) -> Option<[f64; 3]> {
-    let l = dot(a, a).sqrt();
-    (l > 1e-12 && l.is_finite()).then(|| [a[0] / l, a[1] / l, a[2] / l])
+/// A position or normal of the mesh in f64.
+fn f64s(a: [f32; 3]) -> V3 {
+    a.map(f64::from)
 }
 
 /// The most oblique θ (radians) of a set of unit directions in the tile's frame (z up).
@@ -92,34 +76,32 @@ pub fn measure(
     let (view_cone, light_cone) = (cone(views), cone(lights));
     let (mut facing, mut seen_beyond, mut lit, mut lit_beyond) = (0.0, 0.0, 0.0, 0.0);
     let (mut area_sum, mut squeezed_area, mut worst) = (0.0, 0.0, 1.0f64);
-    let eye = camera.eye.map(|x| x as f32);
-    let towards_target = unit([
-        camera.eye[0] - camera.target[0],
-        camera.eye[1] - camera.target[1],
-        camera.eye[2] - camera.target[2],
-    ]);
+
+    let towards_target = unit(sub(camera.eye, camera.target));
     for t in 0..mesh.triangles() {
         let [a, b, c] = mesh.corners(t);
-        let (pa, pb, pc) = (mesh.positions[a], mesh.positions[b], mesh.positions[c]);
+        let (pa, pb, pc) = (
+            f64s(mesh.positions[a]),
+            f64s(mesh.positions[b]),
+            f64s(mesh.positions[c]),
+        );
         let n = cross(sub(pb, pa), sub(pc, pa));
-        let area = 0.5 * dot(n, n).sqrt();
+        let area = 0.5 * length(n);
         let Some(face) = unit(n) else { continue };
         if has_normals {
             for (i, j) in [(a, b), (b, c), (c, a)] {
-                let dp = sub(mesh.positions[i], mesh.positions[j]);
-                let dn = sub(mesh.normals[i], mesh.normals[j]);
-                let len = dot(dp, dp).sqrt();
-                if len > 1e-12 {
-                    curvature.push(dot(dn, dn).sqrt() / len);
+                let dp = length(sub(f64s(mesh.positions[i]), f64s(mesh.positions[j])));
+                let dn = length(sub(f64s(mesh.normals[i]), f64s(mesh.normals[j])));
+                if dp > 1e-12 {
+                    curvature.push(dn / dp);
                 }
             }
         }
         // The texels' stretch: world length per texel along u over along v.
         if let Some((du, dv)) = mesh.uv_derivatives(t) {
-            let len = |d: [f32; 3]| dot(sub(d, [0.0; 3]), sub(d, [0.0; 3])).sqrt();
             let (lu, lv) = (
-                len(du) / tiling[0] / texels[0] as f64,
-                len(dv) / tiling[1] / texels[1] as f64,
+                length(f64s(du)) / tiling[0] / texels[0] as f64,
+                length(f64s(dv)) / tiling[1] / texels[1] as f64,
             );
             if lu > 0.0 && lv > 0.0 && lu.is_finite() && lv.is_finite() && area > 0.0 {
                 let s = (lu / lv).max(lv / lu);
@@ -139,7 +121,7 @@ pub fn measure(
         let to_eye = if camera.orthographic.is_some() {
             towards_target
         } else {
-            unit(sub(eye, centre))
+            unit(sub(camera.eye, centre))
         };
         let Some(to_eye) = to_eye else { continue };
         let cos_v = dot(face, to_eye);
@@ -152,7 +134,7 @@ pub fn measure(
             seen_beyond += w;
         }
         let to_light = match light.position {
-            Some(p) => unit(sub(p.map(|x| x as f32), centre)),
+            Some(p) => unit(sub(p, centre)),
             None => unit(light.direction),
         };
         if let Some(l) = to_light {
