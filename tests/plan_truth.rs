@@ -74,6 +74,27 @@ fn candidates(doc: &Value) -> &Vec<Value> {
     doc["candidates"].as_array().expect("candidates")
 }
 
+/// The chosen candidate, asserted to be the fastest of at least two within the budget (a
+/// planner that keeps the graph, or takes the cheapest whatever its error, fails here).
+fn fastest_of_several_within_budget(doc: &Value) -> &Value {
+    let fits: Vec<&Value> = candidates(doc)
+        .iter()
+        .filter(|c| c["within_budget"] == true)
+        .collect();
+    assert!(fits.len() >= 2, "{doc}");
+    let fastest = fits
+        .iter()
+        .map(|c| c["full_seconds_estimate"].as_f64().unwrap())
+        .fold(f64::INFINITY, f64::min);
+    let c = chosen(doc);
+    assert_eq!(
+        c["full_seconds_estimate"].as_f64().unwrap(),
+        fastest,
+        "{doc}"
+    );
+    c
+}
+
 fn chosen(doc: &Value) -> &Value {
     let name = doc["chosen"].as_str().expect("a chosen candidate");
     candidates(doc)
@@ -205,21 +226,7 @@ fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
     // Lax: several candidates fit; the plan is the fastest of them, not the graph by default
     // and not the cheapest whatever its error.
     let (doc, planned) = plan(&s, "rmse=0.5");
-    let fits: Vec<&Value> = candidates(&doc)
-        .iter()
-        .filter(|c| c["within_budget"] == true)
-        .collect();
-    assert!(fits.len() >= 2, "{doc}");
-    let fastest = fits
-        .iter()
-        .map(|c| c["full_seconds_estimate"].as_f64().unwrap())
-        .fold(f64::INFINITY, f64::min);
-    let c = chosen(&doc);
-    assert_eq!(
-        c["full_seconds_estimate"].as_f64().unwrap(),
-        fastest,
-        "{doc}"
-    );
+    let c = fastest_of_several_within_budget(&doc);
     assert!(c["relative_rmse"].as_f64().unwrap() <= 0.5);
     assert_eq!(planned["nodes"]["ours"]["kind"], c["kind"]);
     bad_planners_fail(&[&tight, &doc]);
@@ -365,21 +372,7 @@ fn a_captured_mesostructure_is_judged_against_its_displaced_truth() {
 
     // Lax: the fastest candidate within it, a model.
     let (doc, planned) = plan_mesh(&s, &graph, "rmse=0.9");
-    let fits: Vec<&Value> = candidates(&doc)
-        .iter()
-        .filter(|c| c["within_budget"] == true)
-        .collect();
-    assert!(fits.len() >= 2, "{doc}");
-    let fastest = fits
-        .iter()
-        .map(|c| c["full_seconds_estimate"].as_f64().unwrap())
-        .fold(f64::INFINITY, f64::min);
-    let c = chosen(&doc);
-    assert_eq!(
-        c["full_seconds_estimate"].as_f64().unwrap(),
-        fastest,
-        "{doc}"
-    );
+    let c = fastest_of_several_within_budget(&doc);
     assert_eq!(planned["nodes"]["ours"]["kind"], c["kind"]);
     run(&s.path("mesh-rmse=0.9.json"));
     bad_planners_fail(&[&tight, &doc]);
