@@ -70,3 +70,22 @@ pub fn quiet_broken_pipes() {
         }
     }
 }
+
+/// Ignores SIGPIPE again, for the studio's server: with the default action a write to a socket
+/// whose client has gone ends the process (the flood test found it); ignored, the write fails
+/// with EPIPE, which the server handles by dropping the connection.
+pub fn ignore_broken_pipes() {
+    #[cfg(unix)]
+    {
+        const SIGPIPE: i32 = 13;
+        const SIG_IGN: usize = 1;
+        extern "C" {
+            fn signal(signum: i32, handler: usize) -> usize;
+        }
+        // SAFETY: setting a signal's disposition to SIG_IGN is valid at any time and in any
+        // thread; no handler runs.
+        unsafe {
+            signal(SIGPIPE, SIG_IGN);
+        }
+    }
+}

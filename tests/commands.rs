@@ -372,3 +372,39 @@ fn quickstart_writes_png_and_exr() {
         assert!(out.join(f).is_file(), "{f}");
     }
 }
+
+/// A new user's first mistake (issue 58): a graph whose input file does not exist. `validate`
+/// refuses it naming the node and the folder the path resolves against (it said "ok"), and a run
+/// says the same (it said only "./nosuch.png: No such file or directory").
+#[test]
+fn a_missing_input_file_is_refused_by_validate_and_run_naming_the_graphs_folder() {
+    let s = Scratch::new();
+    let g = s.write(
+        "graphs/g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "photo": {"kind": "image.read", "params": {"path": "nosuch.png"}},
+            "save": {"kind": "image.write", "inputs": {"image": "photo.image"}, "params": {"path": "copy.png"}}
+        }}"#,
+    );
+    let folder = s.path("graphs");
+    let r = mesoflow(&["validate", g.to_str().unwrap()], s.dir.path());
+    assert_eq!(r.code, 2, "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains("node `photo`")
+            && r.stderr.contains("nosuch.png")
+            && r.stderr.contains(&folder.display().to_string()),
+        "{}",
+        r.stderr
+    );
+    let out = s.path("out");
+    let r = mesoflow(
+        &["run", g.to_str().unwrap(), "--quiet", "--out-dir", out.to_str().unwrap()],
+        s.dir.path(),
+    );
+    assert_ne!(r.code, 0);
+    assert!(
+        r.stderr.contains("no such file") && r.stderr.contains(&folder.display().to_string()),
+        "{}",
+        r.stderr
+    );
+}

@@ -133,6 +133,7 @@ impl Arbitration {
                 o.insert("family".into(), json!(c.family));
                 o.insert("kind".into(), json!(c.decl.kind));
                 o.insert("params".into(), Value::Object(c.decl.params.clone()));
+                o.insert("inputs".into(), json!(c.decl.inputs));
                 for (k, v) in [
                     ("relative_rmse", c.error),
                     ("probe_seconds", c.probe_s),
@@ -265,8 +266,10 @@ struct Setting {
     variants: Vec<(String, Vec<(String, Value)>)>,
     /// The render's timings that grow with the pixels, and their unit in seconds.
     per_pixel: &'static [(&'static str, f64)],
-    /// What the graph may read from the render for brute force to stand in for it.
-    readable: &'static [&'static str],
+    /// What the graph may read from the render for brute force to stand in for it: each port
+    /// and `render.reference`'s port that gives the same (`render.mesh`'s 0/1 `mask` is the
+    /// reference's `coverage`, over 0.5 where a pixel shows the surface).
+    readable: &'static [(&'static str, &'static str)],
     judge_why: String,
 }
 
@@ -295,7 +298,12 @@ fn sss_setting(file: &GraphFile, decl: &NodeDecl, render: &str) -> Result<Settin
             ("mode: brdf".into(), one("mode", "brdf")),
         ],
         per_pixel: &[("gather_seconds", 1.0), ("shading_seconds", 1.0)],
-        readable: &["image", "coverage", "covered", "noise"],
+        readable: &[
+            ("image", "image"),
+            ("coverage", "coverage"),
+            ("covered", "covered"),
+            ("noise", "noise"),
+        ],
         judge_why: "the graph holds the mesh and the medium: the truth is volumetric path tracing of them (render.reference)".into(),
         params,
         inputs,
@@ -438,7 +446,7 @@ fn mesh_setting(
         reference_inputs,
         variants,
         per_pixel: &[("frame_ms", 1e-3)],
-        readable: &["image"],
+        readable: &[("image", "image"), ("mask", "coverage")],
         judge_why: format!(
             "the graph captures the BTF from a height field (`{capture_id}`): the truth is that height field displaced on the mesh (mesh.displace), path traced with the capture's reflectance (render.reference)"
         ),
@@ -625,9 +633,10 @@ pub fn arbitrate(
     }
 
     // Brute force, where what the graph reads from the render, render.reference makes too.
-    let readable: BTreeSet<String> = readable.iter().map(|s| s.to_string()).collect();
+    let readable_ports: BTreeSet<String> =
+        readable.iter().map(|(s, _)| s.to_string()).collect();
     let missing: Vec<String> = ports_read(file, render)
-        .difference(&readable)
+        .difference(&readable_ports)
         .cloned()
         .collect();
     let brute = if missing.is_empty() {
@@ -732,6 +741,20 @@ pub fn arbitrate(
         }
         if let Some(n) = planned.node_mut(render) {
             *n = c.decl.clone();
+        }
+        if c.family == "brute force" {
+            // What the graph read from the render under another name (render.mesh's `mask`)
+            // it now reads from render.reference's port that gives the same.
+            for (_, d) in &mut planned.nodes {
+                for from in d.inputs.values_mut() {
+                    let renamed = readable.iter().find(|(was, is)| {
+                        was != is && from.as_str() == format!("{render}.{was}")
+                    });
+                    if let Some((_, is)) = renamed {
+                        *from = format!("{render}.{is}");
+                    }
+                }
+            }
         }
         crate::edit::prune(&mut planned, file, render);
     }

@@ -7,6 +7,7 @@
 pub mod atomic_file;
 pub mod cache;
 pub mod codec;
+pub mod confine;
 pub mod engine;
 pub mod gpu;
 pub mod gpu_memo;
@@ -23,6 +24,7 @@ mod scheduler;
 pub mod value;
 
 pub use atomic_file::write_atomic;
+pub use confine::Confinement;
 pub use engine::{Engine, EngineConfig, EngineError};
 pub use gpu::{Gpu, GpuProvider};
 pub use key::{Key, KEY_SCHEME};

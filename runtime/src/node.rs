@@ -170,6 +170,8 @@ pub struct NodeContext {
     pub(crate) timings: std::sync::Mutex<BTreeMap<String, f64>>,
     /// The warnings given so far, kept with the value in the caches.
     pub(crate) warnings: std::sync::Mutex<Vec<String>>,
+    /// The run's confinement, checked when an input path is resolved.
+    pub(crate) confine: Option<crate::confine::Confinement>,
 }
 
 impl NodeContext {
@@ -188,6 +190,7 @@ impl NodeContext {
             sink: Arc::new(Quiet),
             timings: Default::default(),
             warnings: Default::default(),
+            confine: None,
         }
     }
 
@@ -253,9 +256,22 @@ impl NodeContext {
     pub fn gpu(&self) -> Option<&Gpu> {
         self.gpu.as_deref()
     }
-    /// Resolves an input path against the graph's folder.
-    pub fn input_path(&self, p: &str) -> PathBuf {
-        self.base_dir.join(p)
+    /// Resolves parameter `param`'s input path `p` against the graph's folder, as the node is
+    /// about to open it. A path that does not exist is an error naming the parameter and the
+    /// folder it was resolved against; in a confined run (the studio) so is one that resolves
+    /// outside the run's folders, whatever it was when the graph was checked.
+    pub fn input_path(&self, param: &str, p: &str) -> Result<PathBuf, NodeError> {
+        let path = self.base_dir.join(p);
+        if !path.exists() {
+            return Err(NodeError::param(
+                param,
+                format!(
+                    "{p}: no such file (a relative path resolves against the graph's folder, {})",
+                    self.base_dir.display()
+                ),
+            ));
+        }
+        crate::confine::admit(self.confine.as_ref(), &path).map_err(|m| NodeError::file(&path, m))
     }
 }
 

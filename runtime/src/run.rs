@@ -56,6 +56,9 @@ pub struct RunOptions {
     /// recompute than to read (`NodeSpec::disk_cache` false): a cluster job hands its values
     /// over to other jobs only through the cache.
     pub cache_everything: bool,
+    /// Folders every input file must lie in, links followed, when it is hashed and when its node
+    /// opens it (the studio's folders); `None`: anywhere.
+    pub confine: Option<crate::confine::Confinement>,
 }
 
 /// Whether `MESOFLOW_REQUIRE_GPU=1` asks that GPU nodes never fall back to their CPU path: the
@@ -82,11 +85,12 @@ impl RunOptions {
             cancel: Arc::new(AtomicBool::new(false)),
             compute_only: None,
             cache_everything: false,
+            confine: None,
         }
     }
 
     /// Options for another run of the same session: this one's graph name and folders and its
-    /// policy (device, require_gpu, caches, verification, cancel flag), none of its per-run
+    /// policy (device, require_gpu, caches, verification, cancel flag, confinement), none of its per-run
     /// fields (outputs, compute_only, cache_everything).
     pub fn same_policy(&self) -> RunOptions {
         RunOptions {
@@ -95,6 +99,7 @@ impl RunOptions {
             use_cache: self.use_cache,
             verify_cache: self.verify_cache,
             cancel: self.cancel.clone(),
+            confine: self.confine.clone(),
             ..RunOptions::new(
                 &self.graph_name,
                 self.base_dir.clone(),

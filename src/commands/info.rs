@@ -10,6 +10,35 @@ use std::path::Path;
 pub fn validate(path: &Path, set: &[String]) -> anyhow::Result<i32> {
     let registry = mesoflow_nodes::registry();
     let graph = load::load(path, set, &registry)?;
+    // Input files as a run would look for them: a missing one is an error here, not at run time.
+    let base = crate::commands::run::graph_dir(path);
+    let mut missing = Vec::new();
+    for cn in &graph.nodes {
+        let Some(node) = registry.node(&cn.kind) else {
+            continue;
+        };
+        let Ok(prepared) = node.prepare(&cn.params) else {
+            continue;
+        };
+        for f in node.files(&prepared, &base).unwrap_or_default() {
+            if !f.exists() {
+                missing.push(format!(
+                    "node `{}` ({}): its input file {} does not exist (a relative path resolves against the graph's folder, {})",
+                    cn.id,
+                    cn.kind,
+                    f.display(),
+                    base.display()
+                ));
+            }
+        }
+    }
+    if !missing.is_empty() {
+        return Err(invalid(format!(
+            "{}: {}",
+            path.display(),
+            missing.join("\n")
+        )));
+    }
     println!(
         "{}: ok, {} nodes; default outputs: {}",
         path.display(),

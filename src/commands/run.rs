@@ -178,6 +178,7 @@ impl Runner {
             compute_only: self.base.compute_only.clone(),
             cache_everything: self.base.cache_everything,
             cancel: self.base.cancel.clone(),
+            confine: None,
         };
         let shown: Arc<dyn RunObserver> = if self.quiet {
             Arc::new(SilentObserver)

@@ -1,6 +1,9 @@
 //! The studio's HTTP interface: the page, the JSON API the page uses, the event stream, pixels
-//! and files. Every request passes [`Guard`] (token and Host) first.
+//! and files, as plain values ([`Call`] in, [`Reply`] out) that the server (`server.rs`) reads
+//! from and writes to the connection. Every request passes [`Guard`] (token and Host) before its
+//! body is read.
 
+use super::plan;
 use super::preview;
 use super::session::{Problem, Refused, Studio};
 use super::sweep;
@@ -12,7 +15,6 @@ use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
-use tiny_http::{Header, Method, Request, Response, StatusCode};
 
 const PAGE: &str = include_str!("assets/index.html");
 const STYLE: &str = include_str!("assets/studio.css");
@@ -29,10 +31,43 @@ const SCRIPT: &str = concat!(
     include_str!("assets/js/07-previews.js"),
     include_str!("assets/js/08-report.js"),
     include_str!("assets/js/09-sweeps.js"),
+    include_str!("assets/js/09-plan.js"),
     include_str!("assets/js/10-start.js"),
 );
-/// The largest request body accepted (a graph edit is a few hundred bytes).
-const MAX_BODY: u64 = 4 << 20;
+/// The largest request body accepted (a graph edit is a few hundred bytes); a larger declared
+/// length is refused before anything is read.
+pub const MAX_BODY: u64 = 4 << 20;
+
+/// One request as the API sees it: read in full by the server, after the guard admitted it.
+pub struct Call {
+    pub method: String,
+    pub path: String,
+    pub query: Vec<(String, String)>,
+    pub body: Vec<u8>,
+}
+
+/// What the API answers: a whole response, or "stream the events" (the server holds the
+/// connection open and writes them as they come).
+pub enum Reply {
+    Data {
+        status: u16,
+        content_type: &'static str,
+        headers: Vec<(&'static str, String)>,
+        body: Vec<u8>,
+    },
+    Events,
+}
+
+impl Reply {
+    fn data(content_type: &'static str, body: Vec<u8>) -> Reply {
+        Reply::Data {
+            status: 200,
+            content_type,
+            headers: Vec::new(),
+            body,
+        }
+    }
+}
 
 pub struct Guard {
     token: String,
@@ -56,9 +91,15 @@ impl Guard {
         Guard { token, hosts }
     }
 
-    fn admits(&self, req: &Request, query: &[(String, String)]) -> Result<(), (u16, &'static str)> {
-        let host = header(req, "Host").unwrap_or_default();
-        if !self.hosts.is_empty() && !self.hosts.contains(&host) {
+    /// Whether a request with this Host header, token header and query may be answered.
+    pub fn admits(
+        &self,
+        host: Option<&str>,
+        token_header: Option<&str>,
+        query: &[(String, String)],
+    ) -> Result<(), (u16, &'static str)> {
+        let host = host.unwrap_or_default();
+        if !self.hosts.is_empty() && !self.hosts.iter().any(|h| h == host) {
             return Err((
                 403,
                 "this server answers only to its own address (Host header)",
@@ -67,8 +108,8 @@ impl Guard {
         let given = query
             .iter()
             .find(|(k, _)| k == "token")
-            .map(|(_, v)| v.clone())
-            .or_else(|| header(req, "X-Mesoflow-Token"));
+            .map(|(_, v)| v.as_str())
+            .or(token_header);
         // Compared in full whatever the first difference, so timing tells nothing.
         let ok = given.is_some_and(|g| {
             g.len() == self.token.len()
@@ -86,13 +127,6 @@ impl Guard {
             ))
         }
     }
-}
-
-fn header(req: &Request, name: &str) -> Option<String> {
-    req.headers()
-        .iter()
-        .find(|h| h.field.as_str().as_str().eq_ignore_ascii_case(name))
-        .map(|h| h.value.as_str().to_string())
 }
 
 fn percent_decode(s: &str) -> String {
@@ -119,7 +153,7 @@ fn percent_decode(s: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-fn split_url(url: &str) -> (String, Vec<(String, String)>) {
+pub fn split_url(url: &str) -> (String, Vec<(String, String)>) {
     let (path, query) = url.split_once('?').unwrap_or((url, ""));
     let pairs = query
         .split('&')
@@ -132,31 +166,23 @@ fn split_url(url: &str) -> (String, Vec<(String, String)>) {
     (path.to_string(), pairs)
 }
 
-fn content_type(value: &str) -> Header {
-    Header::from_bytes(&b"Content-Type"[..], value.as_bytes()).unwrap_or_else(|_| {
-        Header::from_bytes(&b"X-Invalid"[..], &b"1"[..]).expect("static header")
-    })
+fn json_response(status: u16, v: &Value) -> Reply {
+    Reply::Data {
+        status,
+        content_type: "application/json",
+        headers: Vec::new(),
+        body: v.to_string().into_bytes(),
+    }
 }
 
-fn json_response(status: u16, v: &Value) -> Response<std::io::Cursor<Vec<u8>>> {
-    Response::from_data(v.to_string().into_bytes())
-        .with_status_code(StatusCode(status))
-        .with_header(content_type("application/json"))
-        .with_header(no_store())
-}
-
-fn no_store() -> Header {
-    Header::from_bytes(&b"Cache-Control"[..], &b"no-store"[..]).expect("static header")
-}
-
-fn error(status: u16, message: &str) -> Response<std::io::Cursor<Vec<u8>>> {
+pub fn error(status: u16, message: &str) -> Reply {
     json_response(
         status,
         &json!({ "error": message, "errors": [{ "message": message }] }),
     )
 }
 
-fn refused(r: Refused) -> Response<std::io::Cursor<Vec<u8>>> {
+fn refused(r: Refused) -> Reply {
     let first = r
         .errors
         .first()
@@ -165,13 +191,8 @@ fn refused(r: Refused) -> Response<std::io::Cursor<Vec<u8>>> {
     json_response(422, &json!({ "error": first, "errors": r.errors }))
 }
 
-fn body<T: for<'de> Deserialize<'de>>(req: &mut Request) -> Result<T, String> {
-    let mut text = String::new();
-    req.as_reader()
-        .take(MAX_BODY)
-        .read_to_string(&mut text)
-        .map_err(|e| format!("cannot read the request: {e}"))?;
-    serde_json::from_str(&text).map_err(|e| format!("bad request body: {e}"))
+fn body<T: for<'de> Deserialize<'de>>(call: &Call) -> Result<T, String> {
+    serde_json::from_slice(&call.body).map_err(|e| format!("bad request body: {e}"))
 }
 
 fn q<'a>(query: &'a [(String, String)], key: &str) -> Option<&'a str> {
@@ -181,28 +202,20 @@ fn q<'a>(query: &'a [(String, String)], key: &str) -> Option<&'a str> {
         .map(|(_, v)| v.as_str())
 }
 
-pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
-    let (path, query) = split_url(req.url());
-    if let Err((status, message)) = guard.admits(&req, &query) {
-        let _ = req.respond(error(status, message));
-        return;
-    }
-    let method = req.method().clone();
-    let response = match (&method, path.as_str()) {
-        (Method::Get, "/") | (Method::Get, "/index.html") => {
+/// Answers one admitted request.
+pub fn handle(studio: &Arc<Studio>, call: &Call) -> Reply {
+    let query = &call.query[..];
+    let (method, path) = (call.method.as_str(), call.path.as_str());
+    match (method, path) {
+        ("GET", "/") | ("GET", "/index.html") => {
             let page = PAGE
                 .replace("/*STYLE*/", STYLE)
                 .replace("/*SCRIPT*/", SCRIPT);
-            Response::from_data(page.into_bytes())
-                .with_header(content_type("text/html; charset=utf-8"))
-                .with_header(no_store())
+            Reply::data("text/html; charset=utf-8", page.into_bytes())
         }
-        (Method::Get, "/api/events") => {
-            events(studio, req);
-            return;
-        }
-        (Method::Get, "/api/state") => json_response(200, &state(studio)),
-        (Method::Get, "/api/kinds") => {
+        ("GET", "/api/events") => Reply::Events,
+        ("GET", "/api/state") => json_response(200, &state(studio)),
+        ("GET", "/api/kinds") => {
             let reg = studio.engine.registry();
             let kinds: Vec<Value> = mesoflow_graph::Catalog::kinds(reg)
                 .into_iter()
@@ -210,16 +223,16 @@ pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
                 .collect();
             json_response(200, &json!(kinds))
         }
-        (Method::Get, "/api/value") => match target(&query) {
+        ("GET", "/api/value") => match target(query) {
             Ok(t) => match value(studio, &t) {
                 Ok(v) => json_response(200, &preview::describe(&v)),
                 Err((s, m)) => error(s, &m),
             },
             Err(m) => error(400, &m),
         },
-        (Method::Get, "/api/pixels") => match target(&query) {
+        ("GET", "/api/pixels") => match target(query) {
             Ok(t) => {
-                let index = q(&query, "index").and_then(|i| i.parse().ok()).unwrap_or(0);
+                let index = q(query, "index").and_then(|i| i.parse().ok()).unwrap_or(0);
                 match value(studio, &t).map(|v| preview::pixels(&v, index)) {
                     Ok(Some(p)) => pixels_response(p),
                     Ok(None) => error(404, &format!("{t} has no image {index}")),
@@ -228,11 +241,11 @@ pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
             }
             Err(m) => error(400, &m),
         },
-        (Method::Get, "/api/file") => match q(&query, "path") {
+        ("GET", "/api/file") => match q(query, "path") {
             Some(p) => file(studio, p),
             None => error(400, "?path= is required"),
         },
-        (Method::Get, "/api/sweep") => json_response(
+        ("GET", "/api/sweep") => json_response(
             200,
             &studio
                 .sweep
@@ -240,34 +253,47 @@ pub fn handle(studio: &Arc<Studio>, guard: &Guard, mut req: Request) {
                 .unwrap_or_else(|e| e.into_inner())
                 .json(),
         ),
-        (Method::Post, "/api/set") => edit_response(set(studio, &mut req)),
-        (Method::Post, "/api/add") => edit_response(add(studio, &mut req)),
-        (Method::Post, "/api/remove") => edit_response(remove(studio, &mut req)),
-        (Method::Post, "/api/connect") => edit_response(connect(studio, &mut req)),
-        (Method::Post, "/api/save") => match studio.save() {
+        ("POST", "/api/set") => edit_response(set(studio, call)),
+        ("POST", "/api/add") => edit_response(add(studio, call)),
+        ("POST", "/api/remove") => edit_response(remove(studio, call)),
+        ("POST", "/api/connect") => edit_response(connect(studio, call)),
+        ("POST", "/api/save") => match studio.save() {
             Ok(changed) => json_response(200, &json!({ "saved": true, "changed": changed })),
             Err(e) => error(409, &e),
         },
-        (Method::Post, "/api/run") => {
+        ("POST", "/api/run") => {
             studio.request_run();
             json_response(200, &json!({ "queued": true }))
         }
-        (Method::Post, "/api/sweep") => match body::<sweep::SweepSpec>(&mut req) {
+        ("GET", "/api/plan") => json_response(
+            200,
+            &studio
+                .plan
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .json(),
+        ),
+        ("POST", "/api/plan") => match body::<plan::PlanSpec>(call) {
+            Ok(spec) => match plan::start(studio, spec) {
+                Ok(id) => json_response(200, &json!({ "plan": id })),
+                Err(r) => refused(r),
+            },
+            Err(m) => error(400, &m),
+        },
+        ("POST", "/api/plan/apply") => edit_response(Ok(plan::apply(studio))),
+        ("POST", "/api/sweep") => match body::<sweep::SweepSpec>(call) {
             Ok(spec) => match sweep::start(studio, spec) {
                 Ok(id) => json_response(200, &json!({ "sweep": id })),
                 Err(r) => refused(r),
             },
             Err(m) => error(400, &m),
         },
-        _ => error(404, &format!("no such page: {} {path}", method)),
-    };
-    let _ = req.respond(response);
+        _ => error(404, &format!("no such page: {method} {path}")),
+    }
 }
 
 /// 200 with the graph's new revision, 422 with the validator's errors, 400 for a bad request.
-fn edit_response(
-    result: Result<Result<u64, Refused>, String>,
-) -> Response<std::io::Cursor<Vec<u8>>> {
+fn edit_response(result: Result<Result<u64, Refused>, String>) -> Reply {
     match result {
         Err(m) => error(400, &m),
         Ok(Err(r)) => refused(r),
@@ -282,8 +308,8 @@ struct SetBody {
     value: Value,
 }
 
-fn set(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
-    let b: SetBody = body(req)?;
+fn set(studio: &Studio, call: &Call) -> Result<Result<u64, Refused>, String> {
+    let b: SetBody = body(call)?;
     Ok(studio.set_param(&b.node, &b.param, b.value))
 }
 
@@ -293,8 +319,8 @@ struct AddBody {
     id: Option<String>,
 }
 
-fn add(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
-    let b: AddBody = body(req)?;
+fn add(studio: &Studio, call: &Call) -> Result<Result<u64, Refused>, String> {
+    let b: AddBody = body(call)?;
     Ok(studio.edit(true, |f: &mut GraphFile| {
         let id = match b.id.filter(|s| !s.is_empty()) {
             Some(id) => id,
@@ -350,8 +376,8 @@ struct RemoveBody {
     id: String,
 }
 
-fn remove(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
-    let b: RemoveBody = body(req)?;
+fn remove(studio: &Studio, call: &Call) -> Result<Result<u64, Refused>, String> {
+    let b: RemoveBody = body(call)?;
     Ok(studio.edit(true, |f| {
         if f.node(&b.id).is_none() {
             return Err(format!("no node `{}`", b.id));
@@ -373,8 +399,8 @@ struct ConnectBody {
     from: Option<String>,
 }
 
-fn connect(studio: &Studio, req: &mut Request) -> Result<Result<u64, Refused>, String> {
-    let b: ConnectBody = body(req)?;
+fn connect(studio: &Studio, call: &Call) -> Result<Result<u64, Refused>, String> {
+    let b: ConnectBody = body(call)?;
     Ok(studio.edit(true, |f| {
         let decl = f
             .node_mut(&b.node)
@@ -470,20 +496,21 @@ fn value(studio: &Studio, t: &PortRef) -> Result<ValueRef, (u16, String)> {
     Err((404, format!("{t}: {why}")))
 }
 
-fn pixels_response(p: preview::Pixels) -> Response<std::io::Cursor<Vec<u8>>> {
+fn pixels_response(p: preview::Pixels) -> Reply {
     let mut bytes = Vec::with_capacity(p.data.len() * 4);
     for x in &p.data {
         bytes.extend_from_slice(&x.to_le_bytes());
     }
-    let h = |k: &str, v: usize| {
-        Header::from_bytes(k.as_bytes(), v.to_string().as_bytes()).expect("ascii header")
-    };
-    Response::from_data(bytes)
-        .with_header(content_type("application/octet-stream"))
-        .with_header(h("X-Width", p.width))
-        .with_header(h("X-Height", p.height))
-        .with_header(h("X-Channels", p.channels))
-        .with_header(no_store())
+    Reply::Data {
+        status: 200,
+        content_type: "application/octet-stream",
+        headers: vec![
+            ("X-Width", p.width.to_string()),
+            ("X-Height", p.height.to_string()),
+            ("X-Channels", p.channels.to_string()),
+        ],
+        body: bytes,
+    }
 }
 
 /// Whether `path` (resolved against the output folder when relative) lies inside one of the
@@ -505,7 +532,7 @@ pub fn allowed(roots: &[PathBuf], out_dir: &Path, path: &str) -> Result<PathBuf,
         .map_err(|_| (404, format!("{path}: no such file")))
 }
 
-fn file(studio: &Studio, path: &str) -> Response<std::io::Cursor<Vec<u8>>> {
+fn file(studio: &Studio, path: &str) -> Reply {
     let real = match allowed(&studio.roots, &studio.out_dir, path) {
         Ok(p) => p,
         Err((s, m)) => return error(s, &m),
@@ -524,9 +551,7 @@ fn file(studio: &Studio, path: &str) -> Response<std::io::Cursor<Vec<u8>>> {
                 "csv" | "txt" => "text/plain; charset=utf-8",
                 _ => "application/octet-stream",
             };
-            Response::from_data(bytes)
-                .with_header(content_type(ty))
-                .with_header(no_store())
+            Reply::data(ty, bytes)
         }
         Err((s, m)) => error(s, &format!("{path}: {m}")),
     }
@@ -581,19 +606,6 @@ fn read_served(roots: &[PathBuf], real: &Path) -> Result<Vec<u8>, (u16, String)>
         .read_to_end(&mut bytes)
         .map_err(|e| (404, e.to_string()))?;
     Ok(bytes)
-}
-
-/// The event stream: headers, then events until the client goes (or the server stops).
-fn events(studio: &Arc<Studio>, req: Request) {
-    let rx = studio.hub.subscribe();
-    let head = Response::empty(StatusCode(200))
-        .with_header(content_type("text/event-stream"))
-        .with_header(no_store());
-    let mut stream = req.upgrade("event-stream", head);
-    let quit = crate::interrupt::cancel_flag();
-    super::events::stream(rx, &mut stream, &|| {
-        quit.load(std::sync::atomic::Ordering::Relaxed)
-    });
 }
 
 #[cfg(test)]

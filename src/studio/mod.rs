@@ -6,11 +6,14 @@
 //! Safety: the server listens on 127.0.0.1 unless told otherwise, every request needs the random
 //! token printed with the URL, the Host header must name this server (no DNS rebinding), and no
 //! file outside the graph's folder, the output folder and the cache is read or written through
-//! it.
+//! it. The server (`server.rs`, hyper) bounds what a request may cost before it is admitted:
+//! head size, head and body time, body size, connections.
 
 mod api;
 mod events;
+mod plan;
 mod preview;
+mod server;
 mod session;
 mod sweep;
 mod sweep_state;
@@ -40,6 +43,7 @@ fn random_token() -> String {
 }
 
 pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
+    crate::env::ignore_broken_pipes();
     let engine = engine(&args.cache, &args.graph)?;
     let out_dir = args
         .out_dir
@@ -55,12 +59,12 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
     )?;
     studio.verify_cache = args.cache.verify_cache;
     let studio = Arc::new(studio);
-    let server = tiny_http::Server::http((args.host.as_str(), args.port)).map_err(|e| {
-        crate::exit::invalid(format!("cannot listen on {}:{}: {e}", args.host, args.port))
-    })?;
-    let port = server
-        .server_addr()
-        .to_ip()
+    let listener =
+        std::net::TcpListener::bind((args.host.as_str(), args.port)).map_err(|e| {
+            crate::exit::invalid(format!("cannot listen on {}:{}: {e}", args.host, args.port))
+        })?;
+    let port = listener
+        .local_addr()
         .map(|a| a.port())
         .unwrap_or(args.port);
     let token = random_token();
@@ -88,19 +92,10 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
         let interval = Duration::from_millis(args.interval_ms.max(50));
         std::thread::spawn(move || watch_file(s, interval));
     }
-    let guard = Arc::new(guard);
-    while !quit.load(Ordering::Relaxed) {
-        match server.recv_timeout(Duration::from_millis(200)) {
-            Ok(Some(request)) => {
-                let (s, g) = (studio.clone(), guard.clone());
-                std::thread::spawn(move || api::handle(&s, &g, request));
-            }
-            Ok(None) => {}
-            Err(e) => {
-                eprintln!("error: the studio's server stopped: {e}");
-                return Ok(crate::exit::FAILED);
-            }
-        }
+    if let Err(e) = server::serve(listener, studio.clone(), Arc::new(guard), quit.clone()) {
+        eprintln!("error: the studio's server stopped: {e}");
+        studio.request_run();
+        return Ok(crate::exit::FAILED);
     }
     studio.request_run(); // wakes the worker so that it sees Ctrl-C and stops
     Ok(crate::exit::CANCELLED)

@@ -87,6 +87,7 @@ pub struct Studio {
     runs: Mutex<RunState>,
     wake: Condvar,
     pub sweep: Mutex<super::sweep_state::SweepState>,
+    pub plan: Mutex<super::plan::PlanState>,
 }
 
 /// Errors that a structural edit may leave behind: a node just added has no inputs yet, and a
@@ -156,6 +157,7 @@ impl Studio {
             runs: Mutex::new(RunState::default()),
             wake: Condvar::new(),
             sweep: Mutex::new(Default::default()),
+            plan: Mutex::new(Default::default()),
         };
         studio.load_text(text);
         Ok(studio)
@@ -390,6 +392,9 @@ impl Studio {
         opts.require_gpu = self.require_gpu;
         opts.verify_cache = self.verify_cache;
         opts.cancel = cancel;
+        // Input files are checked against the studio's folders again when a run hashes and opens
+        // them: a file accepted by an edit may have become a link to one outside since.
+        opts.confine = Some(mesoflow_runtime::Confinement::new(&self.roots));
         opts
     }
 

@@ -6,6 +6,7 @@
 pub mod args;
 pub mod cli;
 pub mod node;
+pub mod plan_families;
 pub mod plan_sweep;
 pub mod scenes;
 pub mod skip;

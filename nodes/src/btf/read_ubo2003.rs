@@ -154,7 +154,7 @@ impl Node for ReadUbo2003 {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let dir = ctx.input_path(&p.path);
+        let dir = ctx.input_path("path", &p.path)?;
         let all = list(&dir)?;
         if all.is_empty() {
             return Err(NodeError::param(

@@ -105,7 +105,7 @@ impl Node for ReadUbo2014 {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let path = ctx.input_path(&p.path);
+        let path = ctx.input_path("path", &p.path)?;
         let bytes = std::fs::read(&path).map_err(|e| NodeError::file(&path, e))?;
         let file = ubo2014::parse(&bytes).map_err(|e| NodeError::file(&path, e))?;
         if file.header.rgb_scale != [1.0; 3] {

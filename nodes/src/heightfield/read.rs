@@ -47,7 +47,7 @@ impl Node for Read {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let path = ctx.input_path(&p.path);
+        let path = ctx.input_path("path", &p.path)?;
         let grid = formats::read_grey(&path)?;
         let data: Vec<f32> = grid
             .data

@@ -52,7 +52,7 @@ impl Node for ImageArray {
     }
 
     fn run(&self, ctx: &NodeContext, p: &ArrayParams, _: &Inputs) -> Result<Outputs, NodeError> {
-        let path = ctx.input_path(&p.data);
+        let path = ctx.input_path("data", &p.data)?;
         let (shape, data) = finite_f32(&path, 3, "(H, W, C)")?;
         if !matches!(shape[2], 1 | 3 | 4) {
             return Err(NodeError::file(
@@ -98,7 +98,7 @@ impl Node for HeightFieldArray {
     }
 
     fn run(&self, ctx: &NodeContext, p: &ArrayParams, _: &Inputs) -> Result<Outputs, NodeError> {
-        let (shape, data) = finite_f32(&ctx.input_path(&p.data), 2, "(H, W)")?;
+        let (shape, data) = finite_f32(&ctx.input_path("data", &p.data)?, 2, "(H, W)")?;
         Ok(Outputs::new().with(
             "height",
             HeightField {
@@ -164,7 +164,7 @@ impl Node for BtfArray {
     }
 
     fn run(&self, ctx: &NodeContext, p: &BtfParams, _: &Inputs) -> Result<Outputs, NodeError> {
-        let path = ctx.input_path(&p.data);
+        let path = ctx.input_path("data", &p.data)?;
         let (shape, data) = finite_f32(&path, 4, "(pairs, 3, H, W)")?;
         if shape[1] != 3 || shape[0] != p.pairs.len() {
             return Err(NodeError::file(
@@ -222,7 +222,7 @@ impl Node for PointsArray {
     }
 
     fn run(&self, ctx: &NodeContext, p: &ArrayParams, _: &Inputs) -> Result<Outputs, NodeError> {
-        let points = crate::manifold::points_read::read(&ctx.input_path(&p.data))?;
+        let points = crate::manifold::points_read::read(&ctx.input_path("data", &p.data)?)?;
         Ok(Outputs::new().with("points", points))
     }
 }

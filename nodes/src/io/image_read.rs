@@ -37,7 +37,7 @@ impl Node for ImageRead {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let path = ctx.input_path(&p.path);
+        let path = ctx.input_path("path", &p.path)?;
         let image = formats::read_image(&path)?;
         // NaN or infinite pixels (an EXR or HDR can hold them) would poison every sum downstream:
         // refused here, by position, as `heightfield.read` refuses them.

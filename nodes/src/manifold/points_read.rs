@@ -41,7 +41,7 @@ impl Node for PointsRead {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let points = read(&ctx.input_path(&p.path))?;
+        let points = read(&ctx.input_path("path", &p.path)?)?;
         let n = points.n as f64;
         Ok(Outputs::new()
             .with("points", points)

@@ -57,7 +57,7 @@ impl Node for Read {
     }
 
     fn run(&self, ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let path = ctx.input_path(&p.path);
+        let path = ctx.input_path("path", &p.path)?;
         let mesh = load(&path, p.generate_uvs)?;
         let degenerate = mesh.degenerate_triangles();
         if degenerate > 0 {

@@ -138,6 +138,7 @@ pub(crate) fn run_all(
                     sink: sink.clone(),
                     timings: Default::default(),
                     warnings: Default::default(),
+                    confine: opts.confine.clone(),
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
                 memory: opts.use_cache.then(|| shared.memory.clone()),

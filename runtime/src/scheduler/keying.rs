@@ -58,6 +58,7 @@ pub(crate) fn key_all(
                         &plan.index,
                         base_dir,
                         path,
+                        opts.confine.as_ref(),
                         &mut read_files,
                     )
                     .map(|(prepared, key)| (prepared, key, choice))
@@ -86,12 +87,23 @@ fn prepare_and_key(
     index: &BTreeMap<&str, usize>,
     base: &Path,
     device: Option<&str>,
+    confine: Option<&crate::confine::Confinement>,
     read_files: &mut BTreeSet<String>,
 ) -> Result<(Prepared, Key), NodeError> {
     let prepared = node.prepare(&cn.params)?;
     let declared = node.files(&prepared, base)?;
     let mut files = Vec::new();
     for path in declared.iter().cloned() {
+        if !path.exists() {
+            return Err(NodeError::file(
+                &path,
+                format!(
+                    "no such file (a relative path resolves against the graph's folder, {})",
+                    base.display()
+                ),
+            ));
+        }
+        crate::confine::admit(confine, &path).map_err(|m| NodeError::file(&path, m))?;
         let hash = key::hash_file(&path).map_err(|e| NodeError::file(&path, e))?;
         let name = path
             .file_name()

@@ -56,6 +56,11 @@ function connect() {
     renderReport();
     if (!e.cancelled) refreshPreview();
   });
+  on("plan_started", () => renderPlanResults());
+  on("plan_done", e => {
+    renderPlanResults();
+    $("#status-line").textContent = e.error ? `plan ${e.plan} failed: ${e.error}` : `plan ${e.plan} done: see the Plan tab`;
+  });
   on("sweep_started", e => { S.sweep = { id: e.sweep, total: e.total, rows: [], charts: [], running: true }; renderSweepResults(); });
   on("sweep_row", e => { if (S.sweep && S.sweep.id === e.sweep) { S.sweep.rows.push(e.row); renderSweepResults(); } });
   on("sweep_done", e => {

@@ -15,6 +15,7 @@ function renderAll() {
   renderNode();
   renderCompose();
   renderSweepForm();
+  renderPlanForm();
   renderReport();
   refreshPreview();
 }

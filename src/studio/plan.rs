@@ -1,0 +1,182 @@
+//! The studio's planner: `POST /api/plan` plans a render node of the graph being edited — against
+//! the truth the graph makes at a relative RMSE budget (every candidate, brute force included,
+//! measured against it: `mesoflow_plan::arbitrate`), or against its own model at a FLIP budget
+//! (`plan_view`) — on a thread, one plan at a time (a new one stops the old). The page shows the
+//! decisions as they were measured (`GET /api/plan`), and `POST /api/plan/apply` makes the
+//! planned graph the edit, through the validator like any other, so a run and its previews follow.
+
+use super::session::{Problem, Refused, Studio};
+use mesoflow_graph::GraphFile;
+use serde::Deserialize;
+use serde_json::{json, Value};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+/// What the page asks for.
+#[derive(Deserialize)]
+pub struct PlanSpec {
+    pub render: String,
+    pub budget: f64,
+    /// `truth` (the default: relative RMSE against the truth the graph makes) or `model` (FLIP
+    /// against the graph's own model).
+    #[serde(default = "truth")]
+    pub against: String,
+}
+
+fn truth() -> String {
+    "truth".into()
+}
+
+/// The last plan asked for, as the page sees it.
+#[derive(Default)]
+pub struct PlanState {
+    pub id: u64,
+    pub running: bool,
+    pub render: String,
+    pub against: String,
+    pub budget: f64,
+    /// The graph's revision the plan was made of: applying it to a later one is refused.
+    pub revision: u64,
+    pub doc: Option<Value>,
+    pub planned: Option<GraphFile>,
+    pub error: Option<String>,
+    pub(super) cancel: Option<Arc<AtomicBool>>,
+}
+
+impl PlanState {
+    pub fn json(&self) -> Value {
+        json!({ "id": self.id, "running": self.running, "render": self.render,
+                "against": self.against, "budget": self.budget, "revision": self.revision,
+                "plan": self.doc, "error": self.error })
+    }
+}
+
+fn refused(m: impl Into<String>) -> Refused {
+    Refused {
+        errors: vec![Problem::plain(m)],
+    }
+}
+
+/// Starts planning; its id. Refused at once for a budget out of range, an unknown node or a
+/// graph with errors; the planner's own errors (no truth can be made, …) arrive as the plan's.
+pub fn start(studio: &Arc<Studio>, spec: PlanSpec) -> Result<u64, Refused> {
+    if !(spec.budget.is_finite() && spec.budget > 0.0 && spec.budget <= 10.0) {
+        return Err(refused(format!(
+            "budget {}: a relative RMSE or FLIP in (0, 10]",
+            spec.budget
+        )));
+    }
+    if spec.against != "truth" && spec.against != "model" {
+        return Err(refused(format!(
+            "against {:?}: \"truth\" or \"model\"",
+            spec.against
+        )));
+    }
+    let (file, revision) = {
+        let doc = studio.doc();
+        if doc.checked.is_none() {
+            return Err(refused("the graph has errors; fix them to plan it"));
+        }
+        if doc.file.node(&spec.render).is_none() {
+            return Err(refused(format!("no node `{}`", spec.render)));
+        }
+        (doc.file.clone(), doc.revision)
+    };
+    let cancel = Arc::new(AtomicBool::new(false));
+    let id = {
+        let mut st = studio.plan.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(c) = &st.cancel {
+            c.store(true, Ordering::SeqCst);
+        }
+        *st = PlanState {
+            id: st.id + 1,
+            running: true,
+            render: spec.render.clone(),
+            against: spec.against.clone(),
+            budget: spec.budget,
+            revision,
+            cancel: Some(cancel.clone()),
+            ..PlanState::default()
+        };
+        st.id
+    };
+    studio.hub.publish(
+        "plan_started",
+        json!({ "plan": id, "render": spec.render, "budget": spec.budget, "against": spec.against }),
+    );
+    let studio = studio.clone();
+    std::thread::spawn(move || {
+        let opts = studio.options(&studio.out_dir.join("plan"), cancel);
+        let name = studio.graph_path.display().to_string();
+        let result = if spec.against == "truth" {
+            mesoflow_plan::arbitrate(
+                &studio.engine,
+                &name,
+                &file,
+                &spec.render,
+                &opts,
+                mesoflow_plan::TruthOptions {
+                    rmse: spec.budget,
+                    share: 0.25,
+                },
+            )
+            .map(|a| (a.to_json(), a.planned))
+        } else {
+            mesoflow_plan::plan_view(
+                &studio.engine,
+                &name,
+                &file,
+                &spec.render,
+                mesoflow_plan::Budget {
+                    flip: spec.budget,
+                    ppd: mesoflow_nodes::image::flip::DEFAULT_PPD,
+                },
+                mesoflow_plan::Split::Joint,
+                opts,
+                Some(mesoflow_plan::ProbeOptions::default()),
+            )
+            .map(|p| (p.to_json(), p.plan.file))
+        };
+        let mut st = studio.plan.lock().unwrap_or_else(|e| e.into_inner());
+        if st.id != id {
+            return;
+        }
+        st.running = false;
+        st.cancel = None;
+        match result {
+            Ok((doc, planned)) => {
+                st.doc = Some(doc);
+                st.planned = Some(planned);
+            }
+            Err(e) => st.error = Some(e.to_string()),
+        }
+        let error = st.error.clone();
+        drop(st);
+        studio
+            .hub
+            .publish("plan_done", json!({ "plan": id, "error": error }));
+    });
+    Ok(id)
+}
+
+/// Makes the last plan's graph the edit; refused while it runs, without one, or when the graph
+/// changed since it was planned.
+pub fn apply(studio: &Studio) -> Result<u64, Refused> {
+    let (planned, revision) = {
+        let st = studio.plan.lock().unwrap_or_else(|e| e.into_inner());
+        match (&st.planned, st.running) {
+            (_, true) => return Err(refused("the plan is still running")),
+            (None, _) => return Err(refused("no plan to apply: plan a render first")),
+            (Some(p), false) => (p.clone(), st.revision),
+        }
+    };
+    if studio.doc().revision != revision {
+        return Err(refused(
+            "the graph changed since it was planned: plan it again",
+        ));
+    }
+    studio.edit(true, move |f| {
+        *f = planned;
+        Ok(())
+    })
+}
