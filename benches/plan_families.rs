@@ -29,9 +29,7 @@ fn f2(x: Option<f64>) -> String {
 }
 
 fn row_json(r: &SceneRow) -> Value {
-    let rendered = |x: &plan_families::Rendered| {
-        json!({ "name": x.name, "family": x.family, "error": x.error, "seconds": x.seconds })
-    };
+    let rendered = |x: &plan_families::Rendered| json!({ "name": x.name, "family": x.family, "error": x.error, "seconds": x.seconds });
     json!({
         "family": r.family,
         "seed": r.seed,
@@ -87,6 +85,9 @@ fn summary(rows: &[SceneRow], budgets: &[f64]) {
     }
 }
 
+/// A chart's point from one scene at one budget, if it has one.
+type Pick = dyn Fn(&SceneRow, &plan_families::Budgeted) -> Option<(f64, f64)>;
+
 fn charts(rows: &[SceneRow], out: &Path) {
     let mut made = Vec::new();
     for family in ["translucent", "mesostructure"] {
@@ -94,7 +95,7 @@ fn charts(rows: &[SceneRow], out: &Path) {
         if of.is_empty() {
             continue;
         }
-        let points = |f: &dyn Fn(&SceneRow, &plan_families::Budgeted) -> Option<(f64, f64)>| {
+        let points = |f: &Pick| {
             of.iter()
                 .flat_map(|r| r.budgets.iter().filter_map(move |b| f(r, b)))
                 .collect::<Vec<_>>()
@@ -149,8 +150,11 @@ fn charts(rows: &[SceneRow], out: &Path) {
                     Series {
                         name: "the graph as given".into(),
                         points: {
-                            let mut p: Vec<(f64, f64)> =
-                                of.iter().filter_map(|r| r.given.seconds).map(|s| (s, s)).collect();
+                            let mut p: Vec<(f64, f64)> = of
+                                .iter()
+                                .filter_map(|r| r.given.seconds)
+                                .map(|s| (s, s))
+                                .collect();
                             p.sort_by(|a, b| a.0.total_cmp(&b.0));
                             p
                         },
@@ -163,7 +167,10 @@ fn charts(rows: &[SceneRow], out: &Path) {
     }
     for (name, c) in made {
         match chart::write(&out.join(&name), &c) {
-            Ok(()) => eprintln!("plan_families: {}", out.join(format!("{name}.svg")).display()),
+            Ok(()) => eprintln!(
+                "plan_families: {}",
+                out.join(format!("{name}.svg")).display()
+            ),
             Err(e) => eprintln!("plan_families: {name}: {e}"),
         }
     }

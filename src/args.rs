@@ -88,11 +88,22 @@ pub enum Command {
 pub enum CacheAction {
     /// Entries and bytes, by node kind.
     Stats(CacheArgs),
-    /// Remove every entry.
-    Clear(CacheArgs),
+    /// Remove every entry of a graph's cache (or --cache-dir's); --all: of every cache here and
+    /// one folder down.
+    Clear(ClearArgs),
     /// Remove entries unused for longer than --older-than, then the least recently used until
     /// at most --max-bytes remain (a hit renews an entry), and orphaned temporary files.
     Gc(GcArgs),
+}
+
+#[derive(Args)]
+pub struct ClearArgs {
+    #[command(flatten)]
+    pub cache: CacheArgs,
+    /// Without a graph or --cache-dir: clear every cache in this folder and one folder down
+    /// (without it, they are listed and nothing is removed).
+    #[arg(long)]
+    pub all: bool,
 }
 
 #[derive(Args)]

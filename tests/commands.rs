@@ -398,7 +398,13 @@ fn a_missing_input_file_is_refused_by_validate_and_run_naming_the_graphs_folder(
     );
     let out = s.path("out");
     let r = mesoflow(
-        &["run", g.to_str().unwrap(), "--quiet", "--out-dir", out.to_str().unwrap()],
+        &[
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
         s.dir.path(),
     );
     assert_ne!(r.code, 0);
@@ -407,4 +413,101 @@ fn a_missing_input_file_is_refused_by_validate_and_run_naming_the_graphs_folder(
         "{}",
         r.stderr
     );
+}
+
+/// `run` says where its files went (issue 58: the output folder is relative to the current
+/// folder, not the graph's, and a new user looked for them beside the graph).
+#[test]
+fn run_says_where_its_files_went() {
+    let s = Scratch::new();
+    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/quickstart.json");
+    let r = mesoflow(
+        &[
+            "run",
+            graph.to_str().unwrap(),
+            "--set",
+            "surface.size=32",
+            "--no-cache",
+            "--out-dir",
+            "somewhere",
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let folder = s.path("somewhere").canonicalize().unwrap();
+    assert!(
+        r.stdout
+            .contains(&format!("files and report.json in {}", folder.display())),
+        "{}",
+        r.stdout
+    );
+}
+
+/// `cache clear` without a graph or `--cache-dir` lists the caches it would clear and clears
+/// nothing (issue 58: it wiped every cache here and one folder down without asking); `--all`
+/// clears them.
+#[test]
+fn cache_clear_without_a_graph_asks_for_all() {
+    let s = Scratch::new();
+    let g = s.write(
+        "a/g.json",
+        r#"{"mesoflow": 1, "nodes": {"s": {"kind": "heightfield.procedural", "params": {"size": 16}}}}"#,
+    );
+    let r = mesoflow(
+        &["run", g.to_str().unwrap(), "--quiet", "--out-dir", "out"],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    std::fs::create_dir_all(s.path("a/.mesoflow/cache")).unwrap();
+    let marker = s.write("a/.mesoflow/cache/keep.txt", "a file clear must not reach");
+    let r = mesoflow(&["cache", "clear"], s.dir.path());
+    assert_eq!(r.code, 2, "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stderr.contains("--all") && r.stderr.contains("a/.mesoflow/cache"),
+        "{}",
+        r.stderr
+    );
+    assert!(marker.exists());
+    let r = mesoflow(&["cache", "clear", "--all"], s.dir.path());
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    assert!(
+        r.stdout.contains("a/.mesoflow/cache: removed"),
+        "{}",
+        r.stdout
+    );
+}
+
+/// `mesoflow nodes` and `nodes KIND` keep their columns: names as wide as the longest, text
+/// wrapped to 100 columns under its own column (issue 58: long names pushed columns out of line
+/// and wrapped lines started at column 0).
+#[test]
+fn nodes_lines_fit_a_hundred_columns_and_wrap_under_their_column() {
+    let s = Scratch::new();
+    for args in [
+        vec!["nodes"],
+        vec!["nodes", "render.mesh"],
+        vec!["nodes", "sss.render"],
+    ] {
+        let r = mesoflow(&args, s.dir.path());
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        for line in r.stdout.lines() {
+            let long_word = line.split_whitespace().any(|w| w.chars().count() > 40);
+            assert!(
+                line.chars().count() <= 100 || long_word,
+                "{args:?}: a line of {} columns: {line}",
+                line.chars().count()
+            );
+        }
+    }
+    // A wrapped kind description starts under the description's column, never at column 0.
+    let r = mesoflow(&["nodes"], s.dir.path());
+    let col = r.stdout.lines().next().map_or(0, |l| {
+        l.find(" v").map_or(0, |i| i + " v".len() + 3 + 1 + 4 + 1)
+    });
+    for line in r.stdout.lines().filter(|l| l.starts_with(' ')) {
+        assert!(
+            line.chars().take_while(|c| *c == ' ').count() >= col.min(30),
+            "a continuation line out of its column: {line}"
+        );
+    }
 }

@@ -333,7 +333,8 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
     ("schema", How::AsWritten),
     ("cache stats", How::AsWritten),
     ("cache gc --max-bytes 20G --older-than 30d", How::AsWritten),
-    ("cache clear", How::AsWritten),
+    ("cache clear my.json", How::AsWritten),
+    ("cache clear --all", How::AsWritten),
     (
         "sweep graphs/mdf_render.json --vary pca.rank=4,8,16,32 --vary lod.level=0,2 \
          --vary torus_mdf.use_mdf=false,true --set torus_mdf.frames=5 --measure error.rmse \

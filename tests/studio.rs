@@ -890,10 +890,14 @@ fn a_huge_declared_body_an_endless_header_and_idle_connections_do_not_knock_the_
     };
     assert_eq!(raw_exchange(&s.addr, huge("").as_bytes(), limit), Some(401));
     let with_token = huge(&format!("?token={}", s.token));
-    assert_eq!(raw_exchange(&s.addr, with_token.as_bytes(), limit), Some(413));
+    assert_eq!(
+        raw_exchange(&s.addr, with_token.as_bytes(), limit),
+        Some(413)
+    );
     // A header line that never ends is cut off at the head limit (32 KiB): 431 or a close,
     // never memory without bound. 1 MiB is 32 times the limit.
-    let mut endless = format!("GET /api/state HTTP/1.1\r\nHost: {}\r\nX-Pad: ", s.addr).into_bytes();
+    let mut endless =
+        format!("GET /api/state HTTP/1.1\r\nHost: {}\r\nX-Pad: ", s.addr).into_bytes();
     endless.extend(std::iter::repeat_n(b'a', 1 << 20));
     let got = raw_exchange(&s.addr, &endless, limit);
     assert!(got.is_none() || got == Some(431), "{got:?}");
@@ -964,7 +968,10 @@ fn an_input_replaced_by_a_link_to_outside_after_the_edit_is_refused_by_the_next_
         .unwrap()
         .clone();
     assert!(
-        hf["error"].as_str().unwrap_or("").contains("outside the folders"),
+        hf["error"]
+            .as_str()
+            .unwrap_or("")
+            .contains("outside the folders"),
         "{hf}"
     );
     let (code, bytes) = pixels(&s);
@@ -1019,7 +1026,10 @@ fn the_studio_answers_a_normal_client_throughout_a_flood_of_hostile_requests() {
                     slowest = slowest.max((t.elapsed(), i));
                     sent += 1;
                 }
-                eprintln!("flooder {k}: {sent} sent, the slowest case {} took {:?}", slowest.1, slowest.0);
+                eprintln!(
+                    "flooder {k}: {sent} sent, the slowest case {} took {:?}",
+                    slowest.1, slowest.0
+                );
                 sent
             })
         })
@@ -1045,7 +1055,10 @@ fn the_studio_answers_a_normal_client_throughout_a_flood_of_hostile_requests() {
         worst = worst.max(asked.elapsed());
     }
     stop.store(true, std::sync::atomic::Ordering::Relaxed);
-    let sent: usize = flooders.into_iter().map(|f| f.join().expect("flooder")).sum();
+    let sent: usize = flooders
+        .into_iter()
+        .map(|f| f.join().expect("flooder"))
+        .sum();
     assert!(sent > 40, "the flood sent only {sent} requests");
     let st = s.state();
     let depth = 4.0 + (edits % 5) as f64;

@@ -542,7 +542,11 @@ pub fn arbitrate(
         match noise {
             Some(n) if n > o.rmse / 3.0 && truth_samples < MOST_TRUTH_SAMPLES => {
                 let want = truth_samples as f64 * (n / (o.rmse / 3.0)).powi(2) * 1.1;
-                truth_samples = (want.ceil() as u32).clamp(truth_samples * 2, MOST_TRUTH_SAMPLES);
+                // At least twice the last, at most the cap (a held-out scene once asked for
+                // more than the cap, and `clamp` with min > max panicked).
+                truth_samples = (want.ceil() as u32)
+                    .max(truth_samples.saturating_mul(2))
+                    .min(MOST_TRUTH_SAMPLES);
             }
             _ => break noise,
         }
@@ -633,8 +637,7 @@ pub fn arbitrate(
     }
 
     // Brute force, where what the graph reads from the render, render.reference makes too.
-    let readable_ports: BTreeSet<String> =
-        readable.iter().map(|(s, _)| s.to_string()).collect();
+    let readable_ports: BTreeSet<String> = readable.iter().map(|(s, _)| s.to_string()).collect();
     let missing: Vec<String> = ports_read(file, render)
         .difference(&readable_ports)
         .cloned()
@@ -724,7 +727,9 @@ pub fn arbitrate(
         }
     };
     let mut planned = file.clone();
-    if let Some(i) = chosen {
+    // The render as given (the first candidate) leaves the graph as it is: its candidate's
+    // declaration has the lighting inlined, which would compute it again inside the render.
+    if let Some(i) = chosen.filter(|&i| i > 0) {
         let c = &candidates[i];
         if c.family == "brute force" {
             // The truth's own nodes (the displaced surface) go in before the render.
@@ -747,9 +752,9 @@ pub fn arbitrate(
             // it now reads from render.reference's port that gives the same.
             for (_, d) in &mut planned.nodes {
                 for from in d.inputs.values_mut() {
-                    let renamed = readable.iter().find(|(was, is)| {
-                        was != is && from.as_str() == format!("{render}.{was}")
-                    });
+                    let renamed = readable
+                        .iter()
+                        .find(|(was, is)| was != is && from.as_str() == format!("{render}.{was}"));
                     if let Some((_, is)) = renamed {
                         *from = format!("{render}.{is}");
                     }

@@ -16,7 +16,10 @@ impl Confinement {
     /// in it).
     pub fn new(folders: &[PathBuf]) -> Confinement {
         Confinement(Arc::new(
-            folders.iter().filter_map(|f| f.canonicalize().ok()).collect(),
+            folders
+                .iter()
+                .filter_map(|f| f.canonicalize().ok())
+                .collect(),
         ))
     }
 
@@ -27,13 +30,13 @@ impl Confinement {
         match path.canonicalize() {
             Ok(real) if self.0.iter().any(|r| real.starts_with(r)) => Ok(real),
             Ok(real) => Err(format!(
-                    "resolves to {} outside the folders this run may read ({})",
-                    real.display(),
-                    self.0
-                        .iter()
-                        .map(|r| r.display().to_string())
-                        .collect::<Vec<_>>()
-                        .join(", ")
+                "resolves to {} outside the folders this run may read ({})",
+                real.display(),
+                self.0
+                    .iter()
+                    .map(|r| r.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )),
             Err(_) => Ok(path.to_path_buf()),
         }
@@ -60,7 +63,7 @@ mod tests {
         std::fs::create_dir_all(&inside).expect("mkdir");
         std::fs::write(dir.path().join("secret.npy"), b"x").expect("write");
         std::fs::write(inside.join("h.npy"), b"x").expect("write");
-        let c = Confinement::new(&[inside.clone()]);
+        let c = Confinement::new(std::slice::from_ref(&inside));
         assert!(c.admit(&inside.join("h.npy")).is_ok());
         assert!(c.admit(&inside.join("missing.npy")).is_ok());
         std::fs::remove_file(inside.join("h.npy")).expect("rm");

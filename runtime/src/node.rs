@@ -266,7 +266,7 @@ impl NodeContext {
             return Err(NodeError::param(
                 param,
                 format!(
-                    "{p}: no such file (a relative path resolves against the graph's folder, {})",
+                    "{p}: no such file or folder (a relative path resolves against the graph's folder, {})",
                     self.base_dir.display()
                 ),
             ));

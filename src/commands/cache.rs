@@ -76,7 +76,27 @@ pub fn stats(a: &CacheArgs) -> anyhow::Result<i32> {
     Ok(0)
 }
 
-pub fn clear(a: &CacheArgs) -> anyhow::Result<i32> {
+pub fn clear(c: &crate::args::ClearArgs) -> anyhow::Result<i32> {
+    let a = &c.cache;
+    let named = a.graph.is_some() || a.cache_dir.is_some();
+    if !named && !c.all {
+        let found: Vec<String> = dirs(a)
+            .iter()
+            .filter(|d| d.is_dir())
+            .map(|d| {
+                let s = DiskCache::new(d).stats();
+                format!("  {} ({} entries)", d.display(), s.entries)
+            })
+            .collect();
+        return Err(invalid(if found.is_empty() {
+            "cache clear: no cache here; name a graph (the cache beside it) or --cache-dir".into()
+        } else {
+            format!(
+                "cache clear: name a graph (the cache beside it) or --cache-dir, or add --all to clear every cache found here:\n{}",
+                found.join("\n")
+            )
+        }));
+    }
     for dir in dirs(a) {
         let cache = DiskCache::new(&dir);
         let n = cache.clear()?;

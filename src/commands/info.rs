@@ -61,26 +61,75 @@ fn kind_json(s: &KindSignature) -> Value {
     })
 }
 
+/// The columns text is wrapped to.
+const COLUMNS: usize = 100;
+
+/// `text` word-wrapped to [`COLUMNS`], the first line starting at column `first` (what precedes
+/// it is the caller's) and every further line indented by `indent` spaces.
+fn wrap(text: &str, first: usize, indent: usize) -> String {
+    let mut out = String::new();
+    let mut col = first;
+    for word in text.split_whitespace() {
+        let w = word.chars().count();
+        if col > indent && col + 1 + w > COLUMNS {
+            out.push('\n');
+            out.push_str(&" ".repeat(indent));
+            col = indent;
+        } else if col > first || (col == first && !out.is_empty()) {
+            out.push(' ');
+            col += 1;
+        }
+        out.push_str(word);
+        col += w;
+    }
+    out
+}
+
 fn describe(s: &KindSignature) -> String {
     let device = format!("{:?}", s.device).to_lowercase();
     let mut out = format!(
         "{} (version {}, {device})\n  {}\n",
-        s.kind, s.version, s.doc
+        s.kind,
+        s.version,
+        wrap(&s.doc, 2, 2)
     );
+    let props = s.params.get("properties").and_then(Value::as_object);
+    // One name column for ports and parameters alike, as wide as the longest name.
+    let width = s
+        .inputs
+        .iter()
+        .map(|i| i.name.chars().count())
+        .chain(s.outputs.iter().map(|o| o.name.chars().count()))
+        .chain(props.into_iter().flatten().map(|(k, _)| k.chars().count()))
+        .fold(14, usize::max);
+    let row = |name: &str, what: String, doc: &str| {
+        let head = format!("  {name:<width$} {what}");
+        let col = head.chars().count();
+        if doc.is_empty() {
+            format!("{head}\n")
+        } else if col + 2 + doc.chars().count().min(20) <= COLUMNS {
+            format!("{head}  {}\n", wrap(doc, col + 2, width + 3))
+        } else {
+            format!(
+                "{head}\n{}{}\n",
+                " ".repeat(width + 3),
+                wrap(doc, width + 3, width + 3)
+            )
+        }
+    };
     out.push_str("inputs:\n");
     if s.inputs.is_empty() {
         out.push_str("  (none)\n");
     }
     for i in &s.inputs {
         let opt = if i.required { "" } else { ", optional" };
-        out.push_str(&format!("  {:<14} {}{opt}  {}\n", i.name, i.ty, i.doc));
+        out.push_str(&row(&i.name, format!("{}{opt}", i.ty), &i.doc));
     }
     out.push_str("outputs:\n");
     for o in &s.outputs {
-        out.push_str(&format!("  {:<14} {}  {}\n", o.name, o.ty, o.doc));
+        out.push_str(&row(&o.name, o.ty.clone(), &o.doc));
     }
     out.push_str("params:\n");
-    let props = s.params.get("properties").and_then(Value::as_object);
     let required = s.required_params();
     for (name, schema) in props.into_iter().flatten() {
         let mut ty = mesoflow_graph::params::expected_text(&s.params, schema);
@@ -100,7 +149,17 @@ fn describe(s: &KindSignature) -> String {
             .get("description")
             .and_then(Value::as_str)
             .unwrap_or("");
-        out.push_str(&format!("  {name:<14} {ty}; {default}\n      {doc}\n"));
+        out.push_str(&format!(
+            "  {name:<width$} {}\n",
+            wrap(&format!("{ty}; {default}"), width + 3, width + 3)
+        ));
+        if !doc.is_empty() {
+            out.push_str(&format!(
+                "{}{}\n",
+                " ".repeat(width + 3),
+                wrap(doc, width + 3, width + 3)
+            ));
+        }
     }
     out
 }
@@ -126,14 +185,19 @@ pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
     } else if kind.is_some() {
         print!("{}", describe(chosen[0]));
     } else {
+        let width = chosen
+            .iter()
+            .map(|s| s.kind.chars().count())
+            .fold(0, usize::max);
         for s in chosen {
-            println!(
-                "{:<24} v{:<3} {:<4} {}",
+            let head = format!(
+                "{:<width$} v{:<3} {:<4}",
                 s.kind,
                 s.version,
                 format!("{:?}", s.device).to_lowercase(),
-                s.doc
             );
+            let col = head.chars().count() + 1;
+            println!("{head} {}", wrap(&s.doc, col, col));
         }
     }
     Ok(0)

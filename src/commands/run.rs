@@ -207,6 +207,15 @@ impl Runner {
         write_report(&report, out_dir)?;
         if !self.quiet {
             print!("{}", summary(&report));
+            // Where the files went: the output folder is relative to the current folder, not
+            // the graph's (a new user looked beside the graph).
+            let shown = std::fs::canonicalize(out_dir).unwrap_or_else(|_| out_dir.to_path_buf());
+            println!(
+                "{} file{} and report.json in {}",
+                report.files.len(),
+                if report.files.len() == 1 { "" } else { "s" },
+                shown.display()
+            );
         }
         // The values asked for with --output, one per line (scalars by value).
         for o in &opts.outputs {

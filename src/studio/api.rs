@@ -267,11 +267,7 @@ pub fn handle(studio: &Arc<Studio>, call: &Call) -> Reply {
         }
         ("GET", "/api/plan") => json_response(
             200,
-            &studio
-                .plan
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .json(),
+            &studio.plan.lock().unwrap_or_else(|e| e.into_inner()).json(),
         ),
         ("POST", "/api/plan") => match body::<plan::PlanSpec>(call) {
             Ok(spec) => match plan::start(studio, spec) {

@@ -59,14 +59,10 @@ pub fn serve(args: &ServeArgs) -> anyhow::Result<i32> {
     )?;
     studio.verify_cache = args.cache.verify_cache;
     let studio = Arc::new(studio);
-    let listener =
-        std::net::TcpListener::bind((args.host.as_str(), args.port)).map_err(|e| {
-            crate::exit::invalid(format!("cannot listen on {}:{}: {e}", args.host, args.port))
-        })?;
-    let port = listener
-        .local_addr()
-        .map(|a| a.port())
-        .unwrap_or(args.port);
+    let listener = std::net::TcpListener::bind((args.host.as_str(), args.port)).map_err(|e| {
+        crate::exit::invalid(format!("cannot listen on {}:{}: {e}", args.host, args.port))
+    })?;
+    let port = listener.local_addr().map(|a| a.port()).unwrap_or(args.port);
     let token = random_token();
     let shown_host = if args.host == "0.0.0.0" {
         "127.0.0.1"

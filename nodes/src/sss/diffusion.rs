@@ -85,7 +85,7 @@ impl Medium {
     /// κ = 1 − e^{−2σt′(d + z)}, which damps what single scattering already counts near the
     /// source — the published form of Habel et al. 2013 as pbrt-v3 (§15.5) tabulates it. Against
     /// our Monte Carlo it is still high at high albedo (κ does not remove all the double
-    /// counting: 1.09 at α′ = 1, η = 1); the README's chart shows by how much.
+    /// counting: 1.09 at α′ = 1, η = 1); docs/guide/translucency.md's chart shows by how much.
     pub fn pbd_multiple(&self, r: f64) -> f64 {
         let mut sum = 0.0;
         for i in 0..BEAM_SAMPLES {

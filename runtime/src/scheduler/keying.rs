@@ -25,7 +25,6 @@ pub(crate) fn key_all(
     plan: &super::plan::Plan,
     opts: &RunOptions,
 ) -> Keyed {
-    let base_dir = opts.base_dir.as_path();
     let mut slots: Vec<Option<Slot>> = Vec::with_capacity(graph.nodes.len());
     let mut read_files = BTreeSet::new();
     for (i, cn) in graph.nodes.iter().enumerate() {
@@ -56,9 +55,8 @@ pub(crate) fn key_all(
                         cn,
                         &slots,
                         &plan.index,
-                        base_dir,
+                        opts,
                         path,
-                        opts.confine.as_ref(),
                         &mut read_files,
                     )
                     .map(|(prepared, key)| (prepared, key, choice))
@@ -85,11 +83,11 @@ fn prepare_and_key(
     cn: &CheckedNode,
     slots: &[Option<Slot>],
     index: &BTreeMap<&str, usize>,
-    base: &Path,
+    opts: &RunOptions,
     device: Option<&str>,
-    confine: Option<&crate::confine::Confinement>,
     read_files: &mut BTreeSet<String>,
 ) -> Result<(Prepared, Key), NodeError> {
+    let (base, confine) = (opts.base_dir.as_path(), opts.confine.as_ref());
     let prepared = node.prepare(&cn.params)?;
     let declared = node.files(&prepared, base)?;
     let mut files = Vec::new();

@@ -619,7 +619,7 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
             // at silhouettes and shared edges, f32 vs f64 at the shell test's threshold and the
             // shadow comparison. Those are isolated pixels along outlines: 0.5% of the pixels
             // and a mean difference of 5e-5 of the peak bound them (lavapipe measured 0
-            // pixels and 5e-6; the README quotes these bounds), while a wrong frame, lookup
+            // pixels and 5e-6; docs/guide/mdf.md quotes these bounds), while a wrong frame, lookup
             // or layer breaks whole regions and fails both.
             assert!(frac < 0.005, "{}: {frac} of pixels differ", gpu.describe());
             assert!(mean < 5e-5, "{}: mean difference {mean}", gpu.describe());

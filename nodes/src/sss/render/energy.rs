@@ -124,7 +124,7 @@ mod tests {
 
     #[test]
     fn diffusion_profiles_return_more_than_the_exact_half_space_at_eta_one() {
-        // What the README says of the profiles at η = 1 (Jensen et al. 2001's coefficients),
+        // What docs/guide/translucency.md says of the profiles at η = 1 (Jensen et al. 2001's coefficients),
         // against Chandrasekhar's exact reflectance at normal incidence: marble's PBD, single
         // scattering included, about 10% over everything reflected; skin1's better dipole 30 to
         // 80% over the multiple scattering alone.

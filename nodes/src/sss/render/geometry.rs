@@ -9,7 +9,7 @@
 //! source through the material, less where it faces away. Jensen et al. 2001's dipole constants
 //! (σtr, zr, zv) per channel.
 //!
-//! Measured and dropped (the README's translucency section): placing the dipole against the exit
+//! Measured and dropped (docs/guide/translucency.md): placing the dipole against the exit
 //! point's tangent plane (the source as deep below it as it lies, a slab's multipole for the
 //! local thickness) sends 3× too much light through the torus's tube.
 

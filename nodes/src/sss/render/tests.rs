@@ -196,7 +196,7 @@ fn gpu_and_cpu_brute_force_agree() {
         };
         let g = render(Some(&gpu), &sphere, &m, &profile, &sphere_scene(0.0)).unwrap();
         // f32 sums of ~2000 terms against f64: rounding grows like √n·2⁻²⁴ ≈ 3e-6, so 5e-6
-        // relative RMS is the float bound (the README quotes it; lavapipe measures 8e-7).
+        // relative RMS is the float bound (docs/guide/translucency.md quotes it; lavapipe measures 8e-7).
         let e = rel_rms(&g.exitance.data, &cpu.exitance.data);
         eprintln!("{}: relative RMS {e:.2e}", gpu.describe());
         assert!(e < 5e-6, "{}: {e}", gpu.describe());

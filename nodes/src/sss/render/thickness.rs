@@ -1,6 +1,6 @@
 //! How thick the object is against the material's reduced mean free path 1/σt′. Diffusion
 //! assumes light forgets its direction long before it crosses the object. Against the
-//! volumetric truth (`graphs/sss_truth.json` with other presets and shapes, the README's
+//! volumetric truth (`graphs/sss_truth.json` with other presets and shapes, docs/guide/translucency.md's
 //! translucency section) the torus's error with `geometry: body` stayed under 0.12 where its tube was 7.5 or more
 //! reduced mean free paths across. At 3.7 (ketchup) and 2.5 (chicken1) `geometry: body` and
 //! `exit_normal` sent far too much light through the tube (0.20–0.39, the dimmer half
