@@ -12,6 +12,7 @@
 mod api;
 mod events;
 mod plan;
+mod plan_state;
 mod preview;
 mod server;
 mod session;

@@ -5,10 +5,10 @@
 //! decisions as they were measured (`GET /api/plan`), and `POST /api/plan/apply` makes the
 //! planned graph the edit, through the validator like any other, so a run and its previews follow.
 
+use super::plan_state::PlanState;
 use super::session::{Problem, Refused, Studio};
-use mesoflow_graph::GraphFile;
 use serde::Deserialize;
-use serde_json::{json, Value};
+use serde_json::json;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -25,30 +25,6 @@ pub struct PlanSpec {
 
 fn truth() -> String {
     "truth".into()
-}
-
-/// The last plan asked for, as the page sees it.
-#[derive(Default)]
-pub struct PlanState {
-    pub id: u64,
-    pub running: bool,
-    pub render: String,
-    pub against: String,
-    pub budget: f64,
-    /// The graph's revision the plan was made of: applying it to a later one is refused.
-    pub revision: u64,
-    pub doc: Option<Value>,
-    pub planned: Option<GraphFile>,
-    pub error: Option<String>,
-    pub(super) cancel: Option<Arc<AtomicBool>>,
-}
-
-impl PlanState {
-    pub fn json(&self) -> Value {
-        json!({ "id": self.id, "running": self.running, "render": self.render,
-                "against": self.against, "budget": self.budget, "revision": self.revision,
-                "plan": self.doc, "error": self.error })
-    }
 }
 
 fn refused(m: impl Into<String>) -> Refused {

@@ -87,7 +87,7 @@ pub struct Studio {
     runs: Mutex<RunState>,
     wake: Condvar,
     pub sweep: Mutex<super::sweep_state::SweepState>,
-    pub plan: Mutex<super::plan::PlanState>,
+    pub plan: Mutex<super::plan_state::PlanState>,
 }
 
 /// Errors that a structural edit may leave behind: a node just added has no inputs yet, and a

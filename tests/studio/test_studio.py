@@ -377,3 +377,41 @@ def test_a_sweep_started_in_the_studio_fills_its_table_and_charts(studio_of, bro
     assert slopes[0] < slopes[1] < slopes[2], slopes
     assert (s.dir / "out" / "sweep" / "sweep.csv").exists()
     shot(browser, "studio-sweep.png")
+
+
+def test_a_plan_against_the_truth_is_shown_and_applied(studio_of, browser, tmp_path):
+    """The Plan tab: a budget no model meets on this small translucent sphere (as in
+    tests/plan_truth.rs), the candidates as measured with brute force chosen, then applied as
+    an edit: the render becomes render.reference in the graph being edited."""
+    from selenium.webdriver.common.keys import Keys
+
+    g = json.loads((ROOT / "graphs" / "family_translucent.json").read_text())
+    g["nodes"]["mesh"]["params"]["segments"] = [32, 16]
+    for n in ("ours", "truth"):
+        g["nodes"][n]["params"]["camera"]["resolution"] = [32, 24]
+    g["nodes"]["lighting"]["params"]["max_points"] = 2000
+    g["nodes"]["lighting"]["params"]["shadow_resolution"] = 128
+    g["nodes"]["truth"]["params"]["samples"] = 64
+    src = tmp_path / "src"
+    src.mkdir()
+    (src / "translucent.json").write_text(json.dumps(g, indent=2))
+    s = studio_of(src / "translucent.json")
+    browser.get(s.url)
+    wait_loaded(browser)
+    click(browser, '#tabs button[data-tab="plan"]')
+    budget = browser.find_element("css selector", "#plan-budget")
+    budget.send_keys(Keys.CONTROL, "a")
+    budget.send_keys("0.06")
+    click(browser, "#plan-start")
+    wait(browser, """return document.querySelector('#plan-table tr.chosen') &&
+        document.querySelector('#plan-apply') ? true : null;""", 300, "the plan's candidates")
+    rows = browser.execute_script("""return [...document.querySelectorAll('#plan-table tr')].slice(1)
+        .map(r => r.querySelector('td').textContent);""")
+    assert len(rows) >= 3, rows
+    chosen = browser.execute_script("return document.querySelector('#plan-table tr.chosen td').textContent")
+    assert "brute force" in chosen, rows
+    shot(browser, "studio-plan.png")
+    click(browser, "#plan-apply")
+    wait(browser, """const s = window.studio.state;
+        const n = s && s.nodes.find(n => n.id === 'ours');
+        return n && n.kind === 'render.reference' ? true : null;""", 60, "the plan applied")

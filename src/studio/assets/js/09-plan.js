@@ -41,7 +41,7 @@ function renderPlanResults() {
         el("td", { class: "num" }, fmt(c.relative_rmse)), el("td", { class: "num" }, fmt(c.full_seconds_estimate)),
         el("td", {}, c.within_budget ? "yes" : "no")));
       parts.push(el("table", { class: "data", id: "plan-table" }, head, rows), el("div", { class: "doc", id: "plan-why" }, p.why || ""));
-      if (p.plan_time) parts.push(el("div", { class: "doc" }, `planning took ${secs(p.plan_time.seconds)}, ${fmt(p.plan_time.ratio)}× the longer full render`));
+      if (p.plan_time) parts.push(el("div", { class: "doc" }, `planning took ${secs(p.plan_time.seconds)}, ${p.plan_time.ratio.toFixed(1)}× the longer full render`));
     } else if (p) {
       const decisions = p.decisions || [];
       parts.push(el("table", { class: "data", id: "plan-table" }, el("tr", {}, el("th", {}, "decision")),

@@ -1,0 +1,32 @@
+//! The studio's plan as the page sees it: which render, judge and budget, whether it runs, the
+//! plan document and the planned graph, its error, and the flag that stops it. `Studio` holds
+//! one; `plan.rs` runs it (so `session.rs` and `plan.rs` do not import each other).
+
+use mesoflow_graph::GraphFile;
+use serde_json::{json, Value};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+/// The last plan asked for, as the page sees it.
+#[derive(Default)]
+pub struct PlanState {
+    pub id: u64,
+    pub running: bool,
+    pub render: String,
+    pub against: String,
+    pub budget: f64,
+    /// The graph's revision the plan was made of: applying it to a later one is refused.
+    pub revision: u64,
+    pub doc: Option<Value>,
+    pub planned: Option<GraphFile>,
+    pub error: Option<String>,
+    pub(super) cancel: Option<Arc<AtomicBool>>,
+}
+
+impl PlanState {
+    pub fn json(&self) -> Value {
+        json!({ "id": self.id, "running": self.running, "render": self.render,
+                "against": self.against, "budget": self.budget, "revision": self.revision,
+                "plan": self.doc, "error": self.error })
+    }
+}
