@@ -36,5 +36,36 @@ pub fn checked(path: &Path, file: &GraphFile, registry: &Registry) -> anyhow::Re
 pub fn load(path: &Path, sets: &[String], registry: &Registry) -> anyhow::Result<CheckedGraph> {
     let mut file = read(path)?;
     apply_sets(&mut file, sets)?;
+    known_params(&file, sets, registry)?;
     checked(path, &file, registry)
+}
+
+/// A `--set` of a parameter its node's kind does not have is the `--set`'s mistake, said so
+/// against it rather than against the graph file (issue 58).
+fn known_params(file: &GraphFile, sets: &[String], registry: &Registry) -> anyhow::Result<()> {
+    for s in sets {
+        let Ok(o) = parse_override(s) else {
+            continue;
+        };
+        let top = o.param.split('.').next().unwrap_or(&o.param);
+        let Some(sig) = file
+            .node(&o.node)
+            .and_then(|d| registry.node(&d.kind))
+            .map(|n| n.signature())
+        else {
+            continue;
+        };
+        let names = sig.params.get("properties").and_then(|p| p.as_object());
+        if names.is_some_and(|n| !n.contains_key(top)) {
+            let hint =
+                mesoflow_graph::nearest(top, names.into_iter().flatten().map(|(k, _)| k.as_str()))
+                    .map(|n| format!(" (did you mean `{n}`?)"))
+                    .unwrap_or_default();
+            return Err(invalid(format!(
+                "--set {s}: node `{}` ({}) has no parameter `{top}`{hint}",
+                o.node, sig.kind
+            )));
+        }
+    }
+    Ok(())
 }

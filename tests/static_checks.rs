@@ -252,3 +252,38 @@ fn valid_graphs_in_the_repository_validate() {
         }
     }
 }
+
+/// A negative value for a bounded integer reports the documented bounds, not the storage
+/// type's (issue 58: "-5 is outside 0..=4294967295" for a size documented in [4, 8192]).
+#[test]
+fn a_negative_integer_reports_the_documented_bound() {
+    let r = validate(
+        r#"{"mesoflow": 1, "nodes": {"surface": {"kind": "heightfield.procedural", "params": {"size": -5}}}}"#,
+    );
+    assert!(
+        r.stderr.contains("-5 is below the minimum 4") && !r.stderr.contains("4294967295"),
+        "{}",
+        r.stderr
+    );
+}
+
+/// An unknown parameter given by `--set` is reported against the `--set`, not the graph file
+/// (issue 58).
+#[test]
+fn an_unknown_parameter_from_set_is_the_sets_mistake() {
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {"surface": {"kind": "heightfield.procedural", "params": {"size": 64}}}}"#,
+    );
+    let r = mesoflow(
+        &["validate", g.to_str().unwrap(), "--set", "surface.sise=32"],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("--set surface.sise=32: node `surface` (heightfield.procedural) has no parameter `sise` (did you mean `size`?)"),
+        "{}",
+        r.stderr
+    );
+}

@@ -280,9 +280,8 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
     if !type_ok {
         return Err(type_error(None));
     }
-    if let Some(problem) = format_problem(s, v) {
-        return Err(problem);
-    }
+    // The documented bounds first, then the storage type's: `-5` for a size in [4, 8192] is
+    // "below the minimum 4", not "outside 0..=4294967295" (issue 58).
     if let Some(x) = v.as_f64() {
         let bound = |k: &str| s.get(k).and_then(Value::as_f64);
         if let Some(m) = bound("minimum").filter(|m| x < *m) {
@@ -297,6 +296,9 @@ pub fn check_value(root: &Value, schema: &Value, v: &Value) -> Result<(), Proble
         if let Some(m) = bound("exclusiveMaximum").filter(|m| x >= *m) {
             return Err(Problem::Range(format!("{x} must be less than {m}")));
         }
+    }
+    if let Some(problem) = format_problem(s, v) {
+        return Err(problem);
     }
     if let (Some(Value::Array(prefix)), Some(arr)) = (s.get("prefixItems"), v.as_array()) {
         for (i, (item, sub)) in arr.iter().zip(prefix).enumerate() {
