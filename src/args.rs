@@ -148,7 +148,8 @@ pub struct RunArgs {
     /// Override a parameter (value read as JSON, else as a string).
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,
-    /// Produce only these outputs (default: every sink).
+    /// Produce only these outputs (default: every sink); each is printed after the run's table
+    /// (a scalar by value), and alone with -q.
     #[arg(long = "output", value_name = "ID.PORT")]
     pub output: Vec<String>,
     /// Output folder (default: out/<graph name>/).
