@@ -57,35 +57,32 @@ pub fn quiet_vulkan_device_select() {
 /// Restores the default SIGPIPE action, so `mesoflow nodes | head` ends quietly like any Unix
 /// tool instead of panicking on a closed pipe.
 pub fn quiet_broken_pipes() {
-    #[cfg(unix)]
-    {
-        const SIGPIPE: i32 = 13;
-        const SIG_DFL: usize = 0;
-        extern "C" {
-            fn signal(signum: i32, handler: usize) -> usize;
-        }
-        // SAFETY: called once at start-up, before any thread exists; SIG_DFL is always valid.
-        unsafe {
-            signal(SIGPIPE, SIG_DFL);
-        }
-    }
+    // SIG_DFL. Called once at start-up, before any thread exists.
+    set_sigpipe(0);
 }
 
 /// Ignores SIGPIPE again, for the studio's server: with the default action a write to a socket
 /// whose client has gone ends the process (the flood test found it); ignored, the write fails
 /// with EPIPE, which the server handles by dropping the connection.
 pub fn ignore_broken_pipes() {
+    // SIG_IGN: valid at any time and in any thread; no handler runs.
+    set_sigpipe(1);
+}
+
+/// Sets SIGPIPE's disposition to `SIG_DFL` (0) or `SIG_IGN` (1).
+fn set_sigpipe(handler: usize) {
     #[cfg(unix)]
     {
         const SIGPIPE: i32 = 13;
-        const SIG_IGN: usize = 1;
         extern "C" {
             fn signal(signum: i32, handler: usize) -> usize;
         }
-        // SAFETY: setting a signal's disposition to SIG_IGN is valid at any time and in any
-        // thread; no handler runs.
+        // SAFETY: only SIG_DFL or SIG_IGN are passed, both always valid dispositions; neither
+        // installs a handler.
         unsafe {
-            signal(SIGPIPE, SIG_IGN);
+            signal(SIGPIPE, handler);
         }
     }
+    #[cfg(not(unix))]
+    let _ = handler;
 }
