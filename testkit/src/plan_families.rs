@@ -347,21 +347,16 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
     }
 }
 
-/// The `--set`s (`ID.PARAM[.KEY…]=JSON`, test sizes) written into the graph file.
+/// The `--set`s (`ID.PARAM[.KEY…]=VALUE`, test sizes) written into the graph file, applied as
+/// the command line applies them (`mesoflow_graph::parse_override`, `GraphFile::apply`).
 fn set(graph: &Path, sets: &[String]) {
-    let mut g = read_json(graph);
+    let text = std::fs::read_to_string(graph).expect("the scene's graph");
+    let mut file = mesoflow_graph::GraphFile::parse(&text).expect("a scene's graph parses");
     for s in sets {
-        let (path, value) = s.split_once('=').expect("ID.PARAM=VALUE");
-        let value: Value = serde_json::from_str(value).unwrap_or_else(|_| json!(value));
-        let mut keys = path.split('.');
-        let id = keys.next().expect("an id");
-        let mut at = &mut g["nodes"][id]["params"];
-        for k in keys {
-            at = &mut at[k];
-        }
-        *at = value;
+        let o = mesoflow_graph::parse_override(s).unwrap_or_else(|e| panic!("--set {e}"));
+        file.apply(&o).unwrap_or_else(|e| panic!("{e}"));
     }
-    write_json(graph, &g);
+    std::fs::write(graph, file.to_json()).expect("write a graph");
 }
 
 /// Brute force at the samples that meet `budget`: a pilot at 4 samples a pixel gives its
