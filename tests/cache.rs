@@ -227,8 +227,13 @@ fn a_value_from_the_cpu_path_is_not_served_for_the_gpu_path() {
         assert_eq!(statuses(&auto)["normals"], "disk");
     }
     // `--device gpu`, not `auto`: auto passes over a software adapter such as CI's lavapipe.
-    let (code, _, gpu) = normals_on(&s, &g, &cache, "gpu", "gpu");
+    let (code, stderr, gpu) = normals_on(&s, &g, &cache, "gpu", "gpu");
     if code != 0 {
+        // Only a missing adapter may skip; any other failure of the GPU run is this test's.
+        assert!(
+            stderr.contains("no GPU adapter"),
+            "--device gpu failed for another reason than a missing adapter: {stderr}"
+        );
         mesoflow_testkit::skip_unless_required(
             "MESOFLOW_REQUIRE_GPU",
             "no GPU adapter: the GPU half (its own key) did not run",

@@ -117,7 +117,8 @@ fn heights_from_normals_over_the_family() {
 /// samples seen (regression bounds, not a held-out result): ρd ≤ 1.5%, ρs ≤ 35%, α ≤ 16%,
 /// and the degree's Spearman correlation with the truth ≥ 0.99 where the sample marks both
 /// ends (measured ≥ 0.9938). A sample that marks no most- or least-weathered pixel has no
-/// degree (the run names the missing mask; three of the 24), and is counted, not failed.
+/// degree (the run names the missing mask; three of the 24), and is counted, not failed: at
+/// most six may be.
 #[test]
 fn ward_fits_over_the_family() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -170,6 +171,13 @@ fn ward_fits_over_the_family() {
     }
     println!(
         "{}\nsamples without a marked end: {without_ends}",
+        table.join("\n")
+    );
+    // Measured three of the 24; at most twice that, so that the degree is checked on most
+    // samples (a run where every sample failed for want of a mark would otherwise pass).
+    assert!(
+        without_ends <= 6,
+        "{without_ends} of 24 samples without a marked end (measured 3)\n{}",
         table.join("\n")
     );
     assert!(failures.is_empty(), "{}", failures.join("\n"));

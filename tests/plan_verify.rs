@@ -53,9 +53,9 @@ fn planned_views_stay_within_their_flip_budget() {
         }
     }
     // Time saved where the view shows less: the far half of the distances (7 and beyond). The
-    // last charted sweeps had medians of 5.3× (BTF) and 1.3× (translucent) on lavapipe, 10× and
-    // 5.9× on the CPU path; the bounds are half the BTF's and, over both objects, 1.5×, which a
-    // planner that keeps the full model (1×) cannot reach.
+    // last charted sweep had medians of 5.5× (BTF) and 1.2× (translucent) on lavapipe
+    // (BENCHMARKS.md), 10× and 5.9× on the CPU path; the bounds are half the BTF's and, over
+    // both objects, 1.5×, which a planner that keeps the full model (1×) cannot reach.
     let median = |mut v: Vec<f64>| {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]

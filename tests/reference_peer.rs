@@ -137,7 +137,7 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
     );
 }
 
-/// The same on the sphere 28 mm across that the README's translucency section renders back-lit
+/// The same on the sphere 28 mm across that the translucency guide renders back-lit
 /// (most of what the camera sees is lit only through the material), isotropic as the truth
 /// graph's materials are: the far side's light, which no diffusion render gets right there, is
 /// the peer's too. Measured: relative RMSE 0.047 against a combined noise of 0.047 (marble),
@@ -157,7 +157,7 @@ fn the_volumetric_reference_agrees_with_mitsuba_on_a_back_lit_sphere() {
     );
 }
 
-/// `mesh.primitive` parameters: `graphs/sss_render.json`'s torus, and the README's sphere.
+/// `mesh.primitive` parameters: `graphs/sss_render.json`'s torus, and the translucency guide's sphere.
 const TORUS: &str = r#"{ "shape": "torus", "size": 0.9, "minor": 0.38, "segments": [64, 32] }"#;
 const SPHERE: &str = r#"{ "shape": "sphere", "size": 0.7, "segments": [96, 48] }"#;
 

@@ -277,7 +277,7 @@ fn a_ward_fit_of_a_cook_torrance_sample_is_a_cross_model_check() {
     // fitted). Rendered with Cook–Torrance (Beckmann, Fresnel, masking–shadowing) the Ward fit
     // cannot match exactly: how far its parameters land and whether the degree survives is the
     // accuracy a user of real captures can expect. Bounds: about twice what a 32² sample
-    // measured (ρd 0.19%, ρs 11%, α 5.4%, Spearman 0.9986), quoted in the README.
+    // measured (ρd 0.19%, ρs 11%, α 5.4%, Spearman 0.9986), quoted in docs/guide/manifolds.md.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = Scratch::new();
     let out = s.path("o");

@@ -1124,6 +1124,35 @@ fn a_plan_against_the_truth_is_shown_with_its_candidates_and_applied_as_an_edit(
     assert!(candidates.len() >= 3, "{st}");
     let chosen = plan["chosen"].as_str().expect("a choice");
     assert!(chosen.starts_with("brute force"), "{st}");
+    // The probe's truth, the render as given, the plan and their FLIP maps against the truth:
+    // each an image of the probe's size (three channels, f32).
+    let probe = &plan["probe"]["resolution"];
+    let (w, h) = (probe[0].as_u64().unwrap(), probe[1].as_u64().unwrap());
+    let names = st["previews"].as_array().expect("previews");
+    assert_eq!(names.len(), 5, "{st}");
+    for name in names {
+        let (code, bytes) = exchange(
+            &s.addr,
+            &s.addr,
+            "GET",
+            &format!(
+                "/api/plan/pixels?image={}&token={}",
+                name.as_str().unwrap(),
+                s.token
+            ),
+            "",
+        );
+        assert_eq!(code, 200, "{name}: {}", String::from_utf8_lossy(&bytes));
+        assert_eq!(bytes.len() as u64, w * h * 3 * 4, "{name}");
+    }
+    let (code, _) = exchange(
+        &s.addr,
+        &s.addr,
+        "GET",
+        &format!("/api/plan/pixels?image=nope&token={}", s.token),
+        "",
+    );
+    assert_eq!(code, 400);
     // Applied: the render becomes render.reference in the graph being edited (not yet saved).
     let (code, body) = s.post("/api/plan/apply", json!({}));
     assert_eq!(code, 200, "{body}");

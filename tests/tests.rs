@@ -14,6 +14,7 @@ mod families;
 mod flip_peer;
 mod hostile;
 mod plan;
+mod plan_families;
 mod plan_probe;
 mod plan_truth;
 mod plan_verify;

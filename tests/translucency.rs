@@ -59,7 +59,7 @@ struct Measured {
     /// Bias over the object, and over its dimmer half: the pixels below the median of a second
     /// truth rendered with another seed. Chosen by the compared truth itself, the half would
     /// take the pixels its noise made dark, and read ours too bright: at 256 samples a pixel
-    /// on the README's sphere, +178% where the independent choice gives +46%.
+    /// on the translucency guide's sphere, +178% where the independent choice gives +46%.
     bias: f64,
     dim: f64,
 }
@@ -76,7 +76,7 @@ fn measure(ours: &[f32], truth: &Truth, chooser: &Truth) -> Measured {
     let n = truth.len() / 3;
     // The object is where ours is lit at all: the camera's view of the mesh, the same for
     // every truth. Taken as the truth's nonzero pixels it would drop exactly those its noise
-    // left black, and lift its sum in the dim parts: on the README's sphere at 256 samples a
+    // left black, and lift its sum in the dim parts: on the translucency guide's sphere at 256 samples a
     // pixel they are 11% of the object, and leaving them out read marble's dimmer half +18%
     // where counting them reads +32% (+34% against a 2048-sample truth). A pixel the chooser
     // left black is among the dimmest, so it joins the dimmer half.
@@ -245,7 +245,7 @@ fn translucent_renders_against_the_volumetric_truth() {
             j.dim
         );
     }
-    // The octree (threshold 0.1) at brute force's error: the README's speed-up is at equal
+    // The octree (threshold 0.1) at brute force's error: the translucency guide's speed-up is at equal
     // error (the truth's noise left in, common to both).
     let (t, chooser) = (truth("torus_marble"), truth("torus_marble_chooser"));
     let octree = measure(&ours(&out, "marble"), &t, &chooser).raw;
@@ -396,6 +396,43 @@ fn a_back_lit_ball_meets_the_bounds_with_the_beams_sources() {
             "{material}: point sources {} {}",
             p.rel,
             p.dim
+        );
+    }
+}
+
+/// Each fixture's recorded noise is held by the images themselves: a truth and its chooser (the
+/// same scene on another seed) differ by their two noises in quadrature, so the relative RMSE
+/// between them over √(n₁² + n₂² · |chooser|²/|truth|²) is 1 where the recorded noises are
+/// right (measured 0.972–1.001 over the seven pairs). An inflated noise, which the accuracy
+/// tests above would subtract and so pass a worse render, makes the ratio fall below the
+/// bound.
+#[test]
+fn each_fixtures_recorded_noise_is_what_its_pair_of_seeds_shows() {
+    let spec = truth_spec();
+    let names: Vec<String> = spec["truths"]
+        .as_object()
+        .unwrap()
+        .keys()
+        .filter(|k| !k.ends_with("_chooser"))
+        .cloned()
+        .collect();
+    assert!(names.len() >= 7, "{names:?}");
+    for name in names {
+        let (a, b) = (truth(&name), truth(&format!("{name}_chooser")));
+        assert_eq!(a.image.len(), b.image.len(), "{name}");
+        let (mut d2, mut a2, mut b2) = (0.0f64, 0.0f64, 0.0f64);
+        for (x, y) in a.image.iter().zip(&b.image) {
+            let (x, y) = (*x as f64, *y as f64);
+            d2 += (x - y).powi(2);
+            a2 += x * x;
+            b2 += y * y;
+        }
+        let rel = (d2 / a2).sqrt();
+        let expected = (a.noise.powi(2) + b.noise.powi(2) * b2 / a2).sqrt();
+        let ratio = rel / expected;
+        assert!(
+            (0.9..=1.1).contains(&ratio),
+            "{name}: the two seeds differ by {rel:.4}, their recorded noises say {expected:.4} ({ratio:.3})"
         );
     }
 }

@@ -1,4 +1,4 @@
-//! How close to the truth, held in CI: `graphs/truth.json` as the README measures it (the torus
+//! How close to the truth, held in CI: `graphs/truth.json` as docs/guide/truth.md measures it (the torus
 //! under bumps 6 texels high, a ubo81 Lambert BTF, the MDF, 320 × 240, every node on the CPU)
 //! and its open plane with and without the MDF, against the true mesostructure rendered by
 //! `render.reference`. The bounds are the (relative RMSE at most 0.30, IoU at least
@@ -126,7 +126,8 @@ fn renders_stay_as_close_to_the_true_mesostructure_as_measured() {
     );
     // The open plane: the shell's sides carve its far edge and extend its near one (IoU
     // measured 0.996 with the MDF, 0.923 without), and the parallax-compensated view blend
-    // needs the MDF (relative RMSE measured 0.177 with it, 0.362 without).
+    // needs the MDF (relative RMSE measured 0.180 with it in the last run,
+    // docs/sweeps/truth.csv; 0.362 without).
     let renders = ["truth", "ours", "macro"];
     let with = measure(
         &s,

@@ -45,11 +45,11 @@ mod synthesis;
 pub mod verify;
 pub mod view;
 
-pub use arbiter::{arbitrate, Arbitration, TruthOptions};
+pub use arbiter::{arbitrate, Arbitration, Measure, TruthOptions, TRUTH, TRUTH_SHARE};
 pub use btf::BtfModel;
 pub use edit::btf_chain;
 pub use scene::{texture_sources, Scene, TextureView};
-pub use verify::{ProbeOptions, Proof};
+pub use verify::{ProbeOptions, Proof, PROBE_SHARE};
 pub use view::{plan_view, render_kind, Planned};
 
 use btf::{apply_btf, decide_btf, range_note};
@@ -134,6 +134,10 @@ pub enum PlanError {
     Probe(String),
     #[error("{0}")]
     NoRender(String),
+    /// `--against truth` where the graph cannot make a truth (why, in words): the graph's own
+    /// model is the judge instead (`mesoflow plan` falls back to it for a FLIP budget).
+    #[error("{0}")]
+    NoTruth(String),
     #[error("the planned graph is invalid: {0}")]
     Invalid(String),
 }

@@ -22,6 +22,9 @@ pub const FLIP: &str = "plan_probe_flip";
 /// The prefix of the candidate's nodes (those the plan changed) in the probe graph.
 pub const CANDIDATE: &str = "plan_probe_candidate_";
 
+/// The probe's share of the view's pixels by default.
+pub const PROBE_SHARE: f64 = 0.25;
+
 /// How the plan is proved.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProbeOptions {
@@ -35,7 +38,7 @@ pub struct ProbeOptions {
 impl Default for ProbeOptions {
     fn default() -> Self {
         ProbeOptions {
-            share: 0.25,
+            share: PROBE_SHARE,
             budget: 1.0,
         }
     }
@@ -177,6 +180,23 @@ pub fn probe_camera(
         let half = (fov.to_radians() * 0.5).tan() * ratio;
         cam.insert("fov".into(), json!((2.0 * half.atan()).to_degrees()));
     }
+    cam.insert("resolution".into(), json!(probe));
+    let got = (probe[0] as f64 * probe[1] as f64) / (res[0] as f64 * res[1] as f64).max(1.0);
+    (cam, probe, got)
+}
+
+/// The whole view at a lower resolution: `share` of the pixels, each side at least 16 (and at
+/// most the view's), the field of view unchanged; the camera and its share. Each pixel then
+/// subtends a larger angle: for renders whose error does not hang on the pixel's footprint.
+pub fn scaled_camera(mut cam: Map<String, Value>, share: f64) -> (Map<String, Value>, [u32; 2], f64) {
+    let res = cam
+        .get("resolution")
+        .and_then(Value::as_array)
+        .and_then(|a| Some([a.first()?.as_u64()? as u32, a.get(1)?.as_u64()? as u32]))
+        .unwrap_or([400, 300]);
+    let k = share.clamp(0.0, 1.0).sqrt();
+    let side = |n: u32| ((n as f64 * k).round() as u32).max(16).min(n);
+    let probe = [side(res[0]), side(res[1])];
     cam.insert("resolution".into(), json!(probe));
     let got = (probe[0] as f64 * probe[1] as f64) / (res[0] as f64 * res[1] as f64).max(1.0);
     (cam, probe, got)

@@ -6,7 +6,9 @@
 
 use crate::session::{device_mode, engine, parse_with_sets};
 use mesoflow_graph::check;
-use mesoflow_plan::{arbitrate, plan_view, Budget, PlanError, ProbeOptions, Split, TruthOptions};
+use mesoflow_plan::{
+    arbitrate, plan_view, Budget, Measure, PlanError, ProbeOptions, Split, TruthOptions,
+};
 use mesoflow_runtime::RunOptions;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
@@ -101,7 +103,7 @@ pub fn plan(
 /// `(plan_json, planned_graph_json)`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (text, name, base_dir, render, budget, sets, device="auto", cache_dir=None, use_cache=true, probe_share=0.25))]
+#[pyo3(signature = (text, name, base_dir, render, budget, sets, device="auto", cache_dir=None, use_cache=true, probe_share=0.1))]
 pub fn plan_truth(
     py: Python<'_>,
     text: &str,
@@ -125,7 +127,8 @@ pub fn plan_truth(
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();
     let options = TruthOptions {
-        rmse: budget,
+        budget,
+        measure: Measure::RelativeRmse,
         share: probe_share,
     };
     let a = interruptible(

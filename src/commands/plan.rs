@@ -76,15 +76,18 @@ fn viewer_ppd(args: &PlanArgs, render: &NodeDecl) -> anyhow::Result<f64> {
     .ppd(pixels))
 }
 
-/// `rmse=B` → B, for `--against truth`.
-fn parse_rmse_budget(text: &str) -> anyhow::Result<f64> {
-    let value = text
+/// `rmse=B` or `flip=B` → whether FLIP, and B, for `--against truth`.
+fn parse_truth_budget(text: &str) -> anyhow::Result<(bool, f64)> {
+    let (flip, value) = text
         .split_once('=')
-        .filter(|(m, _)| m.trim() == "rmse")
-        .map(|(_, v)| v)
+        .and_then(|(m, v)| match m.trim() {
+            "rmse" => Some((false, v)),
+            "flip" => Some((true, v)),
+            _ => None,
+        })
         .ok_or_else(|| {
             invalid(format!(
-                "--budget {text}: --against truth takes rmse=B, the relative RMSE against the truth"
+                "--budget {text}: --against truth takes rmse=B (the relative RMSE against the truth) or flip=B (the mean FLIP against it)"
             ))
         })?;
     let b: f64 = value
@@ -94,13 +97,30 @@ fn parse_rmse_budget(text: &str) -> anyhow::Result<f64> {
     if !(b.is_finite() && b > 0.0) {
         return Err(invalid(format!("--budget {text}: must be a number > 0")));
     }
-    Ok(b)
+    Ok((flip, b))
+}
+
+/// `--probe-share`, or `default`, checked.
+fn share(args: &PlanArgs, default: f64) -> anyhow::Result<f64> {
+    let s = args.probe_share.unwrap_or(default);
+    if !(s > 0.0 && s <= 1.0) {
+        return Err(invalid(format!(
+            "--probe-share {s}: a fraction of the frame in (0, 1]"
+        )));
+    }
+    Ok(s)
 }
 
 pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
     if args.against.is_some() {
         return against_truth(args);
     }
+    own_model(args, None)
+}
+
+/// The plan against the graph's own model (a FLIP budget); `fallback` is why, where `--against
+/// truth` was asked and the graph cannot make a truth. The plan says which judge it used and why.
+fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
     let budget = parse_budget(&args.budget)?;
     let engine = engine(&args.cache, &args.graph)?;
     let mut file = load::read(&args.graph)?;
@@ -131,14 +151,9 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
             args.probe_budget
         )));
     }
-    if !(args.probe_share > 0.0 && args.probe_share <= 1.0) {
-        return Err(invalid(format!(
-            "--probe-share {}: a fraction of the frame in (0, 1]",
-            args.probe_share
-        )));
-    }
+    let probe_share = share(args, plan::PROBE_SHARE)?;
     let probe = (args.probe_budget > 0.0).then_some(plan::ProbeOptions {
-        share: args.probe_share,
+        share: probe_share,
         budget: args.probe_budget,
     });
     let planned = plan::plan_view(
@@ -164,8 +179,19 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
         args.render,
         plan_name(args)
     ));
-    let (out_path, plan_path) = write_plan(args, &planned_file, planned.to_json())?;
+    let mut doc = planned.to_json();
+    doc["judge"] = json!("model");
+    doc["judge_why"] = json!(match &fallback {
+        Some(why) => format!(
+            "--against truth was asked, but {why}: each stage judged by its FLIP against the graph's own model instead"
+        ),
+        None => "each stage judged by its FLIP against the graph's own model (--against truth not asked)".into(),
+    });
+    let (out_path, plan_path) = write_plan(args, &planned_file, doc)?;
     if !args.quiet {
+        if let Some(why) = &fallback {
+            println!("no truth: {why}; judged against the graph's own model instead");
+        }
         for d in &planned.plan.decisions {
             println!("{:4} {} — {}", d.stage, d.choice, d.reason);
         }
@@ -264,21 +290,26 @@ fn write_plan(
 /// `mesoflow plan --against truth`: every candidate measured against the truth the graph makes
 /// (`mesoflow_plan::arbiter`).
 fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
-    let rmse = parse_rmse_budget(&args.budget)?;
-    if !(args.probe_share > 0.0 && args.probe_share <= 1.0) {
-        return Err(invalid(format!(
-            "--probe-share {}: a fraction of the frame in (0, 1]",
-            args.probe_share
-        )));
-    }
+    let (flip, budget) = parse_truth_budget(&args.budget)?;
+    let probe_share = share(args, plan::TRUTH_SHARE)?;
     let engine = engine(&args.cache, &args.graph)?;
     let mut file = load::read(&args.graph)?;
     load::apply_sets(&mut file, &args.set)?;
     load::checked(&args.graph, &file, engine.registry())?;
     let opts = run_options(args);
+    let measure = match (flip, file.node(&args.render)) {
+        (true, Some(decl)) => plan::Measure::Flip {
+            ppd: viewer_ppd(args, decl)?,
+        },
+        (true, None) => plan::Measure::Flip {
+            ppd: flip::DEFAULT_PPD,
+        },
+        (false, _) => plan::Measure::RelativeRmse,
+    };
+    let said = format!("{} {budget}", measure.name());
     if !args.quiet {
         eprintln!(
-            "plan: `{}` against the truth at relative RMSE {rmse}: the truth probe, then each candidate",
+            "plan: `{}` against the truth at {said}: a pilot and the truth probe, then each candidate",
             args.render
         );
     }
@@ -290,17 +321,29 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
         &args.render,
         &opts,
         plan::TruthOptions {
-            rmse,
-            share: args.probe_share,
+            budget,
+            measure,
+            share: probe_share,
         },
-    )
-    .map_err(|e| match e {
-        plan::PlanError::Probe(_) => anyhow::anyhow!("{e}"),
-        _ => invalid(format!("--render {}: {e}", args.render)),
-    })?;
+    );
+    let a = match a {
+        Ok(a) => a,
+        Err(plan::PlanError::NoTruth(why)) if flip => {
+            drop(engine);
+            return own_model(args, Some(why));
+        }
+        Err(plan::PlanError::NoTruth(why)) => {
+            return Err(invalid(format!(
+                "--render {}: {why}; against the graph's own model the budget is flip=B (with --against truth, a FLIP budget falls back to it)",
+                args.render
+            )))
+        }
+        Err(e @ plan::PlanError::Probe(_)) => return Err(anyhow::anyhow!("{e}")),
+        Err(e) => return Err(invalid(format!("--render {}: {e}", args.render))),
+    };
     let mut planned_file = a.planned.clone();
     planned_file.description = Some(format!(
-        "{} — planned for `{}` against the truth at a relative RMSE of {rmse} (see {})",
+        "{} — planned for `{}` against the truth at {said} (see {})",
         file.description.clone().unwrap_or_default(),
         args.render,
         plan_name(args)
@@ -315,10 +358,15 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
             a.truth_noise.map_or("absent".into(), |n| format!("{n:.4}"))
         );
         for (i, c) in a.candidates.iter().enumerate() {
+            if let (None, Some(n)) = (c.probe_s, &c.note) {
+                println!("    {}: {n}", c.name);
+                continue;
+            }
             println!(
-                "{:>3} {}: relative RMSE {}, {} s on the probe, {} s on the view (estimated){}{}",
+                "{:>3} {}: {} {}, {} s on the probe, {} s on the view (estimated){}{}",
                 if a.chosen == Some(i) { "->" } else { "" },
                 c.name,
+                measure.name(),
                 c.error.map_or("absent".into(), |e| format!("{e:.3}")),
                 c.probe_s.map_or("absent".into(), |t| format!("{t:.2}")),
                 c.full_s.map_or("absent".into(), |t| format!("{t:.2}")),
@@ -329,12 +377,20 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
                 println!("      warning: {w}");
             }
         }
+        let phases: Vec<String> = a
+            .phases
+            .iter()
+            .filter(|(_, t)| *t >= 0.05)
+            .map(|(k, t)| format!("{k} {t:.1}"))
+            .collect();
         match a.plan_time().map(|(_, r)| r) {
             Some(r) => println!(
-                "{} ({:.1} s planning, {r:.1}× the longer full render of the graph as given and of brute force)",
-                a.why, a.plan_s
+                "{} ({:.1} s planning: {}; {r:.1}× the longer full render of the graph as given and of brute force)",
+                a.why,
+                a.plan_s,
+                phases.join(", ")
             ),
-            None => println!("{} ({:.1} s planning)", a.why, a.plan_s),
+            None => println!("{} ({:.1} s planning: {})", a.why, a.plan_s, phases.join(", ")),
         }
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }

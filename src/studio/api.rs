@@ -277,6 +277,14 @@ pub fn handle(studio: &Arc<Studio>, call: &Call) -> Reply {
             Err(m) => error(400, &m),
         },
         ("POST", "/api/plan/apply") => edit_response(Ok(plan::apply(studio))),
+        ("GET", "/api/plan/pixels") => match q(query, "image").map(|i| plan::preview(studio, i)) {
+            Some(Ok(v)) => match preview::pixels(&v, 0) {
+                Some(p) => pixels_response(p),
+                None => error(404, "not an image"),
+            },
+            Some(Err((s, m))) => error(s, &m),
+            None => error(400, "?image= is required"),
+        },
         ("POST", "/api/sweep") => match body::<sweep::SweepSpec>(call) {
             Ok(spec) => match sweep::start(studio, spec) {
                 Ok(id) => json_response(200, &json!({ "sweep": id })),

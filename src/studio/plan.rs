@@ -7,6 +7,11 @@
 
 use super::plan_state::PlanState;
 use super::session::{Problem, Refused, Studio};
+use mesoflow_plan::arbiter::{
+    PREVIEW_GIVEN, PREVIEW_GIVEN_ERROR, PREVIEW_PLANNED, PREVIEW_PLANNED_ERROR, TRUTH,
+};
+use mesoflow_graph::PortRef;
+use mesoflow_runtime::{SilentObserver, ValueRef};
 use serde::Deserialize;
 use serde_json::json;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -92,11 +97,12 @@ pub fn start(studio: &Arc<Studio>, spec: PlanSpec) -> Result<u64, Refused> {
                 &spec.render,
                 &opts,
                 mesoflow_plan::TruthOptions {
-                    rmse: spec.budget,
-                    share: 0.25,
+                    budget: spec.budget,
+                    measure: mesoflow_plan::Measure::RelativeRmse,
+                    share: mesoflow_plan::TRUTH_SHARE,
                 },
             )
-            .map(|a| (a.to_json(), a.planned))
+            .map(|a| (a.to_json(), a.planned.clone(), Some(a.previews())))
         } else {
             mesoflow_plan::plan_view(
                 &studio.engine,
@@ -111,7 +117,7 @@ pub fn start(studio: &Arc<Studio>, spec: PlanSpec) -> Result<u64, Refused> {
                 opts,
                 Some(mesoflow_plan::ProbeOptions::default()),
             )
-            .map(|p| (p.to_json(), p.plan.file))
+            .map(|p| (p.to_json(), p.plan.file, None))
         };
         let mut st = studio.plan.lock().unwrap_or_else(|e| e.into_inner());
         if st.id != id {
@@ -120,9 +126,10 @@ pub fn start(studio: &Arc<Studio>, spec: PlanSpec) -> Result<u64, Refused> {
         st.running = false;
         st.cancel = None;
         match result {
-            Ok((doc, planned)) => {
+            Ok((doc, planned, previews)) => {
                 st.doc = Some(doc);
                 st.planned = Some(planned);
+                st.previews = previews;
             }
             Err(e) => st.error = Some(e.to_string()),
         }
@@ -155,4 +162,49 @@ pub fn apply(studio: &Studio) -> Result<u64, Refused> {
         *f = planned;
         Ok(())
     })
+}
+
+/// The plan's previews by name: the node and port in `Arbitration::previews`.
+pub const PREVIEWS: [(&str, &str, &str); 5] = [
+    ("truth", TRUTH, "image"),
+    ("given", PREVIEW_GIVEN, "image"),
+    ("planned", PREVIEW_PLANNED, "image"),
+    ("given_error", PREVIEW_GIVEN_ERROR, "preview"),
+    ("planned_error", PREVIEW_PLANNED_ERROR, "preview"),
+];
+
+/// One of the last plan's previews (`GET /api/plan/pixels?image=NAME`): its renders come from the
+/// cache the plan filled, the FLIP maps are computed on first asking.
+pub fn preview(studio: &Studio, image: &str) -> Result<ValueRef, (u16, String)> {
+    let (_, node, port) = PREVIEWS
+        .iter()
+        .find(|(name, ..)| *name == image)
+        .ok_or_else(|| {
+            let names: Vec<&str> = PREVIEWS.iter().map(|(n, ..)| *n).collect();
+            (400, format!("image {image:?}: one of {}", names.join(", ")))
+        })?;
+    let graph = studio
+        .plan
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .previews
+        .clone()
+        .ok_or((404, "no previews: plan a render against the truth first".to_string()))?;
+    let checked = mesoflow_graph::check("plan previews", &graph, studio.engine.registry())
+        .map_err(|e| (500, format!("the previews' graph: {e}")))?;
+    let mut opts = studio.options(&studio.out_dir.join("plan"), Arc::new(AtomicBool::new(false)));
+    opts.outputs = vec![PortRef {
+        node: node.to_string(),
+        port: port.to_string(),
+    }];
+    let outcome = studio
+        .engine
+        .run_values(&checked, &opts, Arc::new(SilentObserver))
+        .map_err(|e| (500, e.to_string()))?;
+    outcome
+        .values
+        .get(*node)
+        .and_then(|o| o.get(*port))
+        .cloned()
+        .ok_or_else(|| (404, format!("{node}.{port}: not computed")))
 }

@@ -19,6 +19,9 @@ pub struct PlanState {
     pub revision: u64,
     pub doc: Option<Value>,
     pub planned: Option<GraphFile>,
+    /// The probe's truth, the render as given, the plan and their FLIP maps against the truth
+    /// (`Arbitration::previews`), for `GET /api/plan/pixels`; a plan against the truth only.
+    pub previews: Option<GraphFile>,
     pub error: Option<String>,
     pub(super) cancel: Option<Arc<AtomicBool>>,
 }
@@ -27,6 +30,7 @@ impl PlanState {
     pub fn json(&self) -> Value {
         json!({ "id": self.id, "running": self.running, "render": self.render,
                 "against": self.against, "budget": self.budget, "revision": self.revision,
-                "plan": self.doc, "error": self.error })
+                "plan": self.doc, "error": self.error,
+                "previews": self.previews.as_ref().map(|_| super::plan::PREVIEWS.iter().map(|(name, ..)| *name).collect::<Vec<_>>()) })
     }
 }

@@ -381,8 +381,9 @@ def test_a_sweep_started_in_the_studio_fills_its_table_and_charts(studio_of, bro
 
 def test_a_plan_against_the_truth_is_shown_and_applied(studio_of, browser, tmp_path):
     """The Plan tab: a budget no model meets on this small translucent sphere (as in
-    tests/plan_truth.rs), the candidates as measured with brute force chosen, then applied as
-    an edit: the render becomes render.reference in the graph being edited."""
+    tests/plan_truth.rs), the candidates as measured with brute force chosen, the probe's truth,
+    the render as given and the plan with their FLIP maps against the truth drawn, then applied
+    as an edit: the render becomes render.reference in the graph being edited."""
     from selenium.webdriver.common.keys import Keys
 
     g = json.loads((ROOT / "graphs" / "family_translucent.json").read_text())
@@ -410,6 +411,12 @@ def test_a_plan_against_the_truth_is_shown_and_applied(studio_of, browser, tmp_p
     assert len(rows) >= 3, rows
     chosen = browser.execute_script("return document.querySelector('#plan-table tr.chosen td').textContent")
     assert "brute force" in chosen, rows
+    # The probe's truth, the render as given, the plan and their FLIP maps, each drawn.
+    names = ["truth", "given", "planned", "given_error", "planned_error"]
+    wait(browser, """return %s.every(n => {
+        const c = document.querySelector('#plan-preview-' + n);
+        return c && c.dataset.draws && c.width > 0; }) ? true : null;""" % json.dumps(names),
+         120, "the plan's previews")
     shot(browser, "studio-plan.png")
     click(browser, "#plan-apply")
     wait(browser, """const s = window.studio.state;

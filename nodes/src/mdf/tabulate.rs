@@ -556,7 +556,7 @@ mod tests {
             // still fails on any systematic error (which would hit whole views or rows).
             assert!(frac < 1e-4, "{}: {off} entries differ", gpu.describe());
             // Every other entry: f32 rounding of coordinates of ~10² texels is ~1e-5; the
-            // README quotes this bound (lavapipe measures 9.3e-6).
+            // MDF guide (docs/guide/mdf.md) quotes this bound (lavapipe measures 9.3e-6).
             assert!(worst < 2e-5, "{}: worst {worst:e} texel", gpu.describe());
             tested += 1;
         }

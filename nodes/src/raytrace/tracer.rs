@@ -2,12 +2,35 @@
 //! candidates, intersected in f64 with the mesh's own triangles, so which hit counts is decided
 //! exactly. `render.reference`'s exact shadows and volumetric paths and `sss.render`'s body
 //! geometry, bounces and single scattering all trace through it.
+//!
+//! The last BVH of a large mesh (at least [`KEEP_FROM`] triangles) is kept for the next tracer
+//! of the same triangles (by their hash), so a second frame of one surface in a process (a
+//! camera move in the studio, a sweep's frames, the planner's probes) does not build it again.
+//! The build is deterministic, so the kept BVH is the one a new build would make: same bits.
 
 use crate::geometry::{add, cross, mul, normalize, sub, V3};
 use crate::types::Mesh;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
+use std::sync::{Arc, Mutex};
+
+/// Meshes with at least this many triangles keep their BVH for the next tracer (a build of
+/// fewer costs milliseconds; one of the planner's displaced surfaces, millions of triangles,
+/// seconds).
+pub const KEEP_FROM: usize = 100_000;
+
+/// The last kept BVH: its mesh's hash and the BVH (one entry, so at most one BVH a process
+/// outlives its render).
+static KEPT: Mutex<Option<([u8; 32], Arc<CwBvh>)>> = Mutex::new(None);
+
+/// The hash of what the BVH is built from: the positions and the indices.
+fn mesh_hash(mesh: &Mesh) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    h.update(bytemuck::cast_slice(&mesh.positions));
+    h.update(bytemuck::cast_slice(&mesh.indices));
+    *h.finalize().as_bytes()
+}
 
 pub struct Hit {
     pub tri: usize,
@@ -25,13 +48,39 @@ const BACK_OFF: f64 = 1e-3;
 /// The mesh and its BVH.
 pub struct Tracer<'a> {
     pub mesh: &'a Mesh,
-    bvh: CwBvh,
+    bvh: Arc<CwBvh>,
     /// Shadow-ray offset along the geometric normal: a millionth of the scene's size.
     pub epsilon: f64,
 }
 
 impl<'a> Tracer<'a> {
     pub fn new(mesh: &'a Mesh) -> Self {
+        let bvh = if mesh.triangles() >= KEEP_FROM {
+            let key = mesh_hash(mesh);
+            let kept = KEPT
+                .lock()
+                .ok()
+                .and_then(|k| k.as_ref().filter(|(h, _)| *h == key).map(|(_, b)| b.clone()));
+            kept.unwrap_or_else(|| {
+                let built = Arc::new(Self::build(mesh));
+                if let Ok(mut k) = KEPT.lock() {
+                    *k = Some((key, built.clone()));
+                }
+                built
+            })
+        } else {
+            Arc::new(Self::build(mesh))
+        };
+        let (lo, hi) = mesh.bounds();
+        let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+        Tracer {
+            mesh,
+            bvh,
+            epsilon: 1e-6 * size.max(1e-30),
+        }
+    }
+
+    fn build(mesh: &Mesh) -> CwBvh {
         let v = |i: usize| {
             let q = mesh.positions[i];
             glam::Vec3A::new(q[0], q[1], q[2])
@@ -46,18 +95,11 @@ impl<'a> Tracer<'a> {
                 }
             })
             .collect();
-        let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+        obvhs::cwbvh::builder::build_cwbvh_from_tris(
             &tris,
             obvhs::BvhBuildParams::medium_build(),
             &mut std::time::Duration::default(),
-        );
-        let (lo, hi) = mesh.bounds();
-        let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
-        Tracer {
-            mesh,
-            bvh,
-            epsilon: 1e-6 * size.max(1e-30),
-        }
+        )
     }
 
     /// Triangle `t`'s corners' positions' plane: a point and the unit geometric normal (the

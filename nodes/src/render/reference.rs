@@ -100,6 +100,11 @@ impl Node for Reference {
 
     fn timings(&self) -> &'static [(&'static str, &'static str)] {
         &[
+            (
+                "bvh_seconds",
+                "building the mesh's BVH, s (0 where the process kept it from a render of the same mesh)",
+            ),
+            ("trace_seconds", "tracing the pixels, s (grows with pixels × samples)"),
             ("rays_per_second", "camera and shadow rays per second"),
             (
                 "events_per_second",
@@ -189,8 +194,10 @@ impl Node for Reference {
         }
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let light = Light::new(&p.light)?;
-        let start = Instant::now();
+        let built = Instant::now();
         let scene = Tracer::new(mesh);
+        ctx.timing("bvh_seconds", built.elapsed().as_secs_f64());
+        let start = Instant::now();
         let (w, h) = (camera.width as usize, camera.height as usize);
         let done = std::sync::atomic::AtomicU64::new(0);
         let rows: Vec<Vec<Pixel>> = (0..h)
@@ -236,6 +243,7 @@ impl Node for Reference {
             tally.add(&px.tally);
         }
         let seconds = start.elapsed().as_secs_f64().max(1e-9);
+        ctx.timing("trace_seconds", seconds);
         ctx.timing("rays_per_second", tally.rays as f64 / seconds);
         if medium.is_some() {
             ctx.timing("events_per_second", tally.events as f64 / seconds);

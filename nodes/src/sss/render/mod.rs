@@ -51,6 +51,7 @@ use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
 mod at_samples;
+mod backlit;
 mod beam;
 mod body;
 mod bounce;
@@ -458,6 +459,10 @@ pub(super) fn render_lit(
         body_setup_seconds,
     } = prepared;
     let p = &params;
+    if p.mode == Mode::Diffusion {
+        let share = backlit::share(&setup.sources, &p.camera, p.mm_per_unit);
+        warnings.extend(share.and_then(backlit::warning));
+    }
     let setup_seconds = setup_start.elapsed().as_secs_f64() - body_setup_seconds;
     let view_start = Instant::now();
     let view = View::new(mesh, &camera, &tracer);

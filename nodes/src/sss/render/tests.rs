@@ -143,7 +143,7 @@ fn the_octree_approaches_brute_force_as_the_threshold_falls() {
         assert!(e <= last && r.terms < brute.terms, "threshold {t}: {e}");
         last = e;
     }
-    // The documented bound (README): threshold 0.02 within 1e-3 relative RMS of brute force
+    // The documented bound (docs/guide/translucency.md): threshold 0.02 within 1e-3 relative RMS of brute force
     // (measured 2.6e-4: the bound leaves 4× for other platforms' summation order).
     assert!(last < 1e-3, "{last}");
 }

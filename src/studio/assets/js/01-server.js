@@ -15,7 +15,10 @@ async function post(path, data) {
   return { ok: r.ok, status: r.status, body };
 }
 async function getPixels(node, port, index) {
-  const r = await fetch(url(`/api/pixels?node=${node}&port=${port}&index=${index || 0}`));
+  return getPixelsAt(`/api/pixels?node=${node}&port=${port}&index=${index || 0}`);
+}
+async function getPixelsAt(path) {
+  const r = await fetch(url(path));
   if (!r.ok) {
     const b = await r.json().catch(() => ({}));
     throw new Error(b.error || r.statusText);

@@ -48,10 +48,27 @@ function renderPlanResults() {
         decisions.map(d => el("tr", {}, el("td", {}, Object.entries(d).map(([k, v]) => `${k}: ${typeof v === "object" ? JSON.stringify(v) : fmt(v)}`).join(" · "))))));
       if (p.why) parts.push(el("div", { class: "doc", id: "plan-why" }, p.why));
     }
+    if (st.previews && !st.running) parts.push(planPreviews(st));
     if (p && !st.running) parts.push(el("button", { id: "plan-apply", onclick: async () => {
       const res = await post("/api/plan/apply");
       $("#status-line").textContent = res.ok ? `plan ${st.id} applied (revision ${res.body.revision}); Save writes it` : "not applied: " + (res.body.errors || [res.body]).map(x => x.message || x.error).join("\n");
     } }, "Apply the plan"));
     box.replaceChildren(...parts);
   }).catch(() => {});
+}
+// The probe's truth, the render as given and the plan side by side, and each one's FLIP map
+// against the truth (magma): where the plan's error is, at the view's own pixels per degree.
+const PLAN_PREVIEW_LABELS = { truth: "the truth (probe)", given: "the render as given", planned: "the plan",
+  given_error: "as given: FLIP against the truth", planned_error: "the plan: FLIP against the truth" };
+function planPreviews(st) {
+  const box = el("div", { class: "plan-previews", id: "plan-previews" });
+  for (const name of st.previews) {
+    const canvas = el("canvas", { id: `plan-preview-${name}`, class: "plan-preview" });
+    const msg = el("div", { class: "muted" });
+    box.append(el("figure", {}, canvas, el("figcaption", {}, PLAN_PREVIEW_LABELS[name] || name), msg));
+    getPixelsAt(`/api/plan/pixels?image=${name}&plan=${st.id}`)
+      .then(px => paint(canvas, px))
+      .catch(e => (msg.textContent = e.message));
+  }
+  return box;
 }
