@@ -251,9 +251,11 @@ fn main() {
     println!();
     summary(&rows, &budgets);
     let images = mesoflow_testkit::cli::repo().join("docs/images");
-    let _ = std::fs::copy(
-        out.join("plan_families.json"),
-        images.join("plan_families.json"),
-    );
+    // One family's run is that family's rows: named after it, so the two runs keep both.
+    let name = match family.as_str() {
+        "all" => "plan_families.json".to_string(),
+        f => format!("plan_families_{f}.json"),
+    };
+    let _ = std::fs::copy(out.join("plan_families.json"), images.join(name));
     charts(&rows, &images);
 }

@@ -262,12 +262,14 @@ pub struct PlanArgs {
     pub render: String,
     /// The error the view may show: flip=B, the mean FLIP over the object's pixels against the
     /// graph's own model (0 = the full model; 1 or more = the cheapest); with `--against truth`,
-    /// rmse=B, the relative RMSE against the truth.
+    /// rmse=B (the relative RMSE against the truth) or flip=B (the mean FLIP against it).
     #[arg(long, value_name = "flip=B|rmse=B")]
     pub budget: String,
     /// Judge every candidate, across model families and brute force, against a truth the graph
-    /// makes (sss.render: its mesh filled with its medium, path traced) instead of against the
-    /// graph's own model; the cheapest within `--budget rmse=B` is planned.
+    /// makes (sss.render: its mesh filled with its medium, path traced; render.mesh: its
+    /// captured height field displaced, path traced) instead of against the graph's own model;
+    /// the cheapest within the budget is planned. Where the graph makes no truth, a FLIP budget
+    /// falls back to the graph's own model.
     #[arg(long, value_enum, value_name = "truth")]
     pub against: Option<AgainstArg>,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]

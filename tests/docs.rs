@@ -271,11 +271,11 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
     ),
     (
         "plan graphs/family_translucent.json --render ours --against truth --budget rmse=0.1",
-        How::Slow("a truth probe and six candidates of the 64 × 48 scene, 28 s here"),
+        How::Slow("two pilots, a truth probe and the candidates of the 64 × 48 scene, 6 s here"),
     ),
     (
         "plan graphs/mdf_render.json --render torus_mdf --against truth --budget rmse=0.2",
-        How::Slow("the torus's true mesostructure displaced and path traced, then five candidates, 30 s here"),
+        How::Slow("the torus's true mesostructure displaced and path traced, then five candidates, 9 s here"),
     ),
     (
         "sweep graphs/btf_compress.json --set surface.size=128 --vary pca.rank=1,2,4,8,16 \
@@ -506,6 +506,51 @@ fn run_guide_commands(slow: bool) {
     }
     assert!(failed.is_empty(), "{}", failed.join("\n"));
     assert!(ran > 0, "no command of this tier ran");
+    if slow {
+        mdf_sweep_holds_the_guides_figures(&s.path("out/mdf_sweep/sweep.csv"));
+    }
+}
+
+/// docs/guide/mdf.md on the sweep its command makes: leaving the MDF out costs more error
+/// (measured 0.041–0.053) than any rank or level with it (0.013–0.035). Held: every row without
+/// the MDF above every row with it, and each range within 2× of the measured one.
+fn mdf_sweep_holds_the_guides_figures(csv: &Path) {
+    let text = std::fs::read_to_string(csv).unwrap_or_else(|e| panic!("{}: {e}", csv.display()));
+    let mut lines = text.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| head.iter().position(|h| *h == name).unwrap();
+    let (mdf, rmse) = (col("torus_mdf.use_mdf"), col("error.rmse"));
+    let (mut with, mut without) = (Vec::new(), Vec::new());
+    for line in lines {
+        let f: Vec<&str> = line.split(',').collect();
+        let e: f64 = f[rmse].parse().unwrap();
+        if f[mdf] == "true" {
+            with.push(e)
+        } else {
+            without.push(e)
+        }
+    }
+    let range = |v: &[f64]| {
+        (
+            v.iter().copied().fold(f64::INFINITY, f64::min),
+            v.iter().copied().fold(0.0, f64::max),
+        )
+    };
+    let ((w_lo, w_hi), (o_lo, o_hi)) = (range(&with), range(&without));
+    eprintln!("mdf sweep: with the MDF {w_lo:.3}–{w_hi:.3}, without {o_lo:.3}–{o_hi:.3}");
+    assert!(with.len() == 8 && without.len() == 8, "{text}");
+    assert!(
+        o_lo > w_hi,
+        "without the MDF {o_lo} is not above with it {w_hi}"
+    );
+    assert!(
+        w_lo > 0.013 / 2.0 && w_hi < 0.035 * 2.0,
+        "with the MDF {w_lo}–{w_hi}"
+    );
+    assert!(
+        o_lo > 0.041 / 2.0 && o_hi < 0.053 * 2.0,
+        "without the MDF {o_lo}–{o_hi}"
+    );
 }
 
 /// Starts `mesoflow serve …`, reads the URL it prints and fetches the page with its token.
@@ -562,4 +607,52 @@ fn every_command_the_guide_shows_runs() {
 #[ignore = "slow: the guide's commands that take minutes (GUIDE_COMMANDS' How::Slow)"]
 fn every_slow_command_the_guide_shows_runs() {
     run_guide_commands(true);
+}
+
+/// `docs/architecture.md`'s code map is a map of the tree as it is: every folder its first
+/// column names exists, and every source folder (each crate's `src` and the folders in it,
+/// and the project's other top-level folders of code) has a row.
+#[test]
+fn the_architecture_code_map_names_every_source_folder_and_only_real_ones() {
+    let text = std::fs::read_to_string(root().join("docs/architecture.md")).unwrap();
+    let map = text
+        .split("## Code map")
+        .nth(1)
+        .and_then(|t| t.split("\n## ").next())
+        .expect("a Code map section");
+    let rows: Vec<String> = map
+        .lines()
+        .filter_map(|l| l.strip_prefix("| `"))
+        .filter_map(|l| l.split('`').next())
+        .map(String::from)
+        .collect();
+    assert!(rows.len() > 20, "{rows:?}");
+    let missing: Vec<&String> = rows.iter().filter(|r| !root().join(r).is_dir()).collect();
+    assert!(
+        missing.is_empty(),
+        "the code map names folders that do not exist: {missing:?}"
+    );
+    // Every folder of source code: the crates' `src` and each folder in it (not deeper: a
+    // node kind's own folder is its prefix's row), and the top-level folders of code.
+    let mut want: Vec<String> = Vec::new();
+    for src in ["graph/src", "runtime/src", "nodes/src", "src"] {
+        want.push(src.to_string());
+        for e in std::fs::read_dir(root().join(src)).unwrap() {
+            let e = e.unwrap();
+            if e.file_type().unwrap().is_dir() {
+                want.push(format!("{src}/{}", e.file_name().to_string_lossy()));
+            }
+        }
+    }
+    want.extend(
+        [
+            "plan", "python", "testkit", "tests", "benches", "scripts", "docs",
+        ]
+        .map(String::from),
+    );
+    let absent: Vec<&String> = want.iter().filter(|w| !rows.contains(w)).collect();
+    assert!(
+        absent.is_empty(),
+        "source folders without a row in the code map: {absent:?}"
+    );
 }

@@ -143,7 +143,11 @@ fn flip_matches_nvidias_implementation() {
             "{name}: ours {:?}",
             e.exposures
         );
-        assert_eq!(want.is_some(), pair["mode"] == "hdr", "{name}: the peer's {want:?}");
+        assert_eq!(
+            want.is_some(),
+            pair["mode"] == "hdr",
+            "{name}: the peer's {want:?}"
+        );
         if let (Some(ex), Some(want)) = (&e.exposures, want) {
             // Exposure range: f32 on their side, so agreement to 1e-4 stops.
             assert!(

@@ -314,3 +314,54 @@ fn a_grid_of_a_billion_runs_and_a_parameter_path_of_sixty_thousand_keys_are_refu
         );
     }
 }
+
+/// The validation of a chain of nodes stays linear in its length: a linear search per input
+/// reference once made a 200 000-node file take 126 s (BENCHMARKS.md, "Validation time";
+/// 1.16 s since). Held as a ratio, not a time: 200 000 nodes against 50 000, the faster of two
+/// runs each, at most 8× (linear is 4×, the quadratic check was 16×).
+#[test]
+fn validating_a_long_chain_stays_linear_in_its_length() {
+    let s = Scratch::new();
+    let chain = |n: usize| {
+        let mut nodes = serde_json::Map::new();
+        nodes.insert(
+            "n0".into(),
+            serde_json::json!({ "kind": "scalar.constant", "params": { "value": 1.0 } }),
+        );
+        for i in 1..n {
+            let from = if i == 1 {
+                "n0.value".to_string()
+            } else {
+                format!("n{}.y", i - 1)
+            };
+            nodes.insert(
+                format!("n{i}"),
+                serde_json::json!({ "kind": "scalar.affine", "inputs": { "x": from } }),
+            );
+        }
+        let path = s.path(&format!("chain-{n}.json"));
+        std::fs::write(
+            &path,
+            serde_json::json!({ "mesoflow": 1, "nodes": nodes }).to_string(),
+        )
+        .unwrap();
+        path
+    };
+    let time = |n: usize| {
+        let path = chain(n);
+        (0..2)
+            .map(|_| {
+                let start = Instant::now();
+                let r = mesoflow(&["validate", path.to_str().unwrap()], s.dir.path());
+                assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+                start.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (short, long) = (time(50_000), time(200_000));
+    eprintln!("validate: 50 000 nodes {short:.3} s, 200 000 nodes {long:.3} s");
+    assert!(
+        long < 8.0 * short,
+        "200 000 nodes {long:.3} s against 50 000 {short:.3} s: no longer linear"
+    );
+}

@@ -193,6 +193,15 @@ fn plans_proved_on_the_view_stay_within_budget_and_never_add_model() {
         );
         let kept = c.plan["probed_error"].as_f64().unwrap();
         assert!(kept <= BUDGET, "kept a plan probed at {kept}: {probe}");
+        // The probe stands for the view: its FLIP is near the full frame's (the guide's larger
+        // scene measured within 0.001; this smaller one 0.006 at the first eye; held at 0.015).
+        eprintln!("eye {}: probe {kept:.4}, full frame {:.4}", c.eye, c.flip);
+        assert!(
+            (c.flip - kept).abs() <= 0.015,
+            "eye {}: the full frame's FLIP {:.4} against the probe's {kept:.4}",
+            c.eye,
+            c.flip
+        );
         for r in probe["rungs"].as_array().unwrap() {
             if r["fits"] == true {
                 assert!(r["probed_flip"].as_f64().unwrap() <= BUDGET, "{r}");

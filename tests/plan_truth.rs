@@ -135,7 +135,10 @@ fn accepted(doc: &Value, pick: &dyn Fn(&[Value]) -> Option<String>) -> Result<()
 fn error_key(doc: &Value) -> (&'static str, f64) {
     match doc["budget"]["flip"].as_f64() {
         Some(b) => ("flip", b),
-        None => ("relative_rmse", doc["budget"]["relative_rmse"].as_f64().unwrap()),
+        None => (
+            "relative_rmse",
+            doc["budget"]["relative_rmse"].as_f64().unwrap(),
+        ),
     }
 }
 
@@ -347,8 +350,14 @@ fn a_flip_budget_is_judged_against_the_truth_too() {
         let (doc, _) = plan(&s, budget);
         assert_eq!(doc["judge"], "truth");
         let b = &doc["budget"];
-        assert!(b["flip"].as_f64().is_some() && b["ppd"].as_f64().is_some(), "{doc}");
-        for c in candidates(&doc).iter().filter(|c| c["probe_seconds"].is_number()) {
+        assert!(
+            b["flip"].as_f64().is_some() && b["ppd"].as_f64().is_some(),
+            "{doc}"
+        );
+        for c in candidates(&doc)
+            .iter()
+            .filter(|c| c["probe_seconds"].is_number())
+        {
             let f = c["flip"].as_f64().unwrap_or(f64::NAN);
             // FLIP is in [0, 1] by construction.
             assert!((0.0..=1.0).contains(&f), "{c}");

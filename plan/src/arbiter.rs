@@ -63,6 +63,9 @@ pub const MOST_TRUTH_SAMPLES: u32 = 16_384;
 const TRUTH_SAMPLES: u32 = 64;
 /// The brute-force pilot's samples a pixel.
 const PILOT: u32 = 16;
+/// The least share of a centre probe's pixels the object must cover for the centre to judge;
+/// below it the whole view at a lower resolution is probed.
+const MIN_COVERED: f64 = 0.05;
 /// The truth's samples over what its noise estimate asks: on the translucent family's seed 0
 /// (a development scene), the per-sample noise constant measured at 16 samples a pixel was
 /// 6 % below the one at 1 024 (rare long paths the pilot misses), so (1.06)² and more
@@ -142,6 +145,10 @@ pub struct Arbitration {
     pub measure: Measure,
     pub resolution: [u32; 2],
     pub share: f64,
+    /// Whether the probe was the whole view at a lower resolution (else the view's centre), and
+    /// why where it was not the render kind's own choice.
+    pub whole_view: bool,
+    pub probe_note: Option<String>,
     pub truth_samples: u32,
     pub truth_noise: Option<f64>,
     /// The pilot's noise and each truth render (samples, noise): the last is the truth.
@@ -196,7 +203,6 @@ impl Arbitration {
         }
         g
     }
-
 
     /// The longer of one full render of the graph as given (the first candidate) and of brute
     /// force at the budget, estimated, s, and the planning time over it (issue 57 asks for at
@@ -254,7 +260,12 @@ impl Arbitration {
                 Measure::RelativeRmse => json!({ "relative_rmse": self.budget }),
                 Measure::Flip { ppd } => json!({ "flip": self.budget, "ppd": ppd }),
             },
-            "probe": { "resolution": self.resolution, "share": self.share },
+            "probe": {
+                "resolution": self.resolution,
+                "share": self.share,
+                "kind": if self.whole_view { "the whole view at a lower resolution" } else { "the view's centre at its own pixels per degree" },
+                "note": self.probe_note,
+            },
             "truth": { "samples": self.truth_samples },
             "candidates": candidates,
             "chosen": self.chosen.map_or(json!(null), |i| json!(self.candidates[i].name)),
@@ -467,9 +478,8 @@ fn mesh_setting(
     render: &str,
     catalog: &dyn mesoflow_graph::Catalog,
 ) -> Result<Setting, PlanError> {
-    let no_truth = |why: String| {
-        PlanError::NoTruth(format!("`{render}`: no truth can be made here: {why}"))
-    };
+    let no_truth =
+        |why: String| PlanError::NoTruth(format!("`{render}`: no truth can be made here: {why}"));
     let mesh = decl
         .inputs
         .get("mesh")
@@ -650,19 +660,11 @@ pub fn arbitrate(
     let default = |p: &str| crate::probe::kind_default(catalog, &decl.kind, p);
     let view = |p: &str| params.get(p).cloned().or_else(|| default(p));
     let full_camera = camera_of(file, render, catalog);
-    let (camera, resolution, share) = if whole_view {
+    let mut whole_view = whole_view;
+    let (mut camera, mut resolution, mut share) = if whole_view {
         scaled_camera(full_camera.clone(), o.share)
     } else {
         probe_camera(full_camera.clone(), o.share)
-    };
-    let full_resolution = resolution_of(&full_camera).unwrap_or(resolution);
-    // FLIP at the view's pixels per degree: a whole-view probe's pixels subtend more.
-    let probe_ppd = |ppd: f64| {
-        if whole_view {
-            ppd * resolution[0] as f64 / full_resolution[0].max(1) as f64
-        } else {
-            ppd
-        }
     };
     // The scene's nodes: the candidates' inputs and the truth's.
     let base: Vec<&str> = inputs
@@ -712,12 +714,43 @@ pub fn arbitrate(
     };
     let pilot_at = |camera: &Map<String, Value>| -> Result<RunReport, PlanError> {
         let mut g = scene.clone();
-        g.nodes.push((CANDIDATE.into(), reference(PILOT, 1, camera)));
+        g.nodes
+            .push((CANDIDATE.into(), reference(PILOT, 1, camera)));
         run(engine, name, &g, &[(CANDIDATE, "image")], opts)
     };
-    let pilot = pilot_at(&camera)?;
+    let mut pilot = pilot_at(&camera)?;
+    let mut bvh_s = timing(&pilot, "bvh_seconds").unwrap_or(0.0);
+    // A centre that shows too little of the object (a torus seen through its hole, an object
+    // off the view's centre) or none of its light (an unlit side: the pilot's image is black,
+    // its relative noise undefined) judges nothing: the whole view at a lower resolution.
+    let mut probe_note = None;
+    let centre_covers = metric(&pilot, CANDIDATE, "covered").unwrap_or(0.0);
+    let centre_lit = metric(&pilot, CANDIDATE, "noise").is_some();
+    if !whole_view && (centre_covers < MIN_COVERED || !centre_lit) {
+        (camera, resolution, share) = scaled_camera(full_camera.clone(), o.share);
+        whole_view = true;
+        probe_note = Some(if centre_lit {
+            format!(
+                "the view's centre shows the object on {:.1}% of its pixels (under {:.0}%): the whole view at a lower resolution was probed instead",
+                100.0 * centre_covers,
+                100.0 * MIN_COVERED
+            )
+        } else {
+            "the view's centre shows no light (brute force's pilot there is black): the whole view at a lower resolution was probed instead".to_string()
+        });
+        pilot = pilot_at(&camera)?;
+        bvh_s = bvh_s.max(timing(&pilot, "bvh_seconds").unwrap_or(0.0));
+    }
     let pilot_noise = metric(&pilot, CANDIDATE, "noise");
-    let bvh_s = timing(&pilot, "bvh_seconds").unwrap_or(0.0);
+    let full_resolution = resolution_of(&full_camera).unwrap_or(resolution);
+    // FLIP at the view's pixels per degree: a whole-view probe's pixels subtend more.
+    let probe_ppd = |ppd: f64| {
+        if whole_view {
+            ppd * resolution[0] as f64 / full_resolution[0].max(1) as f64
+        } else {
+            ppd
+        }
+    };
     let full_pilot = if share < 1.0 {
         Some(pilot_at(&full_camera)?)
     } else {
@@ -726,7 +759,10 @@ pub fn arbitrate(
     let full = full_pilot.as_ref().unwrap_or(&pilot);
     let pixels = |r: &[u32; 2]| r[0] as f64 * r[1] as f64;
     // Covered pixels on the full view over those on the probe (1/share where neither covers).
-    let pixel_scale = match (metric(full, CANDIDATE, "covered"), metric(&pilot, CANDIDATE, "covered")) {
+    let pixel_scale = match (
+        metric(full, CANDIDATE, "covered"),
+        metric(&pilot, CANDIDATE, "covered"),
+    ) {
         (Some(f), Some(p)) if f > 0.0 && p > 0.0 => {
             f * pixels(&full_resolution) / (p * pixels(&resolution))
         }
@@ -814,7 +850,8 @@ pub fn arbitrate(
         let error = match o.measure {
             Measure::RelativeRmse => {
                 let noise = truth_noise.unwrap_or(0.0);
-                metric(&r, COMPARE, "relative_rmse").map(|e| (e * e - noise * noise).max(0.0).sqrt())
+                metric(&r, COMPARE, "relative_rmse")
+                    .map(|e| (e * e - noise * noise).max(0.0).sqrt())
             }
             Measure::Flip { .. } => metric(&r, COMPARE, "mean"),
         };
@@ -880,7 +917,11 @@ pub fn arbitrate(
     }
     let mut measured: Vec<Option<Candidate>> = vec![None; unique.len()];
     let mut given_fixed = 0.0;
-    for (i, v) in unique.iter().enumerate().filter(|(_, v)| !v.redoes_lighting) {
+    for (i, v) in unique
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| !v.redoes_lighting)
+    {
         let (c, fixed) = measure_model(v);
         if i == 0 {
             given_fixed = fixed;
@@ -904,9 +945,8 @@ pub fn arbitrate(
             .map(|n| n * (truth_samples as f64).sqrt())
             .or(pilot_noise.map(|n| n * (PILOT as f64).sqrt()));
         let clamp = |x: f64| x.ceil().clamp(1.0, 65_536.0) as u32;
-        let mut samples = per_sample.map_or(PILOT, |c| {
-            clamp((c * to_full / (AIM * o.budget)).powi(2))
-        });
+        let mut samples =
+            per_sample.map_or(PILOT, |c| clamp((c * to_full / (AIM * o.budget)).powi(2)));
         // Each try: samples, its error on the full view (its probe error, noise, scaled by the
         // pilots' ratio), the report.
         let mut tried: Vec<(u32, Option<f64>, RunReport)> = Vec::new();
@@ -914,7 +954,9 @@ pub fn arbitrate(
             let (error, r) = measure(&reference(samples, 1, &camera))?;
             let error = error.map(|e| e * to_full);
             tried.push((samples, error, r));
-            let Some(e) = error.filter(|e| *e > 0.0) else { break };
+            let Some(e) = error.filter(|e| *e > 0.0) else {
+                break;
+            };
             if (0.6 * o.budget..=o.budget).contains(&e) {
                 break;
             }
@@ -924,7 +966,11 @@ pub fn arbitrate(
                     let (s0, e0) = (tried[n - 2].0 as f64, tried[n - 2].1.unwrap_or(0.0));
                     let (s1, e1) = (tried[n - 1].0 as f64, e);
                     let g = -2.0 * (e1 / e0).ln() / (s1 / s0).ln();
-                    if g.is_finite() { g.clamp(0.3, 1.5) } else { 1.0 }
+                    if g.is_finite() {
+                        g.clamp(0.3, 1.5)
+                    } else {
+                        1.0
+                    }
                 }
                 _ => 1.0,
             };
@@ -940,10 +986,10 @@ pub fn arbitrate(
             .filter(|t| fits(t.1))
             .min_by_key(|t| t.0)
             .or_else(|| {
-                tried
-                    .iter()
-                    .filter(|t| t.1.is_some())
-                    .min_by(|a, b| a.1.unwrap_or(f64::INFINITY).total_cmp(&b.1.unwrap_or(f64::INFINITY)))
+                tried.iter().filter(|t| t.1.is_some()).min_by(|a, b| {
+                    a.1.unwrap_or(f64::INFINITY)
+                        .total_cmp(&b.1.unwrap_or(f64::INFINITY))
+                })
             })
             .unwrap_or(&tried[0]);
         let (samples, error, r) = (pick.0, pick.1, &pick.2);
@@ -1106,6 +1152,8 @@ pub fn arbitrate(
         measure: o.measure,
         resolution,
         share,
+        whole_view,
+        probe_note,
         truth_samples,
         truth_noise,
         pilot_noise,

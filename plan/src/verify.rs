@@ -188,7 +188,10 @@ pub fn probe_camera(
 /// The whole view at a lower resolution: `share` of the pixels, each side at least 16 (and at
 /// most the view's), the field of view unchanged; the camera and its share. Each pixel then
 /// subtends a larger angle: for renders whose error does not hang on the pixel's footprint.
-pub fn scaled_camera(mut cam: Map<String, Value>, share: f64) -> (Map<String, Value>, [u32; 2], f64) {
+pub fn scaled_camera(
+    mut cam: Map<String, Value>,
+    share: f64,
+) -> (Map<String, Value>, [u32; 2], f64) {
     let res = cam
         .get("resolution")
         .and_then(Value::as_array)

@@ -99,11 +99,13 @@ pub fn plan(
 }
 
 /// Plans node `render` of the graph `text` against the truth the graph makes, for a relative
-/// RMSE `budget` (`mesoflow plan --against truth --budget rmse=B`). Returns
+/// RMSE `budget` (`mesoflow plan --against truth --budget rmse=B`), or with `measure="flip"` a
+/// mean FLIP budget at `ppd` pixels per degree (FLIP's default without; `--budget flip=B --ppd
+/// P`). Returns
 /// `(plan_json, planned_graph_json)`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (text, name, base_dir, render, budget, sets, device="auto", cache_dir=None, use_cache=true, probe_share=0.1))]
+#[pyo3(signature = (text, name, base_dir, render, budget, sets, device="auto", cache_dir=None, use_cache=true, probe_share=0.1, measure="rmse", ppd=None))]
 pub fn plan_truth(
     py: Python<'_>,
     text: &str,
@@ -116,19 +118,37 @@ pub fn plan_truth(
     cache_dir: Option<String>,
     use_cache: bool,
     probe_share: f64,
+    measure: &str,
+    ppd: Option<f64>,
 ) -> PyResult<(String, String)> {
     if !(probe_share > 0.0 && probe_share <= 1.0) {
         return Err(PyValueError::new_err(format!(
             "probe_share={probe_share}: a fraction of the frame in (0, 1]"
         )));
     }
+    if let Some(p) = ppd.filter(|p| !(p.is_finite() && *p >= 0.5)) {
+        return Err(PyValueError::new_err(format!(
+            "ppd={p}: pixels per degree, a number ≥ 0.5"
+        )));
+    }
+    let measure = match measure {
+        "rmse" => Measure::RelativeRmse,
+        "flip" => Measure::Flip {
+            ppd: ppd.unwrap_or(mesoflow_nodes::image::flip::DEFAULT_PPD),
+        },
+        m => {
+            return Err(PyValueError::new_err(format!(
+                "measure={m:?}: \"rmse\" or \"flip\""
+            )))
+        }
+    };
     let file = parse_with_sets(text, &sets)?;
     let (engine, opts, cancel) = session(name, &file, base_dir, device, cache_dir, use_cache)?;
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();
     let options = TruthOptions {
         budget,
-        measure: Measure::RelativeRmse,
+        measure,
         share: probe_share,
     };
     let a = interruptible(

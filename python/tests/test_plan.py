@@ -75,3 +75,11 @@ def test_a_plan_against_the_truth_from_python_judges_every_candidate(repo, tmp_p
     assert json.loads((saved.parent / "planned.plan.json").read_text())["chosen"] == p.chosen
     with pytest.raises(ValueError, match="against="):
         mesoflow.plan(graph, "ours", budget=0.5, against="model")
+    # A FLIP budget against the truth: every measured candidate has its FLIP in [0, 1].
+    f = mesoflow.plan(graph, "ours", budget=0.5, against="truth", measure="flip", set=sets,
+                      probe_share=0.5, cache_dir=tmp_path / "cache")
+    assert f.measure == "flip" and f.budget == 0.5 and f.doc["budget"]["ppd"] > 60
+    measured = [c for c in f.candidates if "probe_seconds" in c]
+    assert measured and all(0.0 <= c["flip"] <= 1.0 for c in measured)
+    with pytest.raises(ValueError, match="measure="):
+        mesoflow.plan(graph, "ours", budget=0.5, against="truth", measure="psnr")

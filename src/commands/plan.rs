@@ -357,6 +357,9 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
             a.truth_samples,
             a.truth_noise.map_or("absent".into(), |n| format!("{n:.4}"))
         );
+        if let Some(n) = &a.probe_note {
+            println!("    {n}");
+        }
         for (i, c) in a.candidates.iter().enumerate() {
             if let (None, Some(n)) = (c.probe_s, &c.note) {
                 println!("    {}: {n}", c.name);

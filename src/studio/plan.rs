@@ -7,10 +7,10 @@
 
 use super::plan_state::PlanState;
 use super::session::{Problem, Refused, Studio};
+use mesoflow_graph::PortRef;
 use mesoflow_plan::arbiter::{
     PREVIEW_GIVEN, PREVIEW_GIVEN_ERROR, PREVIEW_PLANNED, PREVIEW_PLANNED_ERROR, TRUTH,
 };
-use mesoflow_graph::PortRef;
 use mesoflow_runtime::{SilentObserver, ValueRef};
 use serde::Deserialize;
 use serde_json::json;
@@ -189,10 +189,16 @@ pub fn preview(studio: &Studio, image: &str) -> Result<ValueRef, (u16, String)> 
         .unwrap_or_else(|e| e.into_inner())
         .previews
         .clone()
-        .ok_or((404, "no previews: plan a render against the truth first".to_string()))?;
+        .ok_or((
+            404,
+            "no previews: plan a render against the truth first".to_string(),
+        ))?;
     let checked = mesoflow_graph::check("plan previews", &graph, studio.engine.registry())
         .map_err(|e| (500, format!("the previews' graph: {e}")))?;
-    let mut opts = studio.options(&studio.out_dir.join("plan"), Arc::new(AtomicBool::new(false)));
+    let mut opts = studio.options(
+        &studio.out_dir.join("plan"),
+        Arc::new(AtomicBool::new(false)),
+    );
     opts.outputs = vec![PortRef {
         node: node.to_string(),
         port: port.to_string(),

@@ -417,6 +417,7 @@ def test_a_plan_against_the_truth_is_shown_and_applied(studio_of, browser, tmp_p
         const c = document.querySelector('#plan-preview-' + n);
         return c && c.dataset.draws && c.width > 0; }) ? true : null;""" % json.dumps(names),
          120, "the plan's previews")
+    browser.execute_script("document.querySelector('#plan-why').scrollIntoView()")
     shot(browser, "studio-plan.png")
     click(browser, "#plan-apply")
     wait(browser, """const s = window.studio.state;

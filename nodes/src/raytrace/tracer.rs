@@ -57,10 +57,11 @@ impl<'a> Tracer<'a> {
     pub fn new(mesh: &'a Mesh) -> Self {
         let bvh = if mesh.triangles() >= KEEP_FROM {
             let key = mesh_hash(mesh);
-            let kept = KEPT
-                .lock()
-                .ok()
-                .and_then(|k| k.as_ref().filter(|(h, _)| *h == key).map(|(_, b)| b.clone()));
+            let kept = KEPT.lock().ok().and_then(|k| {
+                k.as_ref()
+                    .filter(|(h, _)| *h == key)
+                    .map(|(_, b)| b.clone())
+            });
             kept.unwrap_or_else(|| {
                 let built = Arc::new(Self::build(mesh));
                 if let Ok(mut k) = KEPT.lock() {

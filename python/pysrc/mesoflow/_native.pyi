@@ -72,6 +72,23 @@ def plan(
     """Plans a render node of a graph file's text; returns the plan document and the planned
     graph, both as JSON text."""
 
+def plan_truth(
+    text: str,
+    name: str,
+    base_dir: str,
+    render: str,
+    budget: float,
+    sets: Sequence[str],
+    device: str = "auto",
+    cache_dir: Optional[str] = None,
+    use_cache: bool = True,
+    probe_share: float = 0.1,
+    measure: str = "rmse",
+    ppd: Optional[float] = None,
+) -> Tuple[str, str]:
+    """Plans a render node against the truth the graph makes (relative RMSE, or mean FLIP at
+    ``ppd``); returns the plan document and the planned graph, both as JSON text."""
+
 def write_sweep(
     out_dir: str,
     varies: Sequence[Tuple[str, str]],

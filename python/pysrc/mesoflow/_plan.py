@@ -84,7 +84,7 @@ class TruthPlan:
     """A plan judged against the truth (``against="truth"``): :attr:`graph` (the render node
     replaced by the chosen candidate, ready to :meth:`Graph.run`), :attr:`candidates` (each
     ``candidate``, ``family`` — ``model`` or ``brute force`` —, ``kind``, ``params``,
-    ``relative_rmse`` against the truth probe, ``probe_seconds``, ``full_seconds_estimate``,
+    ``relative_rmse`` (or ``flip``) against the truth probe, ``probe_seconds``, ``full_seconds_estimate``,
     ``within_budget``, and where so ``note`` and ``warnings``), :attr:`chosen` (its name),
     :attr:`why`, :attr:`judge_why` (what the truth is), :attr:`truth` (its samples a pixel and
     noise), :attr:`budget` (relative RMSE), :attr:`plan_seconds` and :attr:`doc`, the whole
@@ -98,7 +98,9 @@ class TruthPlan:
         self.why: str = doc["why"]
         self.judge_why: str = doc["judge_why"]
         self.truth: Dict[str, Any] = doc["truth"]
-        self.budget: float = doc["budget"]["relative_rmse"]
+        #: The budget and its measure: ``relative_rmse``, or ``flip`` (with ``ppd``).
+        self.measure: str = "flip" if "flip" in doc["budget"] else "relative_rmse"
+        self.budget: float = doc["budget"][self.measure]
         self.plan_seconds: float = doc["plan_seconds"]
 
     def save(self, path: PathLike) -> Path:
@@ -109,7 +111,8 @@ class TruthPlan:
         return path
 
     def __repr__(self) -> str:
-        return f"<mesoflow plan against the truth at relative RMSE {self.budget}: {self.chosen}>"
+        what = "mean FLIP" if self.measure == "flip" else "relative RMSE"
+        return f"<mesoflow plan against the truth at {what} {self.budget}: {self.chosen}>"
 
 
 def plan(
@@ -118,6 +121,7 @@ def plan(
     budget: float = 0.05,
     *,
     against: Optional[str] = None,
+    measure: str = "rmse",
     ppd: Optional[float] = None,
     split: str = "joint",
     device: str = "auto",
@@ -143,11 +147,16 @@ def plan(
     against the truth the graph makes (an ``sss.render``'s mesh filled with its medium, a
     ``render.mesh``'s captured height field displaced), every candidate — the render as given,
     its model switches, brute force — is measured against it on a probe of the view, and the
-    fastest within the budget is planned: a :class:`TruthPlan`. ``ppd``, ``split`` and
+    fastest within the budget is planned: a :class:`TruthPlan`; with ``measure="flip"`` the
+    budget is a mean FLIP against the truth at ``ppd`` (FLIP's 67 when ``None``). ``split`` and
     ``probe_budget`` do not apply there. ``probe_share`` is 0.25 by default, 0.1 against the
     truth (its truth probe costs about 7.3 times that share of a brute-force frame)."""
     if against not in (None, "truth"):
         raise ValueError(f"against={against!r}: None (the graph's own model) or \"truth\"")
+    if measure not in ("rmse", "flip"):
+        raise ValueError(f"measure={measure!r}: \"rmse\" or \"flip\"")
+    if measure == "flip" and against != "truth":
+        raise ValueError("measure=\"flip\" goes with against=\"truth\" (against the graph's own model the budget is FLIP already)")
     g = graph if isinstance(graph, Graph) else load(graph)
     sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
     errors = _native.validate(g.to_json(), g.name)
@@ -172,6 +181,8 @@ def plan(
             cache_dir=cache,
             use_cache=use_cache,
             probe_share=0.1 if probe_share is None else float(probe_share),
+            measure=measure,
+            ppd=None if ppd is None else float(ppd),
         )
         return TruthPlan(json.loads(doc_text), _planned_graph(planned_text, g))
     doc_text, planned_text = _native.plan(

@@ -1,7 +1,7 @@
 //! Where a node runs. In `auto` mode a GPU node takes the GPU only when the adapter is worth it:
 //! a software adapter (Mesa's llvmpipe through OpenGL, or its Vulkan driver lavapipe) runs our
-//! shaders on the CPU, slower than the CPU path (`graphs/btf_edit.json` on 2 cores: `render.mesh`
-//! 120 s on lavapipe against 1.1 s on the CPU path, `render.relief` 2.6 s against 0.19 s), so the
+//! shaders on the CPU, the heavy nodes slower than the CPU path (on 2 cores, BENCHMARKS.md:
+//! `render.mesh` 2.1 s a frame on lavapipe against 0.64 s, `render.relief` about even), so the
 //! CPU path is taken with a warning naming why. `--device gpu` still runs a software adapter:
 //! that is how machines without a GPU test the GPU code. `MESOFLOW_REQUIRE_GPU=1` makes a GPU
 //! node that finds no adapter at all fail instead of falling back.
