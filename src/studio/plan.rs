@@ -5,12 +5,9 @@
 //! decisions as they were measured (`GET /api/plan`), and `POST /api/plan/apply` makes the
 //! planned graph the edit, through the validator like any other, so a run and its previews follow.
 
-use super::plan_state::PlanState;
+use super::plan_state::{PlanState, PREVIEWS};
 use super::session::{Problem, Refused, Studio};
 use mesoflow_graph::PortRef;
-use mesoflow_plan::arbiter::{
-    PREVIEW_GIVEN, PREVIEW_GIVEN_ERROR, PREVIEW_PLANNED, PREVIEW_PLANNED_ERROR, TRUTH,
-};
 use mesoflow_runtime::{SilentObserver, ValueRef};
 use serde::Deserialize;
 use serde_json::json;
@@ -164,15 +161,6 @@ pub fn apply(studio: &Studio) -> Result<u64, Refused> {
     })
 }
 
-/// The plan's previews by name: the node and port in `Arbitration::previews`.
-pub const PREVIEWS: [(&str, &str, &str); 5] = [
-    ("truth", TRUTH, "image"),
-    ("given", PREVIEW_GIVEN, "image"),
-    ("planned", PREVIEW_PLANNED, "image"),
-    ("given_error", PREVIEW_GIVEN_ERROR, "preview"),
-    ("planned_error", PREVIEW_PLANNED_ERROR, "preview"),
-];
-
 /// One of the last plan's previews (`GET /api/plan/pixels?image=NAME`): its renders come from the
 /// cache the plan filled, the FLIP maps are computed on first asking.
 pub fn preview(studio: &Studio, image: &str) -> Result<ValueRef, (u16, String)> {
@@ -210,7 +198,7 @@ pub fn preview(studio: &Studio, image: &str) -> Result<ValueRef, (u16, String)> 
     outcome
         .values
         .get(*node)
-        .and_then(|o| o.get(*port))
+        .and_then(|o| o.get(port))
         .cloned()
         .ok_or_else(|| (404, format!("{node}.{port}: not computed")))
 }

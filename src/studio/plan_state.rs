@@ -3,9 +3,21 @@
 //! one; `plan.rs` runs it (so `session.rs` and `plan.rs` do not import each other).
 
 use mesoflow_graph::GraphFile;
+use mesoflow_plan::arbiter::{
+    PREVIEW_GIVEN, PREVIEW_GIVEN_ERROR, PREVIEW_PLANNED, PREVIEW_PLANNED_ERROR, TRUTH,
+};
 use serde_json::{json, Value};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
+
+/// The plan's previews by name: the node and port in `Arbitration::previews`.
+pub const PREVIEWS: [(&str, &str, &str); 5] = [
+    ("truth", TRUTH, "image"),
+    ("given", PREVIEW_GIVEN, "image"),
+    ("planned", PREVIEW_PLANNED, "image"),
+    ("given_error", PREVIEW_GIVEN_ERROR, "preview"),
+    ("planned_error", PREVIEW_PLANNED_ERROR, "preview"),
+];
 
 /// The last plan asked for, as the page sees it.
 #[derive(Default)]
@@ -31,6 +43,6 @@ impl PlanState {
         json!({ "id": self.id, "running": self.running, "render": self.render,
                 "against": self.against, "budget": self.budget, "revision": self.revision,
                 "plan": self.doc, "error": self.error,
-                "previews": self.previews.as_ref().map(|_| super::plan::PREVIEWS.iter().map(|(name, ..)| *name).collect::<Vec<_>>()) })
+                "previews": self.previews.as_ref().map(|_| PREVIEWS.iter().map(|(name, ..)| *name).collect::<Vec<_>>()) })
     }
 }
