@@ -12,9 +12,10 @@
 //! measured, as regression bounds: every miss within 1.5× of its budget and never slower than
 //! the graph as given where that meets it (the issue's own); the count within the budget at each
 //! budget, the planned time over the fastest fitting candidate's and planning over the longer
-//! full render each at a bound above the six's worst (stated per family below). A planner that
-//! keeps the graph as given fails the counts: the graphs as given are 0.13–0.49 from the truth
-//! on these scenes.
+//! full render each at a bound above the six's worst (stated per family below), with room: CI
+//! runs this beside the other slow tests on two cores, which moves one-run times and, where two
+//! candidates are close, the choice. A planner that keeps the graph as given fails the counts at
+//! 0.10: the graphs as given are 0.13–0.49 from the truth on these scenes.
 
 use mesoflow_testkit::plan_families::{self, Options, SceneRow, MISS_SLACK, TIME_SLACK};
 use mesoflow_testkit::scenes::{Kind, HELD_OUT};
@@ -129,9 +130,9 @@ fn the_plan_meets_its_budget_on_held_out_translucent_scenes() {
             "lighting.shadow_resolution=128",
         ],
         Bounds {
-            within: [5, 6],
-            over_fastest: 2.0,
-            plan_ratio: 5.0,
+            within: [4, 5],
+            over_fastest: 3.0,
+            plan_ratio: 8.0,
         },
     );
 }
@@ -149,9 +150,9 @@ fn the_plan_meets_its_budget_on_held_out_mesostructure_scenes() {
         320,
         &[],
         Bounds {
-            within: [5, 3],
-            over_fastest: 2.0,
-            plan_ratio: 8.0,
+            within: [5, 2],
+            over_fastest: 3.0,
+            plan_ratio: 12.0,
         },
     );
 }
