@@ -42,7 +42,7 @@
 //! `qh.render` has no truth here (one homogeneous medium does not stand for a quasi-homogeneous
 //! material's measured profile): asking is an error that says so.
 
-use crate::verify::{camera_of, probe_camera, run_for as run, scaled_camera};
+use crate::verify::{camera_of, probe_camera, resolution_of, run_for as run, scaled_camera};
 use crate::PlanError;
 use mesoflow_graph::{GraphFile, NodeDecl};
 use mesoflow_runtime::{Engine, NodeStatus, RunOptions, RunReport};
@@ -300,12 +300,6 @@ impl Arbitration {
         }
         doc
     }
-}
-
-/// A camera's `resolution`.
-fn resolution_of(camera: &Map<String, Value>) -> Option<[u32; 2]> {
-    let r = camera.get("resolution")?.as_array()?;
-    Some([r.first()?.as_u64()? as u32, r.get(1)?.as_u64()? as u32])
 }
 
 /// The nodes `ids` need, in the file's order.
@@ -742,7 +736,7 @@ pub fn arbitrate(
         bvh_s = bvh_s.max(timing(&pilot, "bvh_seconds").unwrap_or(0.0));
     }
     let pilot_noise = metric(&pilot, CANDIDATE, "noise");
-    let full_resolution = resolution_of(&full_camera).unwrap_or(resolution);
+    let full_resolution = resolution_of(&full_camera);
     // FLIP at the view's pixels per degree: a whole-view probe's pixels subtend more.
     let probe_ppd = |ppd: f64| {
         if whole_view {

@@ -158,20 +158,32 @@ pub(crate) fn camera_of(
     cam
 }
 
+/// A camera's `resolution` (the render kinds' default where it has none).
+pub fn resolution_of(cam: &Map<String, Value>) -> [u32; 2] {
+    cam.get("resolution")
+        .and_then(Value::as_array)
+        .and_then(|a| Some([a.first()?.as_u64()? as u32, a.get(1)?.as_u64()? as u32]))
+        .unwrap_or([400, 300])
+}
+
+/// `share` of a view's pixels, each side at least 16 and at most the view's: the probe's size
+/// and the share it has.
+fn probe_size(res: [u32; 2], share: f64) -> ([u32; 2], f64) {
+    let k = share.clamp(0.0, 1.0).sqrt();
+    let side = |n: u32| ((n as f64 * k).round() as u32).max(16).min(n);
+    let probe = [side(res[0]), side(res[1])];
+    let got = (probe[0] as f64 * probe[1] as f64) / (res[0] as f64 * res[1] as f64).max(1.0);
+    (probe, got)
+}
+
 /// The probe's camera: the centre `share` of the render's pixels at the same pixels per degree
 /// (the field of view narrowed with the frame), and the share it has.
 pub fn probe_camera(
     mut cam: Map<String, Value>,
     share: f64,
 ) -> (Map<String, Value>, [u32; 2], f64) {
-    let res = cam
-        .get("resolution")
-        .and_then(Value::as_array)
-        .and_then(|a| Some([a.first()?.as_u64()? as u32, a.get(1)?.as_u64()? as u32]))
-        .unwrap_or([400, 300]);
-    let k = share.clamp(0.0, 1.0).sqrt();
-    let side = |n: u32| ((n as f64 * k).round() as u32).max(16).min(n);
-    let probe = [side(res[0]), side(res[1])];
+    let res = resolution_of(&cam);
+    let (probe, got) = probe_size(res, share);
     let ratio = probe[1] as f64 / res[1].max(1) as f64;
     if let Some(h) = cam.get("orthographic").and_then(Value::as_f64) {
         cam.insert("orthographic".into(), json!(h * ratio));
@@ -181,7 +193,6 @@ pub fn probe_camera(
         cam.insert("fov".into(), json!((2.0 * half.atan()).to_degrees()));
     }
     cam.insert("resolution".into(), json!(probe));
-    let got = (probe[0] as f64 * probe[1] as f64) / (res[0] as f64 * res[1] as f64).max(1.0);
     (cam, probe, got)
 }
 
@@ -192,16 +203,8 @@ pub fn scaled_camera(
     mut cam: Map<String, Value>,
     share: f64,
 ) -> (Map<String, Value>, [u32; 2], f64) {
-    let res = cam
-        .get("resolution")
-        .and_then(Value::as_array)
-        .and_then(|a| Some([a.first()?.as_u64()? as u32, a.get(1)?.as_u64()? as u32]))
-        .unwrap_or([400, 300]);
-    let k = share.clamp(0.0, 1.0).sqrt();
-    let side = |n: u32| ((n as f64 * k).round() as u32).max(16).min(n);
-    let probe = [side(res[0]), side(res[1])];
+    let (probe, got) = probe_size(resolution_of(&cam), share);
     cam.insert("resolution".into(), json!(probe));
-    let got = (probe[0] as f64 * probe[1] as f64) / (res[0] as f64 * res[1] as f64).max(1.0);
     (cam, probe, got)
 }
 
