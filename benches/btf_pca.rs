@@ -60,7 +60,7 @@ fn main() {
     let params = capture::Params {
         views: directions::DirectionSet::Named(directions::Named::Ubo81),
         lights: directions::DirectionSet::Named(directions::Named::Ubo81),
-        brdf: mesoflow_nodes::btf::brdf::Model::Ward,
+        brdf: mesoflow_nodes::reflectance::models::Model::Ward,
         albedo: [0.55, 0.4, 0.3],
         ..Default::default()
     };

@@ -10,7 +10,7 @@
 //!    appearance vectors), best of 3 each — where `knn::TREE_FROM` comes from.
 
 use mesoflow_nodes::manifold::{isomap, knn};
-use mesoflow_nodes::rng;
+use mesoflow_nodes::support::rng;
 use mesoflow_nodes::types::PointSet;
 use std::time::Instant;
 
@@ -37,7 +37,7 @@ fn main() {
     let path = dir.join("points.npy");
     std::fs::write(
         &path,
-        mesoflow_nodes::io::formats::encode_npy(&[n, 3], &x.data).expect("npy"),
+        mesoflow_nodes::support::formats::encode_npy(&[n, 3], &x.data).expect("npy"),
     )
     .expect("write");
     let p = isomap::Params::default();
@@ -80,8 +80,7 @@ fn main() {
         match run {
             Ok(o) if o.status.success() => {
                 print!("{}", String::from_utf8_lossy(&o.stdout));
-                let theirs =
-                    mesoflow_nodes::manifold::points_read::read(&out).expect("sklearn npy");
+                let theirs = mesoflow_nodes::points::read::read(&out).expect("sklearn npy");
                 println!(
                     "Procrustes disparity mesoflow vs scikit-learn: {:.3e}",
                     isomap::procrustes(&ours, &theirs.data, 2)

@@ -27,7 +27,7 @@
 use mesoflow_testkit::{args, cli};
 
 use cli::{mesoflow, node};
-use mesoflow_nodes::raytrace::footprint::{shadow_resolution, SHADOW_TEXELS_PER_PIXEL};
+use mesoflow_nodes::support::raytrace::footprint::{shadow_resolution, SHADOW_TEXELS_PER_PIXEL};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 

@@ -9,13 +9,14 @@
 //! force's).
 //!
 //! `cargo bench --bench plan_families -- [--family translucent|mesostructure|all] [--count 24]
-//! [--first SEED] [--budgets 0.1,0.2] [--width W] [--samples S] [--out DIR] [--set ID.P=V]…`
+//! [--first SEED] [--measure rmse|flip] [--budgets 0.1,0.2] [--width W] [--samples S]
+//! [--out DIR] [--set ID.P=V]…` (a FLIP run's files and charts end in `_flip`)
 //! (seeds from `scenes::HELD_OUT` by default: no one tunes on them; each family's template
 //! resolution and truth samples unless given).
 
 use mesoflow::chart::{self, Chart, Series};
 use mesoflow_testkit::args::arg;
-use mesoflow_testkit::plan_families::{self, Options, SceneRow, MISS_SLACK};
+use mesoflow_testkit::plan_families::{self, Measure, Options, SceneRow, MISS_SLACK};
 use mesoflow_testkit::scenes::{self, Kind};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -49,7 +50,7 @@ fn row_json(r: &SceneRow) -> Value {
     })
 }
 
-fn summary(rows: &[SceneRow], budgets: &[f64]) {
+fn summary(rows: &[SceneRow], budgets: &[f64], measure: Measure) {
     for family in ["translucent", "mesostructure"] {
         let of: Vec<&SceneRow> = rows.iter().filter(|r| r.family == family).collect();
         if of.is_empty() {
@@ -70,7 +71,8 @@ fn summary(rows: &[SceneRow], budgets: &[f64]) {
                 .filter(|(_, x)| x.planned.family == "brute force")
                 .count();
             println!(
-                "{family}, budget {b}: within on {within} of {} ({:.0} %; ≥ 95 % asked), worst {} (seed {}; at most {MISS_SLACK}× the budget), brute force planned on {brute}",
+                "{family}, budget {} {b}: within on {within} of {} ({:.0} %; ≥ 95 % asked), worst {} (seed {}; at most {MISS_SLACK}× the budget), brute force planned on {brute}",
+                measure.name(),
                 at.len(),
                 100.0 * within as f64 / at.len().max(1) as f64,
                 f3(worst.map(|w| w.0)),
@@ -88,7 +90,11 @@ fn summary(rows: &[SceneRow], budgets: &[f64]) {
 /// A chart's point from one scene at one budget, if it has one.
 type Pick = dyn Fn(&SceneRow, &plan_families::Budgeted) -> Option<(f64, f64)>;
 
-fn charts(rows: &[SceneRow], out: &Path) {
+fn charts(rows: &[SceneRow], out: &Path, measure: Measure) {
+    let suffix = match measure {
+        Measure::Rmse => "",
+        Measure::Flip => "_flip",
+    };
     let mut made = Vec::new();
     for family in ["translucent", "mesostructure"] {
         let of: Vec<&SceneRow> = rows.iter().filter(|r| r.family == family).collect();
@@ -105,11 +111,17 @@ fn charts(rows: &[SceneRow], out: &Path) {
             .map(|r| r.budgets.iter().map(|b| b.budget).collect())
             .unwrap_or_default();
         made.push((
-            format!("plan_families_error_{family}"),
+            format!("plan_families_error_{family}{suffix}"),
             Chart {
                 title: format!("{family}: the plan's error against the truth, per budget"),
-                x_label: "budget, relative RMSE",
-                y_label: "planned render's relative RMSE (full frame)",
+                x_label: match measure {
+                    Measure::Rmse => "budget, relative RMSE",
+                    Measure::Flip => "budget, mean FLIP",
+                },
+                y_label: match measure {
+                    Measure::Rmse => "planned render's relative RMSE (full frame)",
+                    Measure::Flip => "planned render's mean FLIP (full frame)",
+                },
                 series: vec![
                     Series {
                         name: "planned (one point a scene)".into(),
@@ -131,7 +143,7 @@ fn charts(rows: &[SceneRow], out: &Path) {
             },
         ));
         made.push((
-            format!("plan_families_time_{family}"),
+            format!("plan_families_time_{family}{suffix}"),
             Chart {
                 title: format!("{family}: planned time against the graph's and brute force's"),
                 x_label: "the graph as given, s",
@@ -186,6 +198,8 @@ fn main() {
     };
     let first: u64 = arg("--first", scenes::HELD_OUT);
     let count: u64 = arg("--count", 24);
+    let measure = Measure::parse(&arg("--measure", "rmse".to_string()))
+        .unwrap_or_else(|| panic!("--measure: rmse or flip"));
     let budgets: Vec<f64> = arg("--budgets", "0.1,0.2".to_string())
         .split(',')
         .filter_map(|b| b.trim().parse().ok())
@@ -206,6 +220,7 @@ fn main() {
             resolution: [width, width * kind.resolution()[1] / kind.resolution()[0]],
             samples: arg("--samples", kind.samples()),
             budgets: budgets.clone(),
+            measure,
             out: out.clone(),
             sets: sets.clone(),
         };
@@ -249,13 +264,17 @@ fn main() {
         }
     }
     println!();
-    summary(&rows, &budgets);
+    summary(&rows, &budgets, measure);
     let images = mesoflow_testkit::cli::repo().join("docs/images");
     // One family's run is that family's rows: named after it, so the two runs keep both.
+    let suffix = match measure {
+        Measure::Rmse => "",
+        Measure::Flip => "_flip",
+    };
     let name = match family.as_str() {
-        "all" => "plan_families.json".to_string(),
-        f => format!("plan_families_{f}.json"),
+        "all" => format!("plan_families{suffix}.json"),
+        f => format!("plan_families_{f}{suffix}.json"),
     };
     let _ = std::fs::copy(out.join("plan_families.json"), images.join(name));
-    charts(&rows, &images);
+    charts(&rows, &images, measure);
 }

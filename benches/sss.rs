@@ -11,12 +11,12 @@
 //!    force on the GPU; gather seconds and the octree's RMS error against brute force.
 
 use mesoflow_nodes::mesh::primitive;
-use mesoflow_nodes::raytrace::camera::CameraParams;
-use mesoflow_nodes::raytrace::light::LightParams;
 use mesoflow_nodes::sss::material::{self, Preset};
 use mesoflow_nodes::sss::montecarlo;
 use mesoflow_nodes::sss::profile::{self, Model};
 use mesoflow_nodes::sss::render;
+use mesoflow_nodes::support::raytrace::camera::CameraParams;
+use mesoflow_nodes::support::raytrace::light::LightParams;
 use mesoflow_nodes::types::ScatteringMaterial;
 use mesoflow_runtime::Gpu;
 use std::time::Instant;
@@ -49,7 +49,7 @@ fn tables() {
             std::hint::black_box(profile::tabulate(
                 &m,
                 &p,
-                &mesoflow_nodes::progress::Counter::none(),
+                &mesoflow_nodes::support::progress::Counter::none(),
             ));
         }
         let s = start.elapsed().as_secs_f64() / 3.0;
@@ -79,7 +79,7 @@ fn monte_carlo(photons: u64, peer: bool) {
             photons,
             1,
             0,
-            &mesoflow_nodes::progress::Counter::none(),
+            &mesoflow_nodes::support::progress::Counter::none(),
         );
         let secs = start.elapsed().as_secs_f64();
         let ours = format!(
@@ -137,7 +137,7 @@ fn renders(counts: &[usize], width: u32, height: u32, gpu: Option<&Gpu>) {
             model: profile::Model::Dipole,
             ..Default::default()
         },
-        &mesoflow_nodes::progress::Counter::none(),
+        &mesoflow_nodes::support::progress::Counter::none(),
     )
     .profile;
     println!(

@@ -11,7 +11,7 @@
 //! Images go to `out/bench_synthesis/`.
 
 use mesoflow_nodes::heightfield::procedural::{unit_height, Params as Pattern, Pattern as Kind};
-use mesoflow_nodes::io::formats;
+use mesoflow_nodes::support::formats;
 use mesoflow_nodes::synthesis::optimize::{self, Settings};
 use mesoflow_nodes::synthesis::patches::{self, Grid, Plane};
 use mesoflow_nodes::types::Image;

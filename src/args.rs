@@ -230,7 +230,7 @@ pub struct SweepArgs {
     #[arg(long = "versus", value_name = "ID.METRIC")]
     pub versus: Vec<String>,
     /// The most runs the varies may make; a larger grid is refused before anything runs.
-    #[arg(long, value_name = "N", default_value_t = crate::sweep_table::MAX_RUNS)]
+    #[arg(long, value_name = "N", default_value_t = crate::sweep::MAX_RUNS)]
     pub max_runs: usize,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,

@@ -16,8 +16,9 @@ mod interrupt;
 mod load;
 mod progress;
 pub mod reference;
+mod session;
 mod studio;
-pub mod sweep_table;
+pub mod sweep;
 
 use clap::Parser;
 use std::ffi::OsString;

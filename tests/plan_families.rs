@@ -39,6 +39,7 @@ fn family(kind: Kind, first: u64, width: u32, sets: &[&str], b: Bounds) {
         resolution: [width, width * h / w],
         samples: kind.samples(),
         budgets: BUDGETS.to_vec(),
+        measure: plan_families::Measure::Rmse,
         out: out.path().to_path_buf(),
         sets: sets.iter().map(|s| s.to_string()).collect(),
     };

@@ -4,26 +4,25 @@
 
 pub mod brdf;
 pub mod btf;
-pub mod geometry;
-pub mod gpu;
+pub mod debug;
 pub mod heightfield;
 pub mod image;
-pub mod io;
 pub mod manifold;
+pub mod material;
 pub mod mdf;
-pub mod memory;
 pub mod mesh;
-pub mod optics;
-pub mod progress;
+pub mod npy;
+pub mod points;
 pub mod qh;
-pub mod raytrace;
+pub mod reflectance;
 mod registry;
 pub mod render;
-pub mod rng;
+pub mod scalar;
+pub mod scene;
 pub mod sss;
+pub mod support;
 pub mod synthesis;
 pub mod types;
-pub mod util;
 pub mod weathering;
 
 pub use registry::registry;

@@ -21,20 +21,20 @@ pub fn registry() -> Registry {
     r.register(crate::heightfield::normal_noise::NormalNoise);
     r.register(crate::heightfield::edit::Edit);
     r.register(crate::brdf::edit::Edit);
-    r.register(crate::brdf::transfer::Transfer);
+    r.register(crate::material::transfer::Transfer);
     r.register(crate::image::compare::Compare);
     r.register(crate::image::flip::Flip);
-    r.register(crate::render::scene_footprint::SceneFootprint);
+    r.register(crate::scene::footprint::SceneFootprint);
     r.register(crate::image::row::Row);
     r.register(crate::image::difference::Difference);
     r.register(crate::image::blur::Blur);
     r.register(crate::image::ramp::Ramp);
     r.register(crate::image::colorize::Colorize);
-    r.register(crate::io::image_read::ImageRead);
-    r.register(crate::io::array_read::ImageArray);
-    r.register(crate::io::array_read::HeightFieldArray);
-    r.register(crate::io::array_read::BtfArray);
-    r.register(crate::io::array_read::PointsArray);
+    r.register(crate::image::read::ImageRead);
+    r.register(crate::image::array::ImageArray);
+    r.register(crate::heightfield::array::HeightFieldArray);
+    r.register(crate::btf::array::BtfArray);
+    r.register(crate::points::array::PointsArray);
     r.register(crate::mdf::tabulate::Tabulate);
     r.register(crate::mesh::primitive::Primitive);
     r.register(crate::mesh::displace::Displace);
@@ -43,8 +43,8 @@ pub fn registry() -> Registry {
     r.register(crate::render::render_mesh::RenderMesh);
     r.register(crate::render::reference::Reference);
     r.register(crate::render::relief::RenderRelief);
-    r.register(crate::io::image_write::ImageWrite);
-    r.register(crate::io::npy_write::NpyWrite);
+    r.register(crate::image::write::ImageWrite);
+    r.register(crate::npy::write::NpyWrite);
     r.register(crate::sss::material::Material);
     r.register(crate::sss::profile::Profile);
     r.register(crate::sss::compare::Compare);
@@ -52,8 +52,8 @@ pub fn registry() -> Registry {
     r.register(crate::sss::render::lighting::Lighting);
     r.register(crate::qh::fit_dipole::FitDipole);
     r.register(crate::qh::render::QhRender);
-    r.register(crate::manifold::points_read::PointsRead);
-    r.register(crate::manifold::points_synthetic::PointsSynthetic);
+    r.register(crate::points::read::PointsRead);
+    r.register(crate::points::synthetic::PointsSynthetic);
     r.register(crate::manifold::knn::Knn);
     r.register(crate::manifold::isomap::Isomap);
     r.register(crate::manifold::degree::Degree);
@@ -62,9 +62,9 @@ pub fn registry() -> Registry {
     r.register(crate::weathering::sample::WeatheringSample);
     r.register(crate::brdf::fit_ward::FitWard);
     r.register(crate::synthesis::texture::Texture);
-    r.register(crate::util::scalar::Constant);
-    r.register(crate::util::scalar::Affine);
-    r.register(crate::util::sleep::Sleep);
+    r.register(crate::scalar::Constant);
+    r.register(crate::scalar::Affine);
+    r.register(crate::debug::Sleep);
     r
 }
 
@@ -110,7 +110,7 @@ mod tests {
             if !props.contains_key("camera") && !props.contains_key("tiling") {
                 continue;
             }
-            for field in crate::raytrace::view::ALL {
+            for field in crate::support::raytrace::view::ALL {
                 let Some(schema) = props.get(field) else {
                     continue;
                 };

@@ -938,7 +938,15 @@ pub fn arbitrate(
         let per_sample = truth_noise
             .map(|n| n * (truth_samples as f64).sqrt())
             .or(pilot_noise.map(|n| n * (PILOT as f64).sqrt()));
-        let clamp = |x: f64| x.ceil().clamp(1.0, 65_536.0) as u32;
+        // At a FLIP budget the truth's noise stays in the measure, so brute force at more
+        // samples than the truth measures the truth's noise, not its own: the truth's samples
+        // are its most (a FLIP budget on a whole-view probe once took brute force to thousands
+        // of samples a pixel and planning past a quarter of an hour).
+        let most = match o.measure {
+            Measure::RelativeRmse => 65_536.0,
+            Measure::Flip { .. } => truth_samples as f64,
+        };
+        let clamp = |x: f64| x.ceil().clamp(1.0, most) as u32;
         let mut samples =
             per_sample.map_or(PILOT, |c| clamp((c * to_full / (AIM * o.budget)).powi(2)));
         // Each try: samples, its error on the full view (its probe error, noise, scaled by the

@@ -115,7 +115,7 @@ pub struct SssCandidate {
 }
 
 /// A shadow map of `texels_per_pixel` texels per pixel the object spans
-/// ([`mesoflow_nodes::raytrace::footprint::shadow_resolution`]), per renderer family.
+/// ([`mesoflow_nodes::support::raytrace::footprint::shadow_resolution`]), per renderer family.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Shadows {
     pub texels_per_pixel: f64,
@@ -406,7 +406,7 @@ impl Calibration {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use mesoflow_nodes::raytrace::footprint::SHADOW_TEXELS_PER_PIXEL;
+    use mesoflow_nodes::support::raytrace::footprint::SHADOW_TEXELS_PER_PIXEL;
 
     #[test]
     fn the_builtin_table_loads_and_covers_every_stage() {

@@ -15,7 +15,7 @@ pub const PROBE: &str = "plan_probe";
 /// The view parameters the probe takes from the render node: the shared view fields
 /// `scene.footprint` has (declared once, in `raytrace::view`), and the shell.
 fn view_fields() -> impl Iterator<Item = &'static str> {
-    mesoflow_nodes::render::scene_footprint::Params::VIEW_FIELDS
+    mesoflow_nodes::scene::footprint::Params::VIEW_FIELDS
         .iter()
         .copied()
         .chain(["shell"])

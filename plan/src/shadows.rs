@@ -2,7 +2,7 @@
 
 use crate::*;
 use mesoflow_graph::GraphFile;
-use mesoflow_nodes::raytrace::footprint::shadow_resolution;
+use mesoflow_nodes::support::raytrace::footprint::shadow_resolution;
 use serde_json::{json, Value};
 
 /// Shadow maps: the renderer's resolution lowered to what the view shows, at the sparsest

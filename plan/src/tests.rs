@@ -1,5 +1,5 @@
 use super::*;
-use mesoflow_nodes::raytrace::footprint::shadow_resolution;
+use mesoflow_nodes::support::raytrace::footprint::shadow_resolution;
 use serde_json::json;
 use std::collections::BTreeMap;
 

@@ -209,7 +209,7 @@ fn shaped<T: pyo3::buffer::Element + Copy>(
     // The copy made here against the memory budget (issue 43: what a Python node returned was
     // never held to it).
     let bytes = buf.len_bytes() as u64;
-    let budget = mesoflow_nodes::memory::budget_bytes(None);
+    let budget = mesoflow_nodes::support::memory::budget_bytes(None);
     if bytes > budget {
         return Err(format!(
             "the array of shape {shape:?} is {:.2} GB, over the memory budget of {:.2} GB (MESOFLOW_MEMORY_BUDGET_GB)",

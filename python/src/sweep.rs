@@ -1,7 +1,7 @@
 //! `sweep.csv` and the sweep charts for `mesoflow.sweep`, through the command line's own
-//! module (`mesoflow::sweep_table`), so both front ends write the same files.
+//! module (`mesoflow::sweep`), so both front ends write the same files.
 
-use mesoflow::sweep_table::{write_all, Row, Vary};
+use mesoflow::sweep::{write_all, Row, Vary};
 use mesoflow_graph::PortRef;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;

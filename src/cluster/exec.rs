@@ -104,7 +104,7 @@ pub fn exec(run_dir: &Path, unit: &str) -> anyhow::Result<i32> {
         "gpu" => DeviceMode::Gpu,
         _ => DeviceMode::Auto,
     };
-    opts.require_gpu = crate::commands::run::require_gpu();
+    opts.require_gpu = crate::session::require_gpu();
     opts.cancel = crate::interrupt::cancel_flag();
     opts.outputs = u
         .nodes

@@ -13,7 +13,7 @@ fn dirs(a: &CacheArgs) -> Vec<PathBuf> {
         return vec![d.clone()];
     }
     if let Some(g) = &a.graph {
-        return vec![super::run::graph_dir(g).join(".mesoflow").join("cache")];
+        return vec![crate::session::graph_dir(g).join(".mesoflow").join("cache")];
     }
     let here = PathBuf::from(".mesoflow").join("cache");
     let mut found: Vec<PathBuf> = std::fs::read_dir(".")
@@ -127,7 +127,7 @@ fn parse_age(text: &str) -> anyhow::Result<std::time::Duration> {
 
 pub fn gc(a: &GcArgs) -> anyhow::Result<i32> {
     let max_bytes = match &a.max_bytes {
-        Some(s) => Some(super::run::parse_size(s).map_err(|_| {
+        Some(s) => Some(crate::session::parse_size(s).map_err(|_| {
             invalid(format!(
                 "--max-bytes {s}: expected bytes or a size like 512M, 20G"
             ))

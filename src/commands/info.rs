@@ -11,7 +11,7 @@ pub fn validate(path: &Path, set: &[String]) -> anyhow::Result<i32> {
     let registry = mesoflow_nodes::registry();
     let graph = load::load(path, set, &registry)?;
     // Input files as a run would look for them: a missing one is an error here, not at run time.
-    let base = crate::commands::run::graph_dir(path);
+    let base = crate::session::graph_dir(path);
     let mut missing = Vec::new();
     for cn in &graph.nodes {
         let Some(node) = registry.node(&cn.kind) else {

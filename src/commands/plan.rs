@@ -4,13 +4,13 @@
 //! (the same graph with the choices as ordinary parameters and connections) and its plan
 //! beside it (`<graph>.plan.json`, [`plan_file`]).
 
-use super::run::{device_mode, engine, graph_dir, require_gpu};
 use crate::args::PlanArgs;
 use crate::exit::invalid;
 use crate::load;
+use crate::session::{device_mode, engine, graph_dir, require_gpu};
 use mesoflow_graph::NodeDecl;
 use mesoflow_nodes::image::flip;
-use mesoflow_nodes::raytrace::camera::CameraParams;
+use mesoflow_nodes::support::raytrace::camera::CameraParams;
 use mesoflow_plan as plan;
 use mesoflow_runtime::RunOptions;
 use serde_json::{json, Map, Value};
@@ -225,7 +225,7 @@ fn run_options(args: &PlanArgs) -> RunOptions {
     opts.device = device_mode(args.device);
     opts.require_gpu = require_gpu();
     opts.use_cache = !args.cache.no_cache;
-    opts.cancel = super::run::cancel_flag();
+    opts.cancel = crate::session::cancel_flag();
     opts
 }
 

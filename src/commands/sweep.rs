@@ -2,19 +2,19 @@
 //! nodes upstream of the varied parameters compute once; writes `sweep.csv` and charts of every
 //! measure against every varied parameter and against the measured node's time.
 
-use super::run::{
-    cache_dir, device_mode, engine, graph_dir, graph_name, parse_outputs, require_gpu, write_report,
-};
 use crate::args::{EngineArg, SweepArgs};
 use crate::exit::invalid;
 use crate::load;
 use crate::progress::summary;
-use crate::sweep_table::{cartesian, cell, write_all, Vary};
+use crate::session::{
+    cache_dir, cancel_flag, device_mode, device_name, engine, graph_dir, graph_name, parse_outputs,
+    require_gpu, slurm_run_dir,
+};
+use crate::sweep::{Sweep, Vary};
 use mesoflow_graph::edit::parse_value;
-use mesoflow_runtime::{RunOptions, SilentObserver};
+use mesoflow_runtime::RunOptions;
 use serde_json::Value;
-use std::path::PathBuf;
-use std::sync::Arc;
+use std::path::{Path, PathBuf};
 
 /// Splits on commas outside brackets and quotes, so `[1,2],[3,4]` is two values.
 fn split_values(text: &str) -> Vec<String> {
@@ -69,78 +69,32 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         .collect::<anyhow::Result<_>>()?;
     let measures = parse_outputs(&args.measure)?;
     let versus = parse_outputs(&args.versus)?;
-    if let Some(x) = versus.iter().find(|x| !measures.contains(x)) {
-        return Err(invalid(format!(
-            "--versus {x}: measure it too (--measure {x})"
-        )));
-    }
-    let measured_nodes = crate::sweep_table::measured_nodes(&measures);
     let engine = engine(&args.cache, &args.graph)?;
     let mut base_file = load::read(&args.graph)?;
     load::apply_sets(&mut base_file, &args.set)?;
-    // Check every combination before running any, so a bad value fails fast with exit code 2.
-    crate::sweep_table::grid_size(&varies, args.max_runs).map_err(invalid)?;
-    let combos = cartesian(&varies);
-    let mut graphs = Vec::new();
-    let mut texts = Vec::new();
-    for combo in &combos {
-        let mut file = base_file.clone();
-        for (v, value) in varies.iter().zip(combo) {
-            file.apply(&mesoflow_graph::Override {
-                node: v.node.clone(),
-                param: v.param.clone(),
-                value: value.clone(),
-            })
-            .map_err(invalid)?;
-        }
-        graphs.push(load::checked(&args.graph, &file, engine.registry())?);
-        texts.push(file.to_json());
-    }
-    let outputs = crate::sweep_table::sweep_outputs(engine.registry(), &graphs[0], &measures)
-        .map_err(invalid)?;
+    // Every combination is checked before any runs, so a bad value fails fast with exit code 2.
+    let sweep = Sweep::prepare(
+        &args.graph.display().to_string(),
+        &base_file,
+        varies,
+        measures,
+        versus,
+        args.max_runs,
+        engine.registry(),
+    )
+    .map_err(|r| invalid(r.to_string()))?;
     let out_dir = args
         .out_dir
         .clone()
         .unwrap_or_else(|| PathBuf::from("out").join(format!("{}-sweep", graph_name(&args.graph))));
-    let cancel = super::run::cancel_flag();
+    let cancel = cancel_flag();
     let slurm = args.cluster.engine == EngineArg::Slurm;
-    if slurm {
-        let Some(run_dir) = super::run::slurm_run_dir(&args.cluster, &args.cache, &out_dir)? else {
-            return Ok(0);
-        };
+    let options = |run_dir: &Path| {
         let mut opts = RunOptions::new(
             &args.graph.display().to_string(),
             graph_dir(&args.graph),
-            out_dir.clone(),
+            run_dir.to_path_buf(),
         );
-        opts.outputs = outputs.clone();
-        opts.device = device_mode(args.device);
-        opts.cancel = cancel.clone();
-        let variants: Vec<(String, mesoflow_graph::CheckedGraph)> =
-            texts.into_iter().zip(graphs.iter().cloned()).collect();
-        let outcome = crate::cluster::driver::drive(
-            &engine,
-            &variants,
-            &opts,
-            &cache_dir(&args.cache, &args.graph),
-            &run_dir,
-            &args.cluster,
-            super::run::device_name(args.device),
-            args.quiet,
-        )?;
-        if outcome.interrupted {
-            return Ok(crate::exit::CANCELLED);
-        }
-    }
-    let mut rows = Vec::new();
-    for (i, (combo, graph)) in combos.iter().zip(&graphs).enumerate() {
-        let run_dir = out_dir.join("runs").join(format!("{i:03}"));
-        let mut opts = RunOptions::new(
-            &args.graph.display().to_string(),
-            graph_dir(&args.graph),
-            run_dir.clone(),
-        );
-        opts.outputs = outputs.clone();
         opts.device = device_mode(args.device);
         opts.require_gpu = require_gpu();
         opts.use_cache = !args.cache.no_cache;
@@ -150,53 +104,68 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             // Every value came from the cluster, through the cache: this pass computes nothing.
             opts.compute_only = Some(Default::default());
         }
-        let report = engine
-            .run(graph, &opts, Arc::new(SilentObserver))
-            .map_err(|e| invalid(e.to_string()))?;
-        write_report(&report, &run_dir)?;
-        let label: Vec<String> = varies
+        opts
+    };
+    if slurm {
+        let Some(run_dir) = slurm_run_dir(&args.cluster, &args.cache, &out_dir)? else {
+            return Ok(0);
+        };
+        let mut opts = RunOptions::new(
+            &args.graph.display().to_string(),
+            graph_dir(&args.graph),
+            out_dir.clone(),
+        );
+        opts.outputs = sweep.outputs.clone();
+        opts.device = device_mode(args.device);
+        opts.cancel = cancel.clone();
+        let variants: Vec<(String, mesoflow_graph::CheckedGraph)> = sweep
+            .texts
             .iter()
-            .zip(combo)
-            .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
+            .cloned()
+            .zip(sweep.graphs.iter().cloned())
             .collect();
-        let row = crate::sweep_table::row_of(&report, combo.clone(), &measures, &measured_nodes);
-        let measured = &row.measures;
-        if !args.quiet {
-            let shown: Vec<String> = measures
-                .iter()
-                .zip(measured)
-                .map(|(m, v)| match v {
-                    Some(v) => format!("{m}={v:.4e}"),
-                    None => format!("{m}=—"),
-                })
-                .collect();
-            println!(
-                "[{}/{}] {}: {} in {:.2} s{}{}",
-                i + 1,
-                combos.len(),
-                label.join(" "),
-                if report.ok { "ok" } else { "FAILED" },
-                report.seconds,
-                if shown.is_empty() { "" } else { "; " },
-                shown.join(" ")
-            );
-        }
-        if !report.ok && !args.quiet {
-            print!("{}", summary(&report));
-        }
-        rows.push(row);
-        if report.cancelled {
-            break;
+        let outcome = crate::cluster::driver::drive(
+            &engine,
+            &variants,
+            &opts,
+            &cache_dir(&args.cache, &args.graph),
+            &run_dir,
+            &args.cluster,
+            device_name(args.device),
+            args.quiet,
+        )?;
+        if outcome.interrupted {
+            return Ok(crate::exit::CANCELLED);
         }
     }
-    let chart_errors = write_all(
-        &out_dir,
-        &varies,
-        &measures,
-        &measured_nodes,
-        &versus,
-        &rows,
-    )?;
+    let total = sweep.combos.len();
+    let rows = sweep.run(&engine, &out_dir, options, |i, row, report| {
+        if args.quiet {
+            return;
+        }
+        let shown: Vec<String> = sweep
+            .measures
+            .iter()
+            .zip(&row.measures)
+            .map(|(m, v)| match v {
+                Some(v) => format!("{m}={v:.4e}"),
+                None => format!("{m}=—"),
+            })
+            .collect();
+        println!(
+            "[{}/{total}] {}: {} in {:.2} s{}{}",
+            i + 1,
+            sweep.label(i),
+            if report.ok { "ok" } else { "FAILED" },
+            report.seconds,
+            if shown.is_empty() { "" } else { "; " },
+            shown.join(" ")
+        );
+        if !report.ok {
+            print!("{}", summary(report));
+        }
+    })?;
+    let chart_errors = sweep.write(&out_dir, &rows)?;
     if let Some(e) = chart_errors.first() {
         eprintln!("warning: charts not written: {e}");
     }
@@ -236,7 +205,7 @@ mod tests {
             param: "p".into(),
             values: xs.iter().map(|x| Value::from(*x)).collect(),
         };
-        let c = cartesian(&[v("a", &[1, 2]), v("b", &[3, 4, 5])]);
+        let c = crate::sweep::cartesian(&[v("a", &[1, 2]), v("b", &[3, 4, 5])]);
         assert_eq!(c.len(), 6);
         assert_eq!(c[1], vec![Value::from(1), Value::from(4)]);
     }

@@ -1,9 +1,10 @@
 //! `mesoflow watch`: re-run when the graph file or any file a node read changes. The engine (and
 //! its memory cache) lives across runs, so only the nodes a change touches recompute.
 
-use super::run::{exit_code, Runner};
+use super::run::Runner;
 use crate::args::RunArgs;
 use crate::load;
+use crate::session::exit_code;
 use mesoflow_runtime::NodeStatus;
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;

@@ -20,7 +20,7 @@ mod sweep;
 mod sweep_state;
 
 use crate::args::ServeArgs;
-use crate::commands::run::{cache_dir, device_mode, engine, graph_name};
+use crate::session::{cache_dir, device_mode, engine, graph_name};
 use session::Studio;
 use std::hash::{BuildHasher, Hasher};
 use std::path::PathBuf;

@@ -121,7 +121,7 @@ impl Studio {
         engine: Engine,
         device: DeviceMode,
     ) -> anyhow::Result<Studio> {
-        let base_dir = crate::commands::run::graph_dir(&graph_path);
+        let base_dir = crate::session::graph_dir(&graph_path);
         std::fs::create_dir_all(&out_dir)?;
         let mut roots = vec![base_dir.canonicalize()?, out_dir.canonicalize()?];
         if let Some(c) = &cache_dir {
@@ -137,7 +137,7 @@ impl Studio {
             roots,
             engine,
             device,
-            require_gpu: crate::commands::run::require_gpu(),
+            require_gpu: crate::session::require_gpu(),
             verify_cache: false,
             hub: Arc::new(Hub::default()),
             doc: Mutex::new(Doc {
@@ -462,7 +462,7 @@ impl Studio {
                 return;
             }
         };
-        let _ = crate::commands::run::write_report(&report, &self.out_dir);
+        let _ = crate::session::write_report(&report, &self.out_dir);
         let reran: Vec<&str> = report
             .nodes
             .iter()

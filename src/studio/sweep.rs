@@ -1,10 +1,10 @@
-//! Sweeps started from the studio: the same grid, runs, `sweep.csv` and charts as `mesoflow
-//! sweep` (through `sweep_table`), on the studio's engine and cache, with each row sent to the
-//! browsers as it is measured. The files go under `<out-dir>/sweep`.
+//! Sweeps started from the studio: the same `Sweep` as `mesoflow sweep` (`crate::sweep`: the
+//! grid, the checks, the runs, `sweep.csv` and the charts), on the studio's engine and cache,
+//! with each row sent to the browsers as it is measured. The files go under `<out-dir>/sweep`.
 
 use super::session::{Problem, Refused, Studio};
-use crate::sweep_table::{self, Vary};
-use mesoflow_graph::{Override, PortRef};
+use crate::sweep::{Refusal, Sweep, Vary, MAX_RUNS};
+use mesoflow_graph::PortRef;
 use serde::Deserialize;
 use serde_json::{json, Value};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -39,20 +39,12 @@ fn port(text: &str, what: &str) -> Result<PortRef, Refused> {
 /// Checks the sweep (every combination must validate) and starts it; a sweep in progress is
 /// cancelled.
 pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
-    if spec.vary.is_empty() || spec.measure.is_empty() {
-        return Err(refused(
-            "a sweep needs at least one varied parameter and one measure",
-        ));
-    }
     let mut varies = Vec::new();
     for v in &spec.vary {
         let (node, param) = v
             .param
             .split_once('.')
             .ok_or_else(|| refused(format!("vary {}: expected id.param", v.param)))?;
-        if v.values.is_empty() {
-            return Err(refused(format!("vary {}: no values", v.param)));
-        }
         varies.push(Vary {
             node: node.into(),
             param: param.into(),
@@ -69,36 +61,24 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
         .iter()
         .map(|m| port(m, "versus"))
         .collect::<Result<_, _>>()?;
-    if let Some(x) = versus.iter().find(|x| !measures.contains(x)) {
-        return Err(refused(format!("versus {x}: measure it too")));
-    }
     let base = studio.doc().file.clone();
-    sweep_table::grid_size(&varies, sweep_table::MAX_RUNS).map_err(refused)?;
-    let combos = sweep_table::cartesian(&varies);
-    let mut graphs = Vec::new();
-    for combo in &combos {
-        let mut file = base.clone();
-        for (v, value) in varies.iter().zip(combo) {
-            file.apply(&Override {
-                node: v.node.clone(),
-                param: v.param.clone(),
-                value: value.clone(),
-            })
-            .map_err(refused)?;
-        }
-        let g = mesoflow_graph::check(
-            &studio.graph_path.display().to_string(),
-            &file,
-            studio.engine.registry(),
-        )
-        .map_err(|e| Refused {
+    let sweep = Sweep::prepare(
+        &studio.graph_path.display().to_string(),
+        &base,
+        varies,
+        measures,
+        versus,
+        MAX_RUNS,
+        studio.engine.registry(),
+    )
+    .map_err(|r| match r {
+        Refusal::Asked(m) => refused(m),
+        Refusal::Graph(e) => Refused {
             errors: e.errors.iter().map(Problem::of).collect(),
-        })?;
-        graphs.push(g);
-    }
-    let outputs = sweep_table::sweep_outputs(studio.engine.registry(), &graphs[0], &measures)
-        .map_err(refused)?;
+        },
+    })?;
     let cancel = Arc::new(AtomicBool::new(false));
+    let total = sweep.combos.len();
     let id = {
         let mut st = studio.sweep.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(c) = &st.cancel {
@@ -106,11 +86,12 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
         }
         st.id += 1;
         st.running = true;
-        st.total = combos.len();
-        st.columns = varies
+        st.total = total;
+        st.columns = sweep
+            .varies
             .iter()
             .map(Vary::name)
-            .chain(measures.iter().map(|m| m.to_string()))
+            .chain(sweep.measures.iter().map(|m| m.to_string()))
             .collect();
         st.rows.clear();
         st.charts.clear();
@@ -118,36 +99,16 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
         st.cancel = Some(cancel.clone());
         st.id
     };
-    studio.hub.publish(
-        "sweep_started",
-        json!({ "sweep": id, "total": combos.len() }),
-    );
+    studio
+        .hub
+        .publish("sweep_started", json!({ "sweep": id, "total": total }));
     let studio = studio.clone();
     std::thread::spawn(move || {
         let out_dir = studio.out_dir.join("sweep");
-        let measured_nodes = sweep_table::measured_nodes(&measures);
-        let mut rows = Vec::new();
-        for (i, (combo, graph)) in combos.iter().zip(&graphs).enumerate() {
-            if cancel.load(Ordering::SeqCst) {
-                break;
-            }
-            let run_dir = out_dir.join("runs").join(format!("{i:03}"));
-            let mut opts = studio.options(&run_dir, cancel.clone());
-            opts.outputs = outputs.clone();
-            let report =
-                match studio
-                    .engine
-                    .run(graph, &opts, Arc::new(mesoflow_runtime::SilentObserver))
-                {
-                    Ok(r) => r,
-                    Err(e) => {
-                        finish(&studio, id, Vec::new(), Some(e.to_string()));
-                        return;
-                    }
-                };
-            let _ = crate::commands::run::write_report(&report, &run_dir);
-            let row = sweep_table::row_of(&report, combo.clone(), &measures, &measured_nodes);
-            let cells: Vec<Value> = combo
+        let options = |run_dir: &std::path::Path| studio.options(run_dir, cancel.clone());
+        let rows = sweep.run(&studio.engine, &out_dir, options, |i, row, _| {
+            let cells: Vec<Value> = row
+                .values
                 .iter()
                 .cloned()
                 .chain(row.measures.iter().map(|m| json!(m)))
@@ -163,16 +124,15 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
             studio
                 .hub
                 .publish("sweep_row", json!({ "sweep": id, "row": row_json }));
-            rows.push(row);
-        }
-        let result = sweep_table::write_all(
-            &out_dir,
-            &varies,
-            &measures,
-            &measured_nodes,
-            &versus,
-            &rows,
-        );
+        });
+        let rows = match rows {
+            Ok(rows) => rows,
+            Err(e) => {
+                finish(&studio, id, Vec::new(), Some(format!("{e:#}")));
+                return;
+            }
+        };
+        let result = sweep.write(&out_dir, &rows);
         let mut charts: Vec<String> = std::fs::read_dir(&out_dir)
             .map(|d| {
                 d.filter_map(|e| e.ok())

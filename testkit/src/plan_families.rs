@@ -1,5 +1,6 @@
 //! The planner as the arbiter over the scene families (issue 57): each scene planned with
-//! `mesoflow plan --against truth --budget rmse=B`, the planned graph run on the full frame
+//! `mesoflow plan --against truth --budget rmse=B` (or `flip=B`, judged on the full frame by mean
+//! FLIP at the default pixels per degree over the truth's coverage), the planned graph run on the full frame
 //! against the family's converged truth (the template's `truth`, independent of the planner's
 //! probe), beside a fixed list of candidates rendered here on the full frame: the graph as given,
 //! each model variant the plan lists, and brute force (`render.reference`, a seed apart from the
@@ -19,6 +20,46 @@ use crate::scenes::{self, Kind, Scene};
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
 
+/// What a budget measures: relative RMSE with the truth's noise removed, or mean FLIP (at
+/// `image.flip`'s default pixels per degree, the planner's when no viewer is given) over the
+/// truth's coverage, the truth's own noise left in (it is converged: its noise is far under
+/// the budgets).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Measure {
+    Rmse,
+    Flip,
+}
+
+impl Measure {
+    /// `rmse` or `flip`, as `--budget` takes it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Measure::Rmse => "rmse",
+            Measure::Flip => "flip",
+        }
+    }
+
+    /// Words for tables and charts.
+    pub fn label(self) -> &'static str {
+        match self {
+            Measure::Rmse => "relative RMSE",
+            Measure::Flip => "mean FLIP",
+        }
+    }
+
+    /// `rmse` or `flip`.
+    pub fn parse(s: &str) -> Option<Measure> {
+        match s {
+            "rmse" => Some(Measure::Rmse),
+            "flip" => Some(Measure::Flip),
+            _ => None,
+        }
+    }
+}
+
+/// The node that judges a render by FLIP in a FLIP run (added to the scene's graph).
+const FLIP_JUDGE: &str = "judge_flip";
+
 /// What a run over the families is asked for.
 #[derive(Clone)]
 pub struct Options {
@@ -26,16 +67,18 @@ pub struct Options {
     pub resolution: [u32; 2],
     /// The truth's samples a pixel.
     pub samples: u32,
-    /// Relative RMSE budgets.
+    /// The budgets, in `measure`.
     pub budgets: Vec<f64>,
+    /// What the budgets measure.
+    pub measure: Measure,
     /// Where each scene's graphs, runs and plans go (`seed-N/`), and the shared cache.
     pub out: PathBuf,
     /// `--set`s applied after the scene's own (test sizes).
     pub sets: Vec<String>,
 }
 
-/// One render on the full frame: its error against the truth (the truth's noise removed) and
-/// its node's own compute time.
+/// One render on the full frame: its error against the truth in the run's measure (relative
+/// RMSE with the truth's noise removed, or mean FLIP) and its node's own compute time.
 #[derive(Clone, Debug)]
 pub struct Rendered {
     pub name: String,
@@ -190,15 +233,18 @@ fn run(graph: &Path, out: &Path, cache: &Path) -> Value {
     read_json(&out.join("report.json"))
 }
 
-/// The render `ours`' error against the truth (its noise removed) and compute time in a report:
+/// The render `ours`' error against the truth in `measure` and compute time in a report:
 /// the render's own seconds, and its `sss.lighting`'s where it reads one (a candidate of the
 /// plan computes its lighting inside the render, so the graph as given is charged for its own).
-fn measured(report: &Value, graph: &Value, name: &str, family: &str) -> Rendered {
+fn measured(report: &Value, graph: &Value, name: &str, family: &str, measure: Measure) -> Rendered {
     let m = |id: &str, k: &str| cli::node(report, id)["metrics"][k].as_f64();
-    let error = m("error", "relative_rmse").map(|raw| {
-        let noise = m("truth", "noise").unwrap_or(0.0);
-        (raw * raw - noise * noise).max(0.0).sqrt()
-    });
+    let error = match measure {
+        Measure::Rmse => m("error", "relative_rmse").map(|raw| {
+            let noise = m("truth", "noise").unwrap_or(0.0);
+            (raw * raw - noise * noise).max(0.0).sqrt()
+        }),
+        Measure::Flip => m(FLIP_JUDGE, "mean"),
+    };
     let secs = |id: &str| {
         let n = cli::node(report, id);
         n["timings"]["seconds"].as_f64().or(n["seconds"].as_f64())
@@ -249,9 +295,22 @@ fn brute_decl(g: &Value, samples: u32) -> Value {
 /// Plans, renders and measures one scene at every budget.
 pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
     let scene: Scene = scenes::family(kind, seed);
-    let dir = o.out.join(format!("{}-{seed}", kind.name()));
+    let dir = o.out.join(match o.measure {
+        Measure::Rmse => format!("{}-{seed}", kind.name()),
+        Measure::Flip => format!("{}-{seed}-flip", kind.name()),
+    });
     let cache = o.out.join("cache");
     let mut g = scene.graph(o.resolution, o.samples);
+    if o.measure == Measure::Flip {
+        g["nodes"][FLIP_JUDGE] = json!({
+            "kind": "image.flip",
+            "inputs": {
+                "reference": "truth.image",
+                "test": "ours.image",
+                "mask": "truth.coverage",
+            },
+        });
+    }
     let template_dir = cli::repo().join(kind.template());
     let template_dir = template_dir.parent().expect("graphs/");
     absolute_paths(&mut g, template_dir);
@@ -266,6 +325,7 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
         &g,
         "the graph as given",
         "model",
+        o.measure,
     );
     let mut models: Vec<Rendered> = Vec::new();
     let mut budgets = Vec::new();
@@ -279,7 +339,7 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
             "--against",
             "truth",
             "--budget",
-            &format!("rmse={b}"),
+            &format!("{}={b}", o.measure.name()),
             "--device",
             "cpu",
             "-o",
@@ -302,7 +362,13 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
                 let model = with_ours(&g, &decl);
                 write_json(&path, &model);
                 let out = dir.join(format!("model-{}", models.len()));
-                models.push(measured(&run(&path, &out, &cache), &model, &name, "model"));
+                models.push(measured(
+                    &run(&path, &out, &cache),
+                    &model,
+                    &name,
+                    "model",
+                    o.measure,
+                ));
             }
         }
         let chosen = doc["chosen"].as_str().unwrap_or("nothing").to_string();
@@ -327,13 +393,14 @@ pub fn scene(kind: Kind, seed: u64, o: &Options) -> SceneRow {
             &planned_graph,
             &chosen,
             &family,
+            o.measure,
         );
         // The render as given leaves the graph as it is: its nodes come from the cache the
         // graph's own run filled, so its time is that run's.
         if chosen == "the render as given" {
             planned.seconds = given.seconds;
         }
-        let (brute, brute_samples) = brute_at(&g, b, &dir, &cache);
+        let (brute, brute_samples) = brute_at(&g, b, o.measure, o.samples, &dir, &cache);
         budgets.push(Budgeted {
             budget: b,
             planned,
@@ -365,9 +432,23 @@ fn set(graph: &Path, sets: &[String]) {
 }
 
 /// Brute force at the samples that meet `budget`: a pilot at 4 samples a pixel gives its
-/// noise constant (error falls as 1/√samples), then the count it asks for with 10 % to spare,
-/// doubled until it fits (at most three times).
-fn brute_at(g: &Value, budget: f64, dir: &Path, cache: &Path) -> (Rendered, u32) {
+/// noise constant (relative RMSE falls as 1/√samples; FLIP is aimed as if it did, then once
+/// along the slope two renders measured), then the count it asks for with 10 % to spare,
+/// doubled until it fits (at most three times); for FLIP never past the truth's own samples
+/// (`most`): FLIP cannot take the truth's noise out, so past them brute force measures the
+/// truth's noise, not its own.
+fn brute_at(
+    g: &Value,
+    budget: f64,
+    measure: Measure,
+    most: u32,
+    dir: &Path,
+    cache: &Path,
+) -> (Rendered, u32) {
+    let most = match measure {
+        Measure::Rmse => 1 << 16,
+        Measure::Flip => most.max(1),
+    };
     let render = |samples: u32| {
         let path = dir.join(format!("brute-{samples}.json"));
         let brute = with_ours(g, &brute_decl(g, samples));
@@ -378,13 +459,14 @@ fn brute_at(g: &Value, budget: f64, dir: &Path, cache: &Path) -> (Rendered, u32)
             &brute,
             &name,
             "brute force",
+            measure,
         )
     };
     let pilot_samples = 4;
     let pilot = render(pilot_samples);
     let mut samples = match pilot.error {
         Some(e) if e > 0.0 => {
-            ((pilot_samples as f64 * 1.1 * (e / budget).powi(2)).ceil() as u32).clamp(1, 1 << 16)
+            ((pilot_samples as f64 * 1.1 * (e / budget).powi(2)).ceil() as u32).clamp(1, most)
         }
         _ => pilot_samples,
     };
@@ -392,11 +474,24 @@ fn brute_at(g: &Value, budget: f64, dir: &Path, cache: &Path) -> (Rendered, u32)
         return (pilot, samples);
     }
     let mut r = render(samples);
+    // FLIP does not fall as 1/√samples: re-aimed once along the slope the pilot and the first
+    // render measured (with 10 % to spare) before doubling.
+    if let (Measure::Flip, Some(e0), Some(e)) = (measure, pilot.error, r.error) {
+        let slope = (e0 / e).ln() / (samples as f64 / pilot_samples as f64).ln();
+        if !r.fits(budget) && e0 > e && slope > 0.05 && samples < most {
+            let more = (e / (0.9 * budget)).powf(1.0 / slope).min(16.0);
+            samples = ((samples as f64 * more).ceil() as u32).clamp(samples + 1, most);
+            r = render(samples);
+        }
+    }
     for _ in 0..3 {
         if r.fits(budget) {
             break;
         }
-        samples = (samples * 2).min(1 << 16);
+        if samples >= most {
+            break;
+        }
+        samples = (samples * 2).min(most);
         r = render(samples);
     }
     (r, samples)

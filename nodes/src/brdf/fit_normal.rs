@@ -4,8 +4,8 @@
 //! analytic (as in `fit_ward.rs`), the two slope columns central differences.
 
 use super::lm;
-use super::ward::clamp_ward;
-use super::ward::PairGeometry;
+use crate::reflectance::ward::clamp_ward;
+use crate::reflectance::ward::PairGeometry;
 use crate::types::{DirectionPair, WARD_PARAMS};
 use std::f64::consts::PI;
 

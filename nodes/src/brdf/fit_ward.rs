@@ -20,8 +20,8 @@ use super::fit_normal::refine_with_normal;
 use super::kmeans::kmeans;
 use super::lm;
 use super::photometric::{angle_deg, photometric_normals, MIN_LIGHTS};
-use super::ward::PairGeometry;
-use super::ward::{clamp_ward, RHO_S_MAX};
+use crate::reflectance::ward::PairGeometry;
+use crate::reflectance::ward::{clamp_ward, RHO_S_MAX};
 use crate::types::{BrdfMap, Btf, Image, NormalMap, PointSet, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -391,7 +391,7 @@ pub fn fit(ctx: &NodeContext, btf: &Btf, p: &Params) -> Result<Fit, NodeError> {
             format!("{pairs} direction pairs cannot determine 5 Ward parameters: need at least 3 lights"),
         ));
     }
-    crate::memory::check(
+    crate::support::memory::check(
         (n * pairs * 3 * 4) as u64,
         "the per-pixel intensity vectors",
         p.memory_budget_gb,
@@ -582,7 +582,7 @@ fn fit_pixels(
 ) -> Vec<([f64; WARD_PARAMS], f32, bool)> {
     let (w, h) = (btf.width, btf.height);
     let dims = btf.pairs.len() * 3;
-    let watch = crate::progress::Counter::new(ctx, h as u64);
+    let watch = crate::support::progress::Counter::new(ctx, h as u64);
     let rows: Vec<Vec<([f64; WARD_PARAMS], f32, bool)>> = (0..h)
         .into_par_iter()
         .map(|y| {

@@ -3,7 +3,7 @@
 //! 003 §3). Seeded; assignments run on rayon and centroid sums in pixel order, so the result
 //! does not depend on the thread count.
 
-use crate::rng;
+use crate::support::rng;
 use rayon::prelude::*;
 
 pub struct Clusters {

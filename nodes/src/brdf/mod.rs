@@ -1,6 +1,6 @@
-//! Per-pixel reflectance models fitted to captures: the isotropic Ward lobe with its gradient,
-//! K-means for starting points, the `brdf.fit_ward` node, and the edits of what it recovers
-//! (`brdf.edit`, `material.transfer`).
+//! Per-pixel reflectance models fitted to captures: K-means for starting points, the
+//! `brdf.fit_ward` node (the Ward lobe and its gradient are `reflectance::ward`), and the edit of
+//! what it recovers (`brdf.edit`).
 
 pub mod edit;
 pub mod fit_normal;
@@ -8,5 +8,3 @@ pub mod fit_ward;
 pub mod kmeans;
 pub mod lm;
 pub mod photometric;
-pub mod transfer;
-pub mod ward;

@@ -7,9 +7,9 @@
 //! Radiometry: the light has unit irradiance on a plane facing it, so a value is
 //! f(ωi, ωo) · max(0, n·ωi) · visibility — for a flat Lambertian tile, ρ/π · cos θi.
 
-use super::brdf::{self, Lobe, Model};
 use super::directions::{DirectionSet, Named};
 use crate::heightfield::raycast::{Caster, Miss};
+use crate::reflectance::models::{self as brdf, Lobe, Model};
 use crate::types::{BrdfMap, Btf, Direction, DirectionPair, HeightField, Image, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
@@ -156,7 +156,7 @@ impl Node for Capture {
         }
         let scene = Scene::new(hf, albedo, lobe_maps, p);
         let plane = width * height;
-        crate::memory::check(
+        crate::support::memory::check(
             (pairs.len() * 3 * plane * 4) as u64,
             &format!("a BTF of {} pairs × {plane} texels × RGB f32", pairs.len()),
             p.memory_budget_gb,

@@ -608,9 +608,9 @@ pub fn lanes_sum(values: &[f32], f: impl Fn(f32) -> f64) -> f64 {
 
 /// A standard normal sample, a pure function of (seed, i, j) (Box–Muller on two hashed uniforms).
 fn gaussian(seed: u64, i: usize, j: usize) -> f64 {
-    let h = crate::rng::hash(seed, &[i as u64, j as u64]);
-    let u1 = 1.0 - crate::rng::unit(h); // (0, 1]: ln is finite
-    let u2 = crate::rng::unit(crate::rng::mix(h));
+    let h = crate::support::rng::hash(seed, &[i as u64, j as u64]);
+    let u1 = 1.0 - crate::support::rng::unit(h); // (0, 1]: ln is finite
+    let u2 = crate::support::rng::unit(crate::support::rng::mix(h));
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
@@ -669,7 +669,7 @@ mod tests {
     fn products_match_a_dense_reference_in_both_centrings() {
         let (t, n) = (300, 70); // not multiples of the panel sizes
         let data: Vec<f32> = (0..t * n)
-            .map(|i| crate::rng::unit(crate::rng::hash(3, &[i as u64])) as f32)
+            .map(|i| crate::support::rng::unit(crate::support::rng::hash(3, &[i as u64])) as f32)
             .collect();
         for centring in [Centring::Columns, Centring::Texels] {
             let x = Block::new(&data, t, n, 0, t, centring);

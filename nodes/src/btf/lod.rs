@@ -139,7 +139,9 @@ mod tests {
     /// A basis with hashed content: two blocks (one per-column centred, one per-texel centred).
     fn basis(w: usize, h: usize) -> BtfBasis {
         let t = w * h;
-        let r = |s: u64, i: usize| crate::rng::unit(crate::rng::hash(s, &[i as u64])) as f32;
+        let r = |s: u64, i: usize| {
+            crate::support::rng::unit(crate::support::rng::hash(s, &[i as u64])) as f32
+        };
         let pair = |v: f64| DirectionPair {
             view: Direction::degrees(v, 0.0),
             light: Direction::degrees(0.0, 0.0),

@@ -1,7 +1,7 @@
 //! Bidirectional texture functions: direction sets, reflectance models, synthetic capture, PCA
 //! compression, reconstruction and comparison.
 
-pub mod brdf;
+pub mod array;
 pub mod capture;
 pub mod compare;
 pub mod directions;

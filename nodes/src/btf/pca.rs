@@ -485,7 +485,7 @@ mod tests {
         let params = capture::Params {
             views: DirectionSet::List(views.to_vec()),
             lights: DirectionSet::List(lights.to_vec()),
-            brdf: crate::btf::brdf::Model::Ward,
+            brdf: crate::reflectance::models::Model::Ward,
             ..Default::default()
         };
         let out = mesoflow_testkit::node::run(

@@ -5,7 +5,7 @@
 //! one (so a written BTF reads back in its own order), else view-major by angle.
 
 use super::ubo2003::{self, Name};
-use crate::io::formats;
+use crate::support::formats;
 use crate::types::Btf;
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
@@ -254,7 +254,7 @@ impl Node for ReadUbo2003 {
         }
         let (w, h) = (cw / f, ch / f);
         let bytes = (kept.len() * 3 * w * h * 4) as u64;
-        crate::memory::check(
+        crate::support::memory::check(
             bytes,
             &format!("a BTF of {} pairs × {w}×{h} texels × RGB f32", kept.len()),
             p.memory_budget_gb,

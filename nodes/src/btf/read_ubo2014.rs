@@ -133,7 +133,7 @@ impl Node for ReadUbo2014 {
             Output::Btf => {
                 let basis = window(ubo2014::to_basis(&file, false), p)?;
                 let keep = subset(&basis, p)?;
-                crate::memory::check(
+                crate::support::memory::check(
                     (keep.len() * 3 * basis.texels() * 4) as u64,
                     &format!(
                         "a BTF of {} pairs × {} texels × RGB f32",

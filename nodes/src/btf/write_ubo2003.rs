@@ -4,7 +4,7 @@
 //! the BTF's pair order. Angles must be whole degrees, as the names require.
 
 use super::ubo2003;
-use crate::io::formats;
+use crate::support::formats;
 use crate::types::Btf;
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{
@@ -133,7 +133,9 @@ mod tests {
             .collect();
         let (w, h) = (6, 4);
         let data = (0..pairs.len() * 3 * w * h)
-            .map(|i| (crate::rng::unit(crate::rng::hash(5, &[i as u64])) * 1.7) as f32)
+            .map(|i| {
+                (crate::support::rng::unit(crate::support::rng::hash(5, &[i as u64])) * 1.7) as f32
+            })
             .collect();
         Btf {
             width: w,

@@ -658,7 +658,7 @@ mod tests {
         // bound (≥ 3×) is below the measured factor (printed) so only a real loss of weighting fails.
         let (hf, mut n) = smooth(48, 48);
         let bad: Vec<bool> = (0..48 * 48)
-            .map(|i| crate::rng::unit(crate::rng::hash(7, &[i as u64])) < 0.1)
+            .map(|i| crate::support::rng::unit(crate::support::rng::hash(7, &[i as u64])) < 0.1)
             .collect();
         let tilt = 40f32.to_radians();
         for (i, b) in bad.iter().enumerate() {

@@ -1,5 +1,6 @@
 //! Mesostructure height fields: procedural tiles, reading from files, and normal maps.
 
+pub mod array;
 pub mod edit;
 pub mod from_normals;
 pub mod grid;

@@ -4,7 +4,7 @@
 //! highlight gives — by a fixed angle in a random direction. The angle each texel was moved by is
 //! an output, so a weighted method can be charted against an unweighted one.
 
-use crate::rng;
+use crate::support::rng;
 use crate::types::{Image, NormalMap};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};

@@ -100,7 +100,7 @@ fn normals_gpu(
     params.extend_from_slice(&(hf.height as u32).to_le_bytes());
     params.extend_from_slice(&scale.to_le_bytes());
     params.extend_from_slice(&0f32.to_le_bytes());
-    let pass = crate::gpu::Pass2d {
+    let pass = crate::support::gpu::Pass2d {
         label: "heightfield.normals",
         shader: WGSL,
         entry: "main",
@@ -109,7 +109,7 @@ fn normals_gpu(
         output_len: hf.width * hf.height * 3,
         grid: (hf.width as u32, hf.height as u32),
     };
-    crate::gpu::compute_2d(gpu, &pass)
+    crate::support::gpu::compute_2d(gpu, &pass)
 }
 
 /// sqrt(mean |∇h|²) recovered from the normals (|∇h|² = (nx² + ny²)/nz²), summed row by row in a
@@ -206,6 +206,6 @@ mod tests {
             assert!(max < 1e-5, "{}: max difference {max}", gpu.describe());
             tested.push(gpu.describe());
         }
-        crate::gpu::require_tested(tested.len());
+        crate::support::gpu::require_tested(tested.len());
     }
 }

@@ -1,7 +1,7 @@
 //! `heightfield.procedural`: periodic mesostructure tiles, the built-in data source. Every pattern
 //! tiles seamlessly (opposite edges match), as a mesostructure mapped repeatedly over a surface must.
 
-use crate::rng;
+use crate::support::rng;
 use crate::types::{HeightField, Image};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};

@@ -2,7 +2,7 @@
 //! a 2-D NPY array. Samples are multiplied by `depth`, the height in texels of a sample value 1.0
 //! (PNG samples are first normalised to [0, 1]).
 
-use crate::io::formats;
+use crate::support::formats;
 use crate::types::HeightField;
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};

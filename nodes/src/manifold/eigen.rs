@@ -4,7 +4,7 @@
 //! the wanted eigenvalues stop moving. The products run on rayon over fixed row panels with
 //! faer's sequential GEMM, so the result is the same whatever the thread count.
 
-use crate::rng;
+use crate::support::rng;
 use faer::linalg::matmul::matmul;
 use faer::{Accum, Mat, MatRef, Par, Side};
 use rayon::prelude::*;

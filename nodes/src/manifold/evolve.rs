@@ -15,8 +15,8 @@
 //!   looping `<prefix>.gif`.
 
 use super::path::Path;
-use crate::brdf::ward::PairGeometry;
-use crate::io::formats;
+use crate::reflectance::ward::PairGeometry;
+use crate::support::formats;
 use crate::types::{BrdfMap, Direction, DirectionPair, Image};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};

@@ -11,8 +11,8 @@
 
 use super::eigen;
 use super::graph::Graph;
-use crate::progress::Counter;
-use crate::rng;
+use crate::support::progress::Counter;
+use crate::support::rng;
 use crate::types::{Embedding, KnnGraph, PointSet};
 use faer::{Mat, MatRef};
 use mesoflow_graph::DevicePreference;
@@ -198,9 +198,9 @@ pub fn isomap_with(
     };
     // Geodesic rows (m × n f64), the m × m kernel and the eigensolver's copy of it.
     let (mu, nu) = (m as u64, n as u64);
-    let bytes = crate::memory::product(&[mu, nu, 8])
-        .saturating_add(crate::memory::product(&[2, mu, mu, 8]));
-    crate::memory::check_param(
+    let bytes = crate::support::memory::product(&[mu, nu, 8])
+        .saturating_add(crate::support::memory::product(&[2, mu, mu, 8]));
+    crate::support::memory::check_param(
         bytes,
         &format!("Isomap of {n} points with {m} landmarks (all points without `landmarks`)"),
         "landmarks",
@@ -553,8 +553,8 @@ mod tests {
         // 2-D embedding of the unrolled sheet has residual variance near 0 (< 0.02) and
         // |Spearman| ≈ 1 (> 0.99); short-circuited, the residual variance is at least 5× larger
         // and |Spearman| drops below 0.95.
-        use crate::manifold::points_synthetic::{generate, Params as Synth};
         use crate::manifold::rank::spearman;
+        use crate::points::synthetic::{generate, Params as Synth};
         let (x, truth) = generate(&Synth {
             n: 1500,
             ..Synth::default()

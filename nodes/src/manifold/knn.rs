@@ -149,7 +149,9 @@ mod tests {
         // the same neighbours in the same order as brute force (ties by index).
         let n = 3000;
         let data = (0..n * 5)
-            .map(|i| (crate::rng::unit(crate::rng::hash(9, &[i as u64])) * 4.0).floor())
+            .map(|i| {
+                (crate::support::rng::unit(crate::support::rng::hash(9, &[i as u64])) * 4.0).floor()
+            })
             .collect();
         let points = PointSet { n, dims: 5, data };
         let tree = super::super::kdtree::KdTree::build(&points);

@@ -1,5 +1,5 @@
-//! Appearance manifolds (thesis ch. 6; Wang et al. 2006): point sets, the kNN graph, geodesic
-//! distances and Isomap.
+//! Appearance manifolds (thesis ch. 6; Wang et al. 2006): the kNN graph, geodesic distances and
+//! Isomap over point sets (`points/`).
 
 pub mod degree;
 pub mod eigen;
@@ -9,7 +9,5 @@ pub mod isomap;
 pub mod kdtree;
 pub mod knn;
 pub mod path;
-pub mod points_read;
-pub mod points_synthetic;
 pub mod rank;
 pub mod transfer;

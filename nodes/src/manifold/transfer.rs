@@ -15,8 +15,8 @@
 
 use super::evolve::relight;
 use super::path::Path;
-use crate::brdf::ward::PairGeometry;
-use crate::rng;
+use crate::reflectance::ward::PairGeometry;
+use crate::support::rng;
 use crate::types::{BrdfMap, Direction, DirectionPair, Image, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};

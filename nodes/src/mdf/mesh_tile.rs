@@ -6,14 +6,14 @@
 //! through holes — get +∞. CPU path on rayon (f64), GPU path in `mesh_tile.wgsl` (f32); they
 //! agree to 1e-3 texel (tested).
 
-use crate::raytrace::layers::intersect;
+use crate::support::raytrace::layers::intersect;
 use crate::types::{Direction, Mesh};
 use mesoflow_runtime::{Gpu, NodeContext, NodeError};
 use rayon::prelude::*;
 
 /// The shader: the shared ray–triangle test, then the tile walk.
 pub(crate) const WGSL: &str = concat!(
-    include_str!("../raytrace/triangle.wgsl"),
+    include_str!("../support/raytrace/triangle.wgsl"),
     include_str!("mesh_tile.wgsl")
 );
 
@@ -208,7 +208,7 @@ pub fn tabulate_gpu(
     ]
     .concat();
     let rows = height * views.len();
-    let pass = crate::gpu::Pass2d {
+    let pass = crate::support::gpu::Pass2d {
         label: "mdf.tabulate (mesh tile)",
         shader: WGSL,
         entry: "main",
@@ -217,7 +217,7 @@ pub fn tabulate_gpu(
         output_len: width * rows,
         grid: (width as u32, rows as u32),
     };
-    Ok((crate::gpu::compute_2d(gpu, &pass)?, depth / texel))
+    Ok((crate::support::gpu::compute_2d(gpu, &pass)?, depth / texel))
 }
 
 #[cfg(test)]
@@ -365,6 +365,6 @@ mod tests {
             }
             tested += 1;
         }
-        crate::gpu::require_tested(tested);
+        crate::support::gpu::require_tested(tested);
     }
 }

@@ -61,8 +61,8 @@ pub struct Tabulate;
 /// The table is f32 per texel and view, held twice at its peak (the result and the GPU's
 /// read-back buffer, or the rank-r reconstruction).
 fn table_fits(width: usize, height: usize, views: usize) -> Result<(), NodeError> {
-    let entries = crate::memory::product(&[width as u64, height as u64, views as u64]);
-    crate::memory::check_param(
+    let entries = crate::support::memory::product(&[width as u64, height as u64, views as u64]);
+    crate::support::memory::check_param(
         entries.saturating_mul(8),
         &format!("an MDF of {width} × {height} texels × {views} views"),
         "resolution",
@@ -306,7 +306,7 @@ fn tabulate_gpu(gpu: &Gpu, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, Node
             "too many views × rows for one dispatch",
         ));
     }
-    let pass = crate::gpu::Pass2d {
+    let pass = crate::support::gpu::Pass2d {
         label: "mdf.tabulate",
         shader: WGSL,
         entry: "main",
@@ -315,7 +315,7 @@ fn tabulate_gpu(gpu: &Gpu, hf: &HeightField, s: &Setup) -> Result<Vec<f32>, Node
         output_len: s.width * rows,
         grid: (s.width as u32, rows as u32),
     };
-    crate::gpu::compute_2d(gpu, &pass)
+    crate::support::gpu::compute_2d(gpu, &pass)
 }
 
 #[cfg(test)]
@@ -560,6 +560,6 @@ mod tests {
             assert!(worst < 2e-5, "{}: worst {worst:e} texel", gpu.describe());
             tested += 1;
         }
-        crate::gpu::require_tested(tested);
+        crate::support::gpu::require_tested(tested);
     }
 }

@@ -16,8 +16,8 @@
 //! the seam the two sides meet exactly. Normals are the displaced surface's, averaged over every
 //! triangle that meets a position.
 
-use crate::geometry::{add, cross, mul, normalize, sub, V3};
 use crate::render::material::texel_taps;
+use crate::support::geometry::{add, cross, mul, normalize, sub, V3};
 use crate::types::{HeightField, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -420,7 +420,7 @@ mod tests {
         for (q, nrm) in m.positions.iter().zip(&m.normals) {
             let ring = normalize([q[0] as f64, 0.0, q[2] as f64]).unwrap();
             let out = sub(q.map(|x| x as f64), mul(ring, 1.0));
-            assert!(crate::geometry::dot(out, nrm.map(|x| x as f64)) > 0.0);
+            assert!(crate::support::geometry::dot(out, nrm.map(|x| x as f64)) > 0.0);
         }
     }
 

@@ -142,8 +142,10 @@ impl Node for FitDipole {
                 .fold(0.0f64, f64::max);
             let alpha_hi = 1.0 - (1.0 - alpha_hi) / 3.0;
             let max_events = ((1e-8f64).ln() / alpha_hi.ln()).clamp(1_000.0, 200_000.0) as u32;
-            let watch =
-                crate::progress::Counter::new(ctx, crate::sss::montecarlo::chunks(p.photons));
+            let watch = crate::support::progress::Counter::new(
+                ctx,
+                crate::sss::montecarlo::chunks(p.photons),
+            );
             table = WhiteTable::build(p.eta, p.photons, p.seed, max_events, &watch);
             ctx.check_cancel()?;
             limit = Some(alpha_hi);
@@ -463,7 +465,7 @@ mod tests {
                 points: 96,
                 ..Default::default()
             },
-            &crate::progress::Counter::none(),
+            &crate::support::progress::Counter::none(),
         )
         .profile
     }
@@ -531,7 +533,13 @@ mod tests {
         // (200 000 photons, another seed) are independent runs of the same physics, so what is
         // left is Monte Carlo noise, not model bias. 5000 events: α′^5000 < 1e-40 at the
         // highest albedo here (0.98). Measured: within 1.7% at 400 000 table photons.
-        let table = WhiteTable::build(1.3, 200_000, 99, 5_000, &crate::progress::Counter::none());
+        let table = WhiteTable::build(
+            1.3,
+            200_000,
+            99,
+            5_000,
+            &crate::support::progress::Counter::none(),
+        );
         let fwd = Forward::Table(&table);
         let mut worst: f64 = 0.0;
         for (s, a) in [(1.0, 0.02), (0.5, 0.1)] {
@@ -657,7 +665,13 @@ mod tests {
         // (no code shared with the white table, another generator, another absorption and
         // Fresnel scheme), so the fit recovers coefficients only if both simulations are right.
         // Bound: the same 5% as the same-code check; measured below.
-        let table = WhiteTable::build(1.3, 200_000, 17, 5_000, &crate::progress::Counter::none());
+        let table = WhiteTable::build(
+            1.3,
+            200_000,
+            17,
+            5_000,
+            &crate::support::progress::Counter::none(),
+        );
         let fwd = Forward::Table(&table);
         let (s, a) = ([1.0, 2.0, 0.5], [0.02, 0.04, 0.01]);
         let prof = analog_profile(s, a, 1.3, 100_000);

@@ -18,16 +18,16 @@
 //! A flat height field gives f = fv = 1, the homogeneous render; images, when given, are used as
 //! they are (RGB, direction-independent, periodic bilinear lookup) and take precedence.
 
-use crate::geometry::{dot, V3};
 use crate::heightfield::raycast::Caster;
-use crate::progress::Counter;
-use crate::raytrace::footprint;
-use crate::raytrace::layers::Frag;
-use crate::raytrace::light::Light;
-use crate::raytrace::shadow::ShadowMap;
 use crate::render::material::{texel_taps, Material, Source};
 use crate::render::shade::{Scene, Surface};
 use crate::sss::render::{self as sss_render, Weights};
+use crate::support::geometry::{dot, V3};
+use crate::support::progress::Counter;
+use crate::support::raytrace::footprint;
+use crate::support::raytrace::layers::Frag;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::shadow::ShadowMap;
 use crate::types::{Btf, BtfBasis, DiffusionProfile, HeightField, Image, Mesh, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -353,9 +353,9 @@ impl Weights for Qh<'_> {
 mod tests {
     use super::*;
     use crate::mesh::primitive::{self, Shape};
-    use crate::raytrace::camera::CameraParams;
-    use crate::raytrace::light::LightParams;
     use crate::sss::profile;
+    use crate::support::raytrace::camera::CameraParams;
+    use crate::support::raytrace::light::LightParams;
     use crate::types::{Direction, DirectionPair};
 
     /// A 4×4 BTF whose every texel and direction pair holds `value`.
@@ -409,7 +409,7 @@ mod tests {
                 model: profile::Model::Dipole,
                 ..Default::default()
             },
-            &crate::progress::Counter::none(),
+            &crate::support::progress::Counter::none(),
         )
         .profile;
         let p = Params {

@@ -48,7 +48,7 @@ impl WhiteTable {
         photons: u64,
         seed: u64,
         max_events: u32,
-        watch: &crate::progress::Counter,
+        watch: &crate::support::progress::Counter,
     ) -> WhiteTable {
         let (exits, dropped) = montecarlo::white(eta, photons, seed, max_events, watch);
         let mut edges = vec![0.0];
@@ -147,7 +147,13 @@ mod tests {
     fn the_table_integrates_to_its_total() {
         // ∫ R̂ 2πρ dρ over the bins equals the total up to the interpolation's error between
         // bin centres (the bins are 8% wide; 2% bound), at two albedos.
-        let t = WhiteTable::build(1.3, 20_000, 5, 4_000, &crate::progress::Counter::none());
+        let t = WhiteTable::build(
+            1.3,
+            20_000,
+            5,
+            4_000,
+            &crate::support::progress::Counter::none(),
+        );
         for alpha in [0.8, 0.97] {
             let mut integral = 0.0;
             let n = 4000;

@@ -5,9 +5,9 @@
 
 use super::material::{Material, Source};
 use super::shade::Scene;
-use crate::geometry::{bounding_sphere, dot, sub};
-use crate::gpu::read_back;
-use crate::raytrace::camera::Camera;
+use crate::support::geometry::{bounding_sphere, dot, sub};
+use crate::support::gpu::read_back;
+use crate::support::raytrace::camera::Camera;
 use crate::types::{Centring, ColorSpace};
 use mesoflow_runtime::{Gpu, NodeError};
 use wgpu::util::DeviceExt;
@@ -16,7 +16,7 @@ use wgpu::util::DeviceExt;
 pub(crate) const PEEL_WGSL: &str = concat!(include_str!("raster.wgsl"), include_str!("peel.wgsl"));
 /// The resolve shader: the shared ray–triangle test, then the shell test and shading.
 pub(crate) const RESOLVE_WGSL: &str = concat!(
-    include_str!("../raytrace/triangle.wgsl"),
+    include_str!("../support/raytrace/triangle.wgsl"),
     include_str!("resolve.wgsl")
 );
 

@@ -528,7 +528,7 @@ mod tests {
         let m = MdfLookup::new(&mdf);
         let caster = Caster::new(&hf);
         let top = hf.min_max().1 as f64;
-        let r = |i: u64, k: u64| crate::rng::unit(crate::rng::hash(7, &[i, k]));
+        let r = |i: u64, k: u64| crate::support::rng::unit(crate::support::rng::hash(7, &[i, k]));
         let (mut truth, mut ours, mut wrong, n) = (0.0, 0.0, 0, 4000);
         for i in 0..n {
             let (gx, gy) = (r(i, 0) * 64.0, r(i, 1) * 64.0);

@@ -8,6 +8,5 @@ pub mod relief_gpu;
 pub mod relief_scene;
 pub mod render_mesh;
 pub mod rings;
-pub mod scene_footprint;
 pub mod shade;
 pub mod volume;

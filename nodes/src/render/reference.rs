@@ -22,11 +22,11 @@
 
 use super::material::texel_taps;
 use super::volume::{self, Medium};
-use crate::btf::brdf::{self, Model};
-use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
-use crate::raytrace::camera::Camera;
-use crate::raytrace::light::Light;
-use crate::raytrace::tracer::{Hit, Tracer};
+use crate::reflectance::models::{self as brdf, Model};
+use crate::support::geometry::{add, cross, dot, mul, normalize, sub, V3};
+use crate::support::raytrace::camera::Camera;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::tracer::{Hit, Tracer};
 use crate::types::{Image, Mesh, NormalMap, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -120,7 +120,7 @@ impl Node for Reference {
             return Err(NodeError::param("specular", "must be in [0, 1]"));
         }
         if let Some(a) = p.boundary_roughness {
-            if !(crate::optics::dielectric::MIN_ROUGHNESS..=1.0).contains(&a) {
+            if !(crate::support::optics::dielectric::MIN_ROUGHNESS..=1.0).contains(&a) {
                 return Err(NodeError::param(
                     "boundary_roughness",
                     "must be in [0.01, 1]: a narrower lobe makes next-event estimation through it noise",
@@ -300,8 +300,11 @@ fn camera_ray(camera: &Camera, p: &Params, x: usize, y: usize, s: usize) -> (V3,
     let n = p.samples as usize;
     let side = (n as f64).sqrt().round() as usize;
     let pixel_id = (y * camera.width as usize + x) as u64;
-    let h = crate::rng::hash(p.seed, &[pixel_id, s as u64]);
-    let (jx, jy) = (crate::rng::unit(h), crate::rng::unit(crate::rng::mix(h)));
+    let h = crate::support::rng::hash(p.seed, &[pixel_id, s as u64]);
+    let (jx, jy) = (
+        crate::support::rng::unit(h),
+        crate::support::rng::unit(crate::support::rng::mix(h)),
+    );
     let (sx, sy) = if side * side == n {
         (
             ((s % side) as f64 + jx) / side as f64,
@@ -329,7 +332,7 @@ fn translucent(
     for s in 0..p.samples as usize {
         let ray = camera_ray(camera, p, x, y, s);
         // The path's own stream, apart from the sub-pixel position's hash.
-        let mut rng = crate::rng::Stream(crate::rng::hash(
+        let mut rng = crate::support::rng::Stream(crate::support::rng::hash(
             p.seed ^ 0x9a7e_5eed,
             &[pixel_id, s as u64],
         ));
@@ -466,8 +469,8 @@ fn sample(img: &Image, u: f64, v: f64) -> [f64; 3] {
 mod tests {
     use super::*;
     use crate::mesh::primitive::{self, Shape};
-    use crate::raytrace::camera::CameraParams;
-    use crate::raytrace::light::LightParams;
+    use crate::support::raytrace::camera::CameraParams;
+    use crate::support::raytrace::light::LightParams;
     use mesoflow_testkit::node::OutputsExt;
     use std::f64::consts::PI;
     use std::sync::Arc;

@@ -16,12 +16,12 @@
 use super::relief_gpu;
 pub use super::relief_scene::Relief;
 use super::shade::{surface_at, Surface};
-use crate::btf::brdf::{self, Model};
-use crate::geometry::{dot, mul, normalize, V3};
-use crate::progress::Counter;
-use crate::raytrace::camera::Camera;
-use crate::raytrace::layers::{self, Frag};
-use crate::raytrace::light::Light;
+use crate::reflectance::models::{self as brdf, Model};
+use crate::support::geometry::{dot, mul, normalize, V3};
+use crate::support::progress::Counter;
+use crate::support::raytrace::camera::Camera;
+use crate::support::raytrace::layers::{self, Frag};
+use crate::support::raytrace::light::Light;
 use crate::types::{BrdfMap, HeightField, Image, Mesh, NormalMap, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -434,8 +434,8 @@ mod tests {
     use super::*;
     use crate::btf::capture::{self, Capture};
     use crate::btf::directions::DirectionSet;
-    use crate::raytrace::camera::CameraParams;
-    use crate::raytrace::light::LightParams;
+    use crate::support::raytrace::camera::CameraParams;
+    use crate::support::raytrace::light::LightParams;
     use crate::types::Btf;
     use mesoflow_testkit::node::OutputsExt;
     use std::sync::Arc;
@@ -674,6 +674,6 @@ mod tests {
             assert!(mean < 5e-4, "{name}: {mean}");
             tested += 1;
         }
-        crate::gpu::require_tested(tested);
+        crate::support::gpu::require_tested(tested);
     }
 }

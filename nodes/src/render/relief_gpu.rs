@@ -3,9 +3,9 @@
 
 use super::gpu_render::{cam_block, raster_pass, raster_pipeline};
 use super::relief_scene::Relief;
-use crate::geometry::bounding_sphere;
-use crate::gpu::read_back;
-use crate::raytrace::camera::Camera;
+use crate::support::geometry::bounding_sphere;
+use crate::support::gpu::read_back;
+use crate::support::raytrace::camera::Camera;
 use mesoflow_runtime::{Gpu, NodeError};
 use wgpu::util::DeviceExt;
 

@@ -2,7 +2,7 @@
 //! field, its gradients and reflectance maps, the mesh's texel aspect and the search's settings.
 //! Both the CPU path (`relief.rs`) and the GPU pass (`relief_gpu.rs`) read it.
 
-use crate::raytrace::light::Light;
+use crate::support::raytrace::light::Light;
 use crate::types::Mesh;
 
 /// Everything a pixel's shading reads, prepared once.

@@ -40,11 +40,11 @@
 //! the receiver's shell, so shadows between parts of the mesh and from silhouette mesostructure
 //! appear, while the self-shadowing inside a tile, already in the BTF, is not applied twice.
 use super::material::{Material, MdfLookup};
-use crate::geometry::{add, cross, dot, mul, normalize, sub, V3};
-use crate::raytrace::layers::Binned;
-use crate::raytrace::layers::{Frag, Layers};
-use crate::raytrace::light::Light;
-use crate::raytrace::shadow::{shadow_bias, LazyShadowMap};
+use crate::support::geometry::{add, cross, dot, mul, normalize, sub, V3};
+use crate::support::raytrace::layers::Binned;
+use crate::support::raytrace::layers::{Frag, Layers};
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::shadow::{shadow_bias, LazyShadowMap};
 use crate::types::{Mdf, Mesh};
 
 pub struct Scene<'a> {
@@ -147,7 +147,7 @@ impl Side {
         let q = &self.q;
         let mut best = f64::INFINITY;
         for (p0, p1, p2) in [(q[0], q[1], q[2]), (q[0], q[2], q[3])] {
-            if let Some((t, ..)) = crate::raytrace::layers::intersect(o, d, p0, p1, p2) {
+            if let Some((t, ..)) = crate::support::raytrace::layers::intersect(o, d, p0, p1, p2) {
                 if t > after && t < best {
                     best = t;
                 }

@@ -21,14 +21,14 @@
 //! rays estimate the medium's transmittance by tracking with the smallest extinction, each
 //! channel weighted by the rest (≤ 1), so they stop as soon as the light is out of reach.
 
-use crate::geometry::rotate;
-use crate::geometry::{add, dot, mul, V3};
-use crate::optics::dielectric::Boundary;
-use crate::optics::phase::henyey_greenstein;
-use crate::optics::phase::sample_hg;
-use crate::raytrace::light::Light;
-use crate::raytrace::tracer::Tracer;
-use crate::rng::Stream;
+use crate::support::geometry::rotate;
+use crate::support::geometry::{add, dot, mul, V3};
+use crate::support::optics::dielectric::Boundary;
+use crate::support::optics::phase::henyey_greenstein;
+use crate::support::optics::phase::sample_hg;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::tracer::Tracer;
+use crate::support::rng::Stream;
 use crate::types::ScatteringMaterial;
 use std::f64::consts::PI;
 
@@ -383,7 +383,7 @@ fn transmittance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raytrace::light::LightParams;
+    use crate::support::raytrace::light::LightParams;
     use rayon::prelude::*;
 
     #[test]
@@ -434,7 +434,7 @@ mod tests {
                     let (mut s, mut s2) = ([0.0; 3], [0.0; 3]);
                     let mut tally = Tally::default();
                     for i in c * CHUNK..(c + 1) * CHUNK {
-                        let mut rng = Stream(crate::rng::hash(11, &[i]));
+                        let mut rng = Stream(crate::support::rng::hash(11, &[i]));
                         let (x, y) = (0.4 * rng.unit() - 0.2, 0.4 * rng.unit() - 0.2);
                         let l = radiance(
                             &scene,
@@ -459,7 +459,7 @@ mod tests {
                 let mean = sums.iter().map(|s| s.0[k]).sum::<f64>() / n;
                 let sq = sums.iter().map(|s| s.1[k]).sum::<f64>() / n;
                 let se = ((sq - mean * mean) / (n - 1.0)).sqrt();
-                let h = crate::optics::chandrasekhar::h_function(omega);
+                let h = crate::support::optics::chandrasekhar::h_function(omega);
                 let want = 2.0 * omega / (4.0 * PI) * mu0 / (mu + mu0) * h(mu) * h(mu0);
                 // Five standard errors, plus 0.5% for the H function's grid and the cube's
                 // finite size.

@@ -4,8 +4,8 @@
 //! dipole integrated along the refracted beam, plus the exact single-scattering term). Lengths
 //! in mm, coefficients in mm⁻¹, one channel at a time.
 
-use crate::optics::fresnel;
-use crate::optics::phase::henyey_greenstein;
+use crate::support::optics::fresnel;
+use crate::support::optics::phase::henyey_greenstein;
 use std::f64::consts::PI;
 
 /// Depth samples along the beam, as Habel et al. suggest for a tabulated profile.

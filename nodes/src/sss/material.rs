@@ -345,7 +345,7 @@ mod tests {
                     model,
                     ..Default::default()
                 },
-                &crate::progress::Counter::none(),
+                &crate::support::progress::Counter::none(),
             )
             .profile;
             for (c, want) in [0.3, 0.6, 0.9].iter().enumerate() {

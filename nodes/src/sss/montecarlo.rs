@@ -8,12 +8,12 @@
 //! every photon contributes. Deterministic: photons run in chunks of `CHUNK`, chunk c draws from
 //! SplitMix64 seeded by hash(seed, channel, c), and chunk tallies are added in chunk order.
 
-use crate::geometry::rotate;
-use crate::optics::fresnel;
-use crate::optics::phase::sample_hg;
-use crate::progress::Counter;
-use crate::rng;
-use crate::rng::Stream;
+use crate::support::geometry::rotate;
+use crate::support::optics::fresnel;
+use crate::support::optics::phase::sample_hg;
+use crate::support::progress::Counter;
+use crate::support::rng;
+use crate::support::rng::Stream;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 

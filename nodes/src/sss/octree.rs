@@ -81,7 +81,7 @@ impl Octree {
             lo,
             hi,
             centre: centre.map(|c| c / weight),
-            normal: crate::geometry::normalize(normal).unwrap_or([0.0; 3]),
+            normal: crate::support::geometry::normalize(normal).unwrap_or([0.0; 3]),
             power,
             area: count as f64 * self.area_each,
             children: Vec::new(),
@@ -258,7 +258,7 @@ mod tests {
             .into_iter()
             .enumerate()
             .map(|(i, s)| Source {
-                n: crate::geometry::normalize([(i % 7) as f64 * 0.1, 0.2, 1.0]).unwrap(),
+                n: crate::support::geometry::normalize([(i % 7) as f64 * 0.1, 0.2, 1.0]).unwrap(),
                 ..s
             })
             .collect();

@@ -6,8 +6,8 @@
 //! 0.75 × spacing (dart throwing on a hash grid). The result is evenly spread without a grid's
 //! aliasing; its count is close to area / spacing², and each point gets area / count.
 
-use crate::geometry::{cross, length, sub};
-use crate::rng;
+use crate::support::geometry::{cross, length, sub};
+use crate::support::rng;
 use crate::types::Mesh;
 use std::collections::HashMap;
 

@@ -13,7 +13,7 @@
 use super::diffusion::Medium;
 use super::dipole::Dipole;
 use super::montecarlo;
-use crate::progress::Counter;
+use crate::support::progress::Counter;
 use crate::types::{DiffusionProfile, ScatteringMaterial};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};

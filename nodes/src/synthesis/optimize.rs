@@ -141,7 +141,7 @@ pub fn synthesize<E>(
         }
         for &size in sizes {
             let grid = Grid::new(w, h, size, (size / 4).max(1), s.periodic);
-            let seed = crate::rng::hash(s.seed, &[*level as u64, size as u64]);
+            let seed = crate::support::rng::hash(s.seed, &[*level as u64, size as u64]);
             let mut field = match &sources {
                 Some(src) => patches::field_from_sources(ex, &grid, src),
                 None => patches::random_field(ex, size, grid.len(), seed),
@@ -174,7 +174,7 @@ pub fn synthesize<E>(
                     &feats,
                     &mut field,
                     rounds,
-                    crate::rng::mix(seed ^ it as u64),
+                    crate::support::rng::mix(seed ^ it as u64),
                 );
                 let dim = (size * size * ex.channels) as f64;
                 let dists: Vec<f64> = field.iter().map(|m| (m.d2 as f64 / dim).sqrt()).collect();
@@ -308,7 +308,7 @@ fn update(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng;
+    use crate::support::rng;
 
     /// Blobs: a smooth random field thresholded softly, a texture with structure at a few scales.
     pub fn blobs(w: usize, h: usize, seed: u64) -> Plane {

@@ -3,7 +3,7 @@
 //! Jacobi-style, so every query reads the previous round's field and the result does not depend
 //! on the thread count, and an exhaustive search to check it against.
 
-use crate::rng;
+use crate::support::rng;
 use rayon::prelude::*;
 
 /// Interleaved f32 channels, row 0 at the top.

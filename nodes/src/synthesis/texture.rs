@@ -515,7 +515,8 @@ mod tests {
         // over the halves. Target guide: 1 on the top half, 0 below. The output must be bright
         // on top and dark below.
         let noise = |x: usize, y: usize| {
-            crate::rng::unit(crate::rng::hash(3, &[x as u64, y as u64])) as f32 * 0.2
+            crate::support::rng::unit(crate::support::rng::hash(3, &[x as u64, y as u64])) as f32
+                * 0.2
         };
         let ex = image(40, 40, |x, y| {
             if x < 20 {

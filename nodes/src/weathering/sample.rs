@@ -14,9 +14,9 @@
 //! (`BrdfMap`) and two masks marking the least (ω ≤ 0.02) and most (ω ≥ 0.98) weathered pixels,
 //! the sets a user would mark for `manifold.degree`.
 
-use crate::brdf::ward::PairGeometry;
 use crate::btf::directions::DirectionSet;
-use crate::rng;
+use crate::reflectance::ward::PairGeometry;
+use crate::support::rng;
 use crate::types::{BrdfMap, Btf, DirectionPair, Image, NormalMap, WARD_PARAMS};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port};
@@ -159,8 +159,8 @@ impl Node for WeatheringSample {
         let pairs =
             (p.views.directions().len() as u64).saturating_mul(p.lights.directions().len() as u64);
         let pixels = u64::from(p.size) * u64::from(p.size);
-        crate::memory::check_param(
-            crate::memory::product(&[pairs, pixels, 3, 4]),
+        crate::support::memory::check_param(
+            crate::support::memory::product(&[pairs, pixels, 3, 4]),
             &format!("a {0} × {0} capture under {pairs} direction pairs", p.size),
             "lights",
         )
@@ -308,7 +308,7 @@ pub fn generate(p: &Params) -> Sample {
                 }
                 Reflectance::CookTorrance => {
                     let n = normals.as_ref().map_or([0.0, 0.0, 1.0], |nv| nv[i]);
-                    super::cook_torrance::value(&pairs[pair], n, q[c], q[3], q[4])
+                    crate::reflectance::cook_torrance::value(&pairs[pair], n, q[c], q[3], q[4])
                 }
             };
             if p.noise > 0.0 {

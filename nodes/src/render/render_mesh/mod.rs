@@ -11,12 +11,12 @@ pub mod validity;
 
 use super::material::{Material, MdfLookup, Source};
 use super::shade::{shell_sides, texel_aspect, Scene};
-use crate::geometry::{bounding_sphere, normalize, sub};
-use crate::progress::Counter;
-use crate::raytrace::camera::Camera;
-use crate::raytrace::footprint;
-use crate::raytrace::layers;
-use crate::raytrace::light::Light;
+use crate::support::geometry::{bounding_sphere, normalize, sub};
+use crate::support::progress::Counter;
+use crate::support::raytrace::camera::Camera;
+use crate::support::raytrace::footprint;
+use crate::support::raytrace::layers;
+use crate::support::raytrace::light::Light;
 use crate::types::{Btf, BtfBasis, Image, Mdf, Mesh};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};
@@ -134,12 +134,12 @@ impl Node for RenderMesh {
         } else {
             0
         };
-        crate::memory::check_param(
+        crate::support::memory::check_param(
             pixels.saturating_mul(per_texel),
             &format!("a {w} × {h} render with {} layers", p.layers),
             "camera",
         )?;
-        crate::memory::check_param(
+        crate::support::memory::check_param(
             texels.saturating_mul(8),
             &format!("a {0} × {0} shadow map", p.shadow_resolution),
             "shadow_resolution",
@@ -432,7 +432,7 @@ pub fn render_gpu(
             p.shadow_resolution,
         )?;
         let cam = shadow_camera(scene, p.shadow_resolution)?;
-        let bias = crate::raytrace::shadow::shadow_bias(
+        let bias = crate::support::raytrace::shadow::shadow_bias(
             bounding_sphere(scene.mesh).1,
             p.shadow_resolution,
         );

@@ -3,8 +3,8 @@
 use super::*;
 use crate::btf::directions::DirectionSet;
 use crate::mesh::primitive::{build, Params as MeshParams, Shape};
-use crate::raytrace::camera::CameraParams;
-use crate::raytrace::light::LightParams;
+use crate::support::raytrace::camera::CameraParams;
+use crate::support::raytrace::light::LightParams;
 use crate::types::{Direction, DirectionPair, HeightField};
 use mesoflow_testkit::node::OutputsExt;
 use std::sync::Arc;
@@ -21,7 +21,7 @@ pub(crate) fn test_btf(n: usize, views: &[[f64; 2]], lights: &[[f64; 2]]) -> Btf
         })
         .collect();
     let data = (0..pairs.len() * 3 * n * n)
-        .map(|i| crate::rng::unit(crate::rng::hash(7, &[i as u64])) as f32)
+        .map(|i| crate::support::rng::unit(crate::support::rng::hash(7, &[i as u64])) as f32)
         .collect();
     Btf {
         width: n,
@@ -279,7 +279,7 @@ fn an_open_planes_shell_has_sides_rays_leave_and_enter_by_on_cpu_and_gpu() {
             Err(e) => panic!("{}: {e}", gpu.describe()),
         }
     }
-    crate::gpu::require_tested(tested);
+    crate::support::gpu::require_tested(tested);
 }
 
 /// One orthographic pixel looking at the origin from 45° above +x.
@@ -304,7 +304,7 @@ fn parallax_moves_the_lookup_by_the_mdf_offset() {
     let material = Material::new(Source::Raw(&btf));
     let mesh = plane();
     let cam = one_ray_at_45_degrees();
-    let layers = crate::raytrace::layers::trace(&mesh, &cam, 1, &Counter::none());
+    let layers = crate::support::raytrace::layers::trace(&mesh, &cam, 1, &Counter::none());
     for (parallax, want_u) in [(false, 0.5), (true, 0.0)] {
         let scene = Scene {
             mesh: &mesh,
@@ -361,7 +361,7 @@ fn a_stretched_tile_is_looked_up_in_its_own_proportions() {
         );
     }
     let cam = one_ray_at_45_degrees();
-    let layers = crate::raytrace::layers::trace(&mesh, &cam, 1, &Counter::none());
+    let layers = crate::support::raytrace::layers::trace(&mesh, &cam, 1, &Counter::none());
     let scene = Scene {
         mesh: &mesh,
         material: &material,
@@ -642,7 +642,7 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
         let e = scene_in(Some(&gpu), false, &huge).unwrap_err().to_string();
         assert!(e.contains("camera") && e.contains("exceeds"), "{e}");
     }
-    crate::gpu::require_tested(tested);
+    crate::support::gpu::require_tested(tested);
 }
 
 #[test]

@@ -5,9 +5,9 @@
 //! rings there). Each is measured without rendering, from the mesh, the camera and the light, and
 //! becomes a warning with its numbers where it passes its threshold.
 
-use crate::geometry::{cross, dot, length, normalize as unit, sub, V3};
-use crate::raytrace::camera::CameraParams;
-use crate::raytrace::light::LightParams;
+use crate::support::geometry::{cross, dot, length, normalize as unit, sub, V3};
+use crate::support::raytrace::camera::CameraParams;
+use crate::support::raytrace::light::LightParams;
 use crate::types::Mesh;
 
 /// The shell's depth over the mesh's radius of curvature above which the relief is drawn bent.

@@ -15,9 +15,9 @@
 //! against the volumetric truth moved by at most 0.004 (every sample gathering: 0.002).
 
 use super::setup::Setup;
-use crate::geometry::{dot, V3};
-use crate::progress::Counter;
 use crate::sss::octree::Source;
+use crate::support::geometry::{dot, V3};
+use crate::support::progress::Counter;
 use rayon::prelude::*;
 
 use super::bounce::Nearest;

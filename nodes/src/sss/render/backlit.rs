@@ -6,9 +6,9 @@
 //! eye (or the orthographic view), without occlusion: an estimate from the scene, before a
 //! pixel is rendered.
 
-use crate::geometry::{dot, sub};
-use crate::raytrace::camera::CameraParams;
 use crate::sss::octree::Source;
+use crate::support::geometry::{dot, sub};
+use crate::support::raytrace::camera::CameraParams;
 
 /// The share of the entering light over which `sss.render` warns: most of it.
 pub(super) const WARN: f64 = 0.5;

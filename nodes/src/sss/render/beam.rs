@@ -39,11 +39,11 @@
 
 use super::directional::refracted;
 use super::expneg::exp_neg;
-use crate::geometry::{add, dot, mul, sub, V3};
-use crate::raytrace::light::Light;
-use crate::raytrace::tracer::Tracer;
 use crate::sss::dipole::Dipole;
 use crate::sss::octree::Octree;
+use crate::support::geometry::{add, dot, mul, sub, V3};
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::ScatteringMaterial;
 use rayon::prelude::*;
 use std::sync::OnceLock;
@@ -485,7 +485,7 @@ impl Collision {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raytrace::light::LightParams;
+    use crate::support::raytrace::light::LightParams;
 
     fn marble() -> ScatteringMaterial {
         ScatteringMaterial {

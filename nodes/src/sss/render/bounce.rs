@@ -5,11 +5,11 @@
 //! its nearest sample's). Their diffuse transmittance 1 − Fdr lets it in, where it adds to the
 //! sample's own transmitted irradiance. Each bounce repeats this from the last one's light.
 
-use crate::geometry::rotate;
-use crate::geometry::{add, dot, mul, V3};
-use crate::raytrace::tracer::Tracer;
-use crate::rng::Stream;
 use crate::sss::points::SamplePoint;
+use crate::support::geometry::rotate;
+use crate::support::geometry::{add, dot, mul, V3};
+use crate::support::raytrace::tracer::Tracer;
+use crate::support::rng::Stream;
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -122,7 +122,7 @@ impl Nearest {
 
 /// Ray `k` of sample `i`: cosine-distributed about its normal `n` (cos θ = √u), from `seed`.
 fn direction(seed: u64, i: usize, k: u64, n: V3) -> V3 {
-    let mut rng = Stream(crate::rng::hash(seed, &[i as u64, k]));
+    let mut rng = Stream(crate::support::rng::hash(seed, &[i as u64, k]));
     let cos = rng.unit().sqrt();
     rotate(n, cos, 2.0 * std::f64::consts::PI * rng.unit())
 }

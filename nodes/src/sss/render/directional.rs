@@ -14,9 +14,9 @@
 //! that arrives at a sample from the light's far side (bounced light, or a point behind the
 //! sample's tangent plane) is taken as arriving along the normal.
 
-use crate::geometry::{cross, dot, mul, normalize, sub, V3};
-use crate::optics::fresnel;
-use crate::raytrace::light::Light;
+use crate::support::geometry::{cross, dot, mul, normalize, sub, V3};
+use crate::support::optics::fresnel;
+use crate::support::raytrace::light::Light;
 use crate::types::ScatteringMaterial;
 
 /// The model's constants per channel, and the light.
@@ -144,7 +144,7 @@ pub(super) fn refracted(light: &Light, unit: f64, eta: f64, xi: V3, ni: V3) -> V
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::raytrace::light::LightParams;
+    use crate::support::raytrace::light::LightParams;
 
     fn skin() -> ScatteringMaterial {
         ScatteringMaterial {

@@ -18,9 +18,9 @@
 //! with the deep field's H(μ). Exact in both limits, at η = 1 only; g ≠ 0 through the reduced
 //! albedo.
 
-use crate::optics::chandrasekhar::h_function;
-use crate::optics::fresnel;
-use crate::optics::fresnel::transmit_in;
+use crate::support::optics::chandrasekhar::h_function;
+use crate::support::optics::fresnel;
+use crate::support::optics::fresnel::transmit_in;
 use crate::types::ScatteringMaterial;
 use mesoflow_runtime::NodeError;
 use schemars::JsonSchema;
@@ -251,7 +251,7 @@ mod tests {
         // H function), so per unit exitance it is H(μ)/(2π·∫H(μ)μ dμ). P1's 1 + 1.5μ is the
         // diffusion approximation to it: within 3% for μ ≥ 0.3, 15% at grazing.
         let exit = Exit::new(Emission::P1, 1.0);
-        let h = crate::optics::chandrasekhar::h_function(1.0);
+        let h = crate::support::optics::chandrasekhar::h_function(1.0);
         let steps = 400;
         let first: f64 = (0..steps)
             .map(|k| {
@@ -296,7 +296,7 @@ mod tests {
         };
         let exit = Exit::for_material(Emission::HalfSpace, &m, false).unwrap();
         let (e, mu0) = (2.0, 0.5);
-        let r = crate::optics::chandrasekhar::HalfSpace::new(omega).total(mu0);
+        let r = crate::support::optics::chandrasekhar::HalfSpace::new(omega).total(mu0);
         let own = Local {
             mu0,
             exitance: [e * mu0 * r; 3],

@@ -9,7 +9,7 @@
 //! reduced albedo (the similarity relation). Light arriving from other parts (`bounces`) is
 //! diffuse: its factor is the cosine-weighted mean over the hemisphere.
 
-use crate::optics::chandrasekhar::HalfSpace;
+use crate::support::optics::chandrasekhar::HalfSpace;
 use crate::types::{DiffusionProfile, ScatteringMaterial};
 use mesoflow_runtime::NodeError;
 
@@ -108,8 +108,8 @@ impl Scale {
 
 #[cfg(test)]
 mod tests {
-    use crate::optics::chandrasekhar::HalfSpace;
     use crate::sss::profile::{self as prof, Model};
+    use crate::support::optics::chandrasekhar::HalfSpace;
     use crate::types::ScatteringMaterial;
 
     fn total(m: &ScatteringMaterial, model: Model) -> [f64; 3] {
@@ -117,7 +117,7 @@ mod tests {
             model,
             ..Default::default()
         };
-        prof::tabulate(m, &p, &crate::progress::Counter::none())
+        prof::tabulate(m, &p, &crate::support::progress::Counter::none())
             .profile
             .total
     }

@@ -2,11 +2,11 @@
 //! or the brute-force gather in workgroup tiles on the GPU.
 
 use super::setup::Setup;
-use crate::geometry::{normalize, V3};
-use crate::progress::Counter;
-use crate::raytrace::camera::Camera;
-use crate::raytrace::layers::{self, Frag};
-use crate::raytrace::tracer::Tracer;
+use crate::support::geometry::{normalize, V3};
+use crate::support::progress::Counter;
+use crate::support::raytrace::camera::Camera;
+use crate::support::raytrace::layers::{self, Frag};
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::Mesh;
 use mesoflow_runtime::NodeError;
 use rayon::prelude::*;
@@ -237,9 +237,9 @@ pub(super) fn gather_gpu(
         })
         .collect();
     let params: Vec<&[u8]> = params.iter().map(Vec::as_slice).collect();
-    let out = crate::gpu::compute_2d_sequence(
+    let out = crate::support::gpu::compute_2d_sequence(
         gpu,
-        &crate::gpu::Pass2d {
+        &crate::support::gpu::Pass2d {
             label: "sss.render",
             shader: WGSL,
             entry: "main",

@@ -13,8 +13,8 @@
 //! point's tangent plane (the source as deep below it as it lies, a slab's multipole for the
 //! local thickness) sends 3× too much light through the torus's tube.
 
-use crate::geometry::{dot, sub, V3};
 use crate::sss::dipole::Dipole;
+use crate::support::geometry::{dot, sub, V3};
 use crate::types::ScatteringMaterial;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

@@ -15,10 +15,10 @@ use super::body::Body;
 use super::bounce::Nearest;
 use super::setup::{shadow_camera, Bounced, Setup};
 use super::{prepare, Energy, Geometry, Homogeneous, Mode, Params, Prepared, Sources};
-use crate::raytrace::light::Light;
-use crate::raytrace::shadow::ShadowMap;
-use crate::raytrace::tracer::Tracer;
 use crate::sss::octree::Source;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::shadow::ShadowMap;
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::{DiffusionProfile, LightBounced, Mesh, ScatteringMaterial, SssLighting};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::codec::Encoder;
@@ -363,10 +363,10 @@ pub(super) fn rebuild(
 mod tests {
     use super::*;
     use crate::mesh::primitive::{self, Shape};
-    use crate::progress::Counter;
-    use crate::raytrace::camera::CameraParams;
     use crate::sss::profile;
     use crate::sss::render::{render, render_lit};
+    use crate::support::progress::Counter;
+    use crate::support::raytrace::camera::CameraParams;
     use mesoflow_runtime::codec::Decoder;
 
     fn scene() -> (Mesh, ScatteringMaterial, DiffusionProfile) {

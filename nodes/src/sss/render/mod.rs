@@ -35,13 +35,13 @@
 //!
 //! Lengths: the mesh is in world units, `mm_per_unit` converts to the profile's millimetres.
 
-use crate::geometry::V3;
-use crate::progress::Counter;
-use crate::raytrace::camera::Camera;
-use crate::raytrace::footprint::{self, Footprint};
-use crate::raytrace::layers::Frag;
-use crate::raytrace::light::Light;
-use crate::raytrace::tracer::Tracer;
+use crate::support::geometry::V3;
+use crate::support::progress::Counter;
+use crate::support::raytrace::camera::Camera;
+use crate::support::raytrace::footprint::{self, Footprint};
+use crate::support::raytrace::layers::Frag;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::{DiffusionProfile, Image, Mesh, ScatteringMaterial, SssLighting};
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port, Scalar};

@@ -6,11 +6,11 @@ use super::gather::View;
 use super::setup::{irradiance, Setup};
 use super::single::Traced;
 use super::{Params, Weights};
-use crate::geometry::{dot, sub, V3};
-use crate::optics::fresnel::transmit_in;
-use crate::optics::phase::henyey_greenstein;
-use crate::raytrace::light::Light;
-use crate::raytrace::shadow::ShadowMap;
+use crate::support::geometry::{dot, sub, V3};
+use crate::support::optics::fresnel::transmit_in;
+use crate::support::optics::phase::henyey_greenstein;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::shadow::ShadowMap;
 use crate::types::{Image, ScatteringMaterial};
 use rayon::prelude::*;
 

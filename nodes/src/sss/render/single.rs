@@ -14,11 +14,11 @@
 //! distributed as e^(−σt,min t) on [0, T]: deterministic, and no channel's weight exceeds
 //! σs/σt,min.
 
-use crate::geometry::{add, dot, mul, V3};
-use crate::optics::fresnel::transmit_in;
-use crate::optics::phase::henyey_greenstein;
-use crate::raytrace::light::Light;
-use crate::raytrace::tracer::Tracer;
+use crate::support::geometry::{add, dot, mul, V3};
+use crate::support::optics::fresnel::transmit_in;
+use crate::support::optics::phase::henyey_greenstein;
+use crate::support::raytrace::light::Light;
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::ScatteringMaterial;
 
 /// Points along the camera ray inside the object.

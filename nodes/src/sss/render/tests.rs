@@ -3,11 +3,11 @@
 use super::shading::single_scattering;
 use super::*;
 use crate::mesh::primitive::{self, Shape};
-use crate::optics::fresnel;
-use crate::optics::fresnel::transmit_in;
-use crate::raytrace::camera::CameraParams;
-use crate::raytrace::light::LightParams;
 use crate::sss::profile::{self as prof, Model};
+use crate::support::optics::fresnel;
+use crate::support::optics::fresnel::transmit_in;
+use crate::support::raytrace::camera::CameraParams;
+use crate::support::raytrace::light::LightParams;
 use std::f64::consts::PI;
 
 fn medium() -> ScatteringMaterial {
@@ -26,7 +26,7 @@ fn profile_of(m: &ScatteringMaterial) -> DiffusionProfile {
             model: Model::Dipole,
             ..Default::default()
         },
-        &crate::progress::Counter::none(),
+        &crate::support::progress::Counter::none(),
     )
     .profile
 }
@@ -180,7 +180,7 @@ fn gpu_and_cpu_brute_force_agree_past_65536_samples() {
         assert!(e < 5e-5, "{}: {e}", gpu.describe());
         tested += 1;
     }
-    crate::gpu::require_tested(tested);
+    crate::support::gpu::require_tested(tested);
 }
 
 #[test]
@@ -202,7 +202,7 @@ fn gpu_and_cpu_brute_force_agree() {
         assert!(e < 5e-6, "{}: {e}", gpu.describe());
         tested += 1;
     }
-    crate::gpu::require_tested(tested);
+    crate::support::gpu::require_tested(tested);
 }
 
 #[test]
@@ -638,7 +638,7 @@ fn the_defaults_are_the_accurate_configuration_and_auto_follows_the_mesh() {
         eta: 1.0,
         ..medium()
     };
-    let none = crate::progress::Counter::none();
+    let none = crate::support::progress::Counter::none();
     let profile = prof::tabulate(&m, &prof::Params::default(), &none).profile;
     assert_eq!(profile.model, "pbd_multiple");
     let scene = sphere_scene(0.05);

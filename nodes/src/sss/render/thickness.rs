@@ -10,9 +10,9 @@
 //! warns.
 
 use super::Geometry;
-use crate::geometry::{add, dot, mul, V3};
-use crate::raytrace::tracer::Tracer;
 use crate::sss::octree::Source;
+use crate::support::geometry::{add, dot, mul, V3};
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::ScatteringMaterial;
 
 /// Reduced mean free paths across the object under which `sss.render` warns: between the

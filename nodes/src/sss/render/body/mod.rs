@@ -20,10 +20,10 @@
 //! gains −D ∂ψ/∂n at each shaded point, on top of the `exit_normal` gather.
 
 use super::beam::Beams;
-use crate::geometry::{add, dot, mul, sub, V3};
-use crate::raytrace::tracer::Tracer;
 use crate::sss::dipole::Dipole;
 use crate::sss::octree::Octree;
+use crate::support::geometry::{add, dot, mul, sub, V3};
+use crate::support::raytrace::tracer::Tracer;
 use crate::types::{BodyChannel, BodyGrid, Mesh, ScatteringMaterial};
 use mesoflow_runtime::NodeError;
 use rayon::prelude::*;

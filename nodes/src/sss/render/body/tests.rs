@@ -1,10 +1,10 @@
 //! Tests of `body`.
 
 use super::*;
-use crate::geometry::normalize;
 use crate::mesh::primitive::{self, Shape};
 use crate::sss::octree::Source;
 use crate::sss::render::geometry::ExitNormal;
+use crate::support::geometry::normalize;
 
 /// A sphere of radius 1 (world units) whose facets stay within 0.06% of it (1 − cos(π/96)).
 fn unit_ball() -> Mesh {

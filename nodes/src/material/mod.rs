@@ -1,0 +1,3 @@
+//! Edits between materials (`material.transfer`).
+
+pub mod transfer;

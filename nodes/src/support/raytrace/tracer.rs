@@ -1,0 +1,181 @@
+//! Tracing rays against a triangle mesh: a compressed wide BVH (the `obvhs` crate) to find
+//! candidates, intersected in f64 with the mesh's own triangles, so which hit counts is decided
+//! exactly. `render.reference`'s exact shadows and volumetric paths and `sss.render`'s body
+//! geometry, bounces and single scattering all trace through it.
+//!
+//! The last BVH of a large mesh (at least [`KEEP_FROM`] triangles) is kept for the next tracer
+//! of the same triangles (by their hash), so a second frame of one surface in a process (a
+//! camera move in the studio, a sweep's frames, the planner's probes) does not build it again.
+//! The build is deterministic, so the kept BVH is the one a new build would make: same bits.
+
+use crate::support::geometry::{add, cross, mul, normalize, sub, V3};
+use crate::types::Mesh;
+use obvhs::cwbvh::CwBvh;
+use obvhs::ray::{Ray, RayHit};
+use obvhs::triangle::Triangle;
+use std::sync::{Arc, Mutex};
+
+/// Meshes with at least this many triangles keep their BVH for the next tracer (a build of
+/// fewer costs milliseconds; one of the planner's displaced surfaces, millions of triangles,
+/// seconds).
+pub const KEEP_FROM: usize = 100_000;
+
+/// The last kept BVH: its mesh's hash and the BVH (one entry, so at most one BVH a process
+/// outlives its render).
+static KEPT: Mutex<Option<([u8; 32], Arc<CwBvh>)>> = Mutex::new(None);
+
+/// The hash of what the BVH is built from: the positions and the indices.
+fn mesh_hash(mesh: &Mesh) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    h.update(bytemuck::cast_slice(&mesh.positions));
+    h.update(bytemuck::cast_slice(&mesh.indices));
+    *h.finalize().as_bytes()
+}
+
+pub struct Hit {
+    pub tri: usize,
+    pub t: f64,
+    pub b1: f64,
+    pub b2: f64,
+}
+
+/// How far behind its origin a ray enters the BVH (world units). obvhs culls every box the ray
+/// leaves within 10⁻⁴ (an absolute `EPSILON` in its node test), so without it a surface closer
+/// than that to the origin is missed: 3% of the shadow rays from inside a dense medium. Which
+/// hits count is decided in f64 from the true origin (`intersect`: t > 0).
+const BACK_OFF: f64 = 1e-3;
+
+/// The mesh and its BVH.
+pub struct Tracer<'a> {
+    pub mesh: &'a Mesh,
+    bvh: Arc<CwBvh>,
+    /// Shadow-ray offset along the geometric normal: a millionth of the scene's size.
+    pub epsilon: f64,
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(mesh: &'a Mesh) -> Self {
+        let bvh = if mesh.triangles() >= KEEP_FROM {
+            let key = mesh_hash(mesh);
+            let kept = KEPT.lock().ok().and_then(|k| {
+                k.as_ref()
+                    .filter(|(h, _)| *h == key)
+                    .map(|(_, b)| b.clone())
+            });
+            kept.unwrap_or_else(|| {
+                let built = Arc::new(Self::build(mesh));
+                if let Ok(mut k) = KEPT.lock() {
+                    *k = Some((key, built.clone()));
+                }
+                built
+            })
+        } else {
+            Arc::new(Self::build(mesh))
+        };
+        let (lo, hi) = mesh.bounds();
+        let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
+        Tracer {
+            mesh,
+            bvh,
+            epsilon: 1e-6 * size.max(1e-30),
+        }
+    }
+
+    fn build(mesh: &Mesh) -> CwBvh {
+        let v = |i: usize| {
+            let q = mesh.positions[i];
+            glam::Vec3A::new(q[0], q[1], q[2])
+        };
+        let tris: Vec<Triangle> = (0..mesh.triangles())
+            .map(|t| {
+                let [a, b, c] = mesh.corners(t);
+                Triangle {
+                    v0: v(a),
+                    v1: v(b),
+                    v2: v(c),
+                }
+            })
+            .collect();
+        obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &tris,
+            obvhs::BvhBuildParams::medium_build(),
+            &mut std::time::Duration::default(),
+        )
+    }
+
+    /// Triangle `t`'s corners' positions' plane: a point and the unit geometric normal (the
+    /// winding's).
+    pub fn triangle(&self, t: usize) -> (V3, V3) {
+        let [a, b, c] = self
+            .mesh
+            .corners(t)
+            .map(|i| self.mesh.positions[i].map(|x| x as f64));
+        (
+            a,
+            normalize(cross(sub(b, a), sub(c, a))).unwrap_or([0.0, 0.0, 1.0]),
+        )
+    }
+
+    /// Möller–Trumbore in f64 (the CPU ray caster's): distance and barycentrics (of corners
+    /// 1 and 2).
+    fn intersect(&self, t: usize, o: V3, d: V3) -> Option<(f64, f64, f64)> {
+        let [a, b, c] = self
+            .mesh
+            .corners(t)
+            .map(|i| self.mesh.positions[i].map(|x| x as f64));
+        super::layers::intersect(o, d, a, b, c).map(|(dist, b1, b2, _)| (dist, b1, b2))
+    }
+
+    /// The BVH's ray: started [`BACK_OFF`] behind `o`, so that the traversal's t is the
+    /// distance from `o` plus `BACK_OFF`.
+    fn ray(o: V3, d: V3, tmax: f64) -> Ray {
+        let f = |v: V3| glam::Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32);
+        let back = add(o, mul(d, -BACK_OFF));
+        Ray::new(
+            f(back),
+            f(d),
+            0.0,
+            (tmax + BACK_OFF).min(f32::MAX as f64) as f32,
+        )
+    }
+
+    /// The nearest hit along the ray from `o` in unit direction `d`. Ties go to the lower
+    /// triangle index, so the answer does not depend on the traversal order.
+    pub fn closest(&self, o: V3, d: V3) -> Option<Hit> {
+        let mut best: Option<Hit> = None;
+        let mut hit = RayHit::none();
+        self.bvh
+            .ray_traverse(Self::ray(o, d, f64::INFINITY), &mut hit, |_, id| {
+                let t = self.bvh.primitive_indices[id] as usize;
+                let Some((dist, b1, b2)) = self.intersect(t, o, d) else {
+                    return f32::INFINITY;
+                };
+                let better = best
+                    .as_ref()
+                    .is_none_or(|h| dist < h.t || (dist == h.t && t < h.tri));
+                if better {
+                    best = Some(Hit {
+                        tri: t,
+                        t: dist,
+                        b1,
+                        b2,
+                    });
+                }
+                // Widened a little so that an f32 rounding never prunes an equal-distance tie.
+                ((dist + BACK_OFF) * (1.0 + 1e-6)) as f32
+            });
+        best
+    }
+
+    /// Whether anything lies along the ray from `o` in direction `d` closer than `reach`.
+    pub fn occluded(&self, o: V3, d: V3, reach: f64) -> bool {
+        !self.bvh.ray_traverse_miss(Self::ray(o, d, reach), |_, id| {
+            let t = self.bvh.primitive_indices[id] as usize;
+            match self.intersect(t, o, d) {
+                // Any value below the ray's end is a hit: the f64 test has decided.
+                Some((dist, ..)) if dist < reach => 0.0,
+                _ => f32::INFINITY,
+            }
+        })
+    }
+}
