@@ -55,6 +55,8 @@ pub const TRUTH: &str = "plan_truth";
 /// The candidate's node and its comparison.
 pub const CANDIDATE: &str = "plan_candidate";
 const COMPARE: &str = "plan_candidate_error";
+/// Brute force's second full-view pilot, on another seed (a FLIP budget's noise on the full view).
+const TWIN: &str = "plan_twin";
 /// The true mesostructure the truth and brute force trace (`render.mesh`'s truth).
 pub const TRUE_SURFACE: &str = "plan_true_surface";
 /// The truth's samples a pixel at most (its noise then decides nothing more).
@@ -768,6 +770,38 @@ pub fn arbitrate(
         _ => 1.0,
     };
     let full_trace_per_sample = timing(full, "trace_seconds").map(|t| t / PILOT as f64);
+    // At a FLIP budget, brute force's FLIP on the full view: FLIP of noise does not carry from
+    // a probe to the frame as relative RMSE does (a whole-view probe's pixels subtend more, where
+    // the same noise is a larger FLIP), so it is measured on the full view itself, as the FLIP
+    // between two full-view pilots on other seeds: their difference has the noise of one render
+    // at half their samples against a noiseless truth.
+    let full_noise_flip = match o.measure {
+        Measure::Flip { ppd } => {
+            let mut g = scene.clone();
+            g.nodes
+                .push((CANDIDATE.into(), reference(PILOT, 1, &full_camera)));
+            g.nodes
+                .push((TWIN.into(), reference(PILOT, 2, &full_camera)));
+            g.nodes.push((
+                COMPARE.into(),
+                NodeDecl {
+                    kind: "image.flip".into(),
+                    params: json!({ "ppd": ppd })
+                        .as_object()
+                        .cloned()
+                        .unwrap_or_default(),
+                    inputs: BTreeMap::from([
+                        ("reference".to_string(), format!("{CANDIDATE}.image")),
+                        ("test".to_string(), format!("{TWIN}.image")),
+                        ("mask".to_string(), format!("{CANDIDATE}.coverage")),
+                    ]),
+                },
+            ));
+            let r = run(engine, name, &g, &[(COMPARE, "mean")], opts)?;
+            metric(&r, COMPARE, "mean").filter(|f| *f > 0.0)
+        }
+        Measure::RelativeRmse => None,
+    };
 
     // The truth probe, its noise (as relative RMSE, for either measure) a third of the budget or
     // less: sized from the pilot's noise (1/√samples). A pilot underestimates heavy-tailed noise
@@ -947,14 +981,40 @@ pub fn arbitrate(
             Measure::Flip { .. } => truth_samples as f64,
         };
         let clamp = |x: f64| x.ceil().clamp(1.0, most) as u32;
-        let mut samples =
-            per_sample.map_or(PILOT, |c| clamp((c * to_full / (AIM * o.budget)).powi(2)));
+        // The samples of a render whose noise the two full-view pilots' FLIP measures.
+        let twin_samples = PILOT as f64 / 2.0;
+        let mut samples = match full_noise_flip {
+            Some(f) => clamp(twin_samples * (f / (AIM * o.budget)).powi(2)),
+            None => per_sample.map_or(PILOT, |c| clamp((c * to_full / (AIM * o.budget)).powi(2))),
+        };
+        // At a FLIP budget: the probe pilot's FLIP against the truth, so that the first try
+        // measures FLIP's fall with the samples on the probe.
+        let probe_pilot_flip = match full_noise_flip {
+            Some(_) => measure(&reference(PILOT, 1, &camera))?
+                .0
+                .filter(|e| *e > 0.0),
+            None => None,
+        };
         // Each try: samples, its error on the full view (its probe error, noise, scaled by the
         // pilots' ratio), the report.
         let mut tried: Vec<(u32, Option<f64>, RunReport)> = Vec::new();
         for _ in 0..3 {
             let (error, r) = measure(&reference(samples, 1, &camera))?;
-            let error = error.map(|e| e * to_full);
+            let error = match (full_noise_flip, probe_pilot_flip, error) {
+                // Brute force's FLIP on the full view, from the pilots' twin FLIP, falling with
+                // the samples as the probe measured it fall from its pilot (FLIP ∝ samples^(−γ/2)).
+                (Some(f), Some(e0), Some(e)) if e > 0.0 && samples != PILOT => {
+                    let g = -2.0 * (e / e0).ln() / (samples as f64 / PILOT as f64).ln();
+                    let g = if g.is_finite() {
+                        g.clamp(0.3, 1.5)
+                    } else {
+                        1.0
+                    };
+                    Some(f * (samples as f64 / twin_samples).powf(-g / 2.0))
+                }
+                (Some(f), _, Some(_)) => Some(f * (samples as f64 / twin_samples).powf(-0.5)),
+                _ => error.map(|e| e * to_full),
+            };
             tried.push((samples, error, r));
             let Some(e) = error.filter(|e| *e > 0.0) else {
                 break;
