@@ -18,8 +18,10 @@
 //!   here: the error says so, and the plan is against the graph's own model.
 //! - both: brute force, `render.reference` of the truth's scene, aimed at [`AIM`] of the budget
 //!   from the truth's own noise (noise falls as 1/√samples) and re-aimed from its measured
-//!   error where that is over the budget or well under it. Where the graph reads an output of
-//!   the render that `render.reference` does not make, brute force is listed and refused.
+//!   error where that is over the budget or well under it. At a FLIP budget on a whole-view
+//!   probe, its FLIP is taken on the full view (from two full-view pilots on other seeds), and
+//!   it never passes the truth's own samples. Where the graph reads an output of the render
+//!   that `render.reference` does not make, brute force is listed and refused.
 //!
 //! In order, each phase timed in the plan: two pilots (brute force at [`PILOT`] samples a pixel
 //! on the probe and on the full view), the first's noise sizing the truth; the truth probe, its noise a third of the budget or
@@ -770,13 +772,15 @@ pub fn arbitrate(
         _ => 1.0,
     };
     let full_trace_per_sample = timing(full, "trace_seconds").map(|t| t / PILOT as f64);
-    // At a FLIP budget, brute force's FLIP on the full view: FLIP of noise does not carry from
-    // a probe to the frame as relative RMSE does (a whole-view probe's pixels subtend more, where
-    // the same noise is a larger FLIP), so it is measured on the full view itself, as the FLIP
-    // between two full-view pilots on other seeds: their difference has the noise of one render
-    // at half their samples against a noiseless truth.
+    // At a FLIP budget on a whole-view probe, brute force's FLIP on the full view: FLIP of noise
+    // does not carry from a lower resolution to the frame (each probe pixel subtends more, where
+    // the same noise is a larger FLIP: brute force was planned at 4–40 times the samples it
+    // needed), so it is measured on the full view itself, as the FLIP between two full-view
+    // pilots on other seeds: their difference has the noise of one render at half their samples
+    // against a noiseless truth. A centre probe has the frame's pixels: its own FLIP is kept
+    // (the twin measure planned a median third of the samples needed there, over the budget).
     let full_noise_flip = match o.measure {
-        Measure::Flip { ppd } => {
+        Measure::Flip { ppd } if whole_view && share < 1.0 => {
             let mut g = scene.clone();
             g.nodes
                 .push((CANDIDATE.into(), reference(PILOT, 1, &full_camera)));
@@ -800,7 +804,7 @@ pub fn arbitrate(
             let r = run(engine, name, &g, &[(COMPARE, "mean")], opts)?;
             metric(&r, COMPARE, "mean").filter(|f| *f > 0.0)
         }
-        Measure::RelativeRmse => None,
+        _ => None,
     };
 
     // The truth probe, its noise (as relative RMSE, for either measure) a third of the budget or

@@ -11,6 +11,7 @@
 
 use crate::{plan, BtfChain, Budget, Decision, Plan, PlanError, RenderKind, Scene, Split};
 use mesoflow_graph::{Catalog, GraphFile, NodeDecl};
+use mesoflow_nodes::support::raytrace::camera::CameraParams;
 use mesoflow_runtime::{Engine, NodeStatus, RunOptions, RunReport, SilentObserver};
 use serde_json::{json, Map, Value};
 use std::collections::{BTreeMap, BTreeSet};
@@ -158,12 +159,15 @@ pub(crate) fn camera_of(
     cam
 }
 
-/// A camera's `resolution` (the render kinds' default where it has none).
+/// A render's camera as the kinds read it (`CameraParams`: its defaults where the graph gives
+/// none). The camera comes from a checked graph, so it parses; the defaults stand in otherwise.
+fn typed(cam: &Map<String, Value>) -> CameraParams {
+    serde_json::from_value(Value::Object(cam.clone())).unwrap_or_default()
+}
+
+/// A camera's `resolution`, as the render kinds read it.
 pub fn resolution_of(cam: &Map<String, Value>) -> [u32; 2] {
-    cam.get("resolution")
-        .and_then(Value::as_array)
-        .and_then(|a| Some([a.first()?.as_u64()? as u32, a.get(1)?.as_u64()? as u32]))
-        .unwrap_or([400, 300])
+    typed(cam).resolution
 }
 
 /// `share` of a view's pixels, each side at least 16 and at most the view's: the probe's size
@@ -182,16 +186,15 @@ pub fn probe_camera(
     mut cam: Map<String, Value>,
     share: f64,
 ) -> (Map<String, Value>, [u32; 2], f64) {
-    let res = resolution_of(&cam);
-    let (probe, got) = probe_size(res, share);
-    let ratio = probe[1] as f64 / res[1].max(1) as f64;
-    if let Some(h) = cam.get("orthographic").and_then(Value::as_f64) {
-        cam.insert("orthographic".into(), json!(h * ratio));
-    } else {
-        let fov = cam.get("fov").and_then(Value::as_f64).unwrap_or(40.0);
-        let half = (fov.to_radians() * 0.5).tan() * ratio;
-        cam.insert("fov".into(), json!((2.0 * half.atan()).to_degrees()));
-    }
+    let full = typed(&cam);
+    let (probe, got) = probe_size(full.resolution, share);
+    // The graph's own map with the crop's fields written in (the others as the graph gave them,
+    // so the probe's keys name what the graph names).
+    let crop = full.centre_crop(probe);
+    match crop.orthographic {
+        Some(h) => cam.insert("orthographic".into(), json!(h)),
+        None => cam.insert("fov".into(), json!(crop.fov)),
+    };
     cam.insert("resolution".into(), json!(probe));
     (cam, probe, got)
 }

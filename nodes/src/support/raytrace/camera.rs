@@ -38,6 +38,25 @@ impl Default for CameraParams {
     }
 }
 
+impl CameraParams {
+    /// The centre of this view at `resolution` pixels and the same pixels per degree: the field
+    /// of view (or an orthographic view's height) narrowed with the frame's height, so each
+    /// pixel sees what the same pixel of the full view sees (a probe of the view's centre).
+    pub fn centre_crop(&self, resolution: [u32; 2]) -> CameraParams {
+        let ratio = resolution[1] as f64 / self.resolution[1].max(1) as f64;
+        let mut c = self.clone();
+        match self.orthographic {
+            Some(h) => c.orthographic = Some(h * ratio),
+            None => {
+                let half = (self.fov.to_radians() * 0.5).tan() * ratio;
+                c.fov = (2.0 * half.atan()).to_degrees();
+            }
+        }
+        c.resolution = resolution;
+        c
+    }
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Camera {
     pub eye: V3,
@@ -209,6 +228,25 @@ mod tests {
                 2.7
             };
             assert!((t - expected_t).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_centre_crop_sees_the_full_view_s_centre_pixels() {
+        // Pixel (x, y) of the crop is pixel (x + dx, y + dy) of the full view: the same ray.
+        for ortho in [None, Some(1.5)] {
+            let full = CameraParams {
+                orthographic: ortho,
+                resolution: [64, 48],
+                ..Default::default()
+            };
+            let crop = full.centre_crop([16, 12]);
+            let (f, c) = (Camera::new(&full).unwrap(), Camera::new(&crop).unwrap());
+            let (of, df) = f.ray(24 + 3, 18 + 5);
+            let (oc, dc) = c.ray(3, 5);
+            for k in 0..3 {
+                assert!((df[k] - dc[k]).abs() < 1e-12 && (of[k] - oc[k]).abs() < 1e-12);
+            }
         }
     }
 
