@@ -22,6 +22,18 @@ pub fn run_in<N: Node>(
     node.run(ctx, params, inputs)
 }
 
+/// As [`run`], with the parameters as JSON (they must parse) and relative file paths resolved
+/// against `dir`, no inputs: a node that reads files.
+pub fn run_json_in<N: Node>(
+    node: &N,
+    params: serde_json::Value,
+    dir: &std::path::Path,
+) -> Result<Outputs, NodeError> {
+    let p: N::Params = serde_json::from_value(params).expect("the parameters parse");
+    let ctx = NodeContext::detached(None).with_base(dir.to_path_buf());
+    run_in(&ctx, node, &p, &Inputs::new())
+}
+
 /// Typed reads of a node's outputs.
 pub trait OutputsExt {
     /// The value at `port`, if there is one of type `T`.

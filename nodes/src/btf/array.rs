@@ -99,13 +99,8 @@ impl Node for BtfArray {
 mod tests {
     use super::*;
     use crate::support::formats::encode_npy;
+    use mesoflow_testkit::node::run_json_in as run;
     use mesoflow_testkit::node::OutputsExt;
-
-    fn run<N: Node>(node: &N, params: serde_json::Value, dir: &Path) -> Result<Outputs, NodeError> {
-        let p: N::Params = serde_json::from_value(params).unwrap();
-        let ctx = NodeContext::detached(None).with_base(dir.to_path_buf());
-        mesoflow_testkit::node::run_in(&ctx, node, &p, &Inputs::new())
-    }
 
     #[test]
     fn a_btf_array_takes_its_direction_pairs_and_refuses_a_mismatch() {

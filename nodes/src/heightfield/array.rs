@@ -48,12 +48,7 @@ impl Node for HeightFieldArray {
 mod tests {
     use super::*;
     use crate::support::formats::encode_npy;
-
-    fn run<N: Node>(node: &N, params: serde_json::Value, dir: &Path) -> Result<Outputs, NodeError> {
-        let p: N::Params = serde_json::from_value(params).unwrap();
-        let ctx = NodeContext::detached(None).with_base(dir.to_path_buf());
-        mesoflow_testkit::node::run_in(&ctx, node, &p, &Inputs::new())
-    }
+    use mesoflow_testkit::node::run_json_in as run;
 
     #[test]
     fn a_non_finite_height_is_refused_naming_its_element() {

@@ -53,13 +53,8 @@ impl Node for ImageArray {
 mod tests {
     use super::*;
     use crate::support::formats::encode_npy;
+    use mesoflow_testkit::node::run_json_in as run;
     use mesoflow_testkit::node::OutputsExt;
-
-    fn run<N: Node>(node: &N, params: serde_json::Value, dir: &Path) -> Result<Outputs, NodeError> {
-        let p: N::Params = serde_json::from_value(params).unwrap();
-        let ctx = NodeContext::detached(None).with_base(dir.to_path_buf());
-        mesoflow_testkit::node::run_in(&ctx, node, &p, &Inputs::new())
-    }
 
     #[test]
     fn arrays_become_typed_values_in_npy_write_layouts() {
