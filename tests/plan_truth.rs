@@ -362,6 +362,15 @@ fn a_flip_budget_is_judged_against_the_truth_too() {
             // FLIP is in [0, 1] by construction.
             assert!((0.0..=1.0).contains(&f), "{c}");
         }
+        // The probe is the whole view at a lower resolution (`sss.render`), where FLIP of noise
+        // is not the frame's: brute force's FLIP is the full view's, from two full-view pilots,
+        // and says so with its figures.
+        let brute = candidates(&doc)
+            .into_iter()
+            .find(|c| c["family"] == "brute force" && c["probe_seconds"].is_number())
+            .unwrap_or_else(|| panic!("no measured brute force: {doc}"));
+        let said = brute["warnings"].to_string();
+        assert!(said.contains("two full-view pilots"), "{brute}");
         docs.push(doc);
     }
     let (tight, lax) = (&docs[0], &docs[1]);

@@ -1069,6 +1069,11 @@ pub fn arbitrate(
                 n * to_full
             ));
         }
+        if let (Some(f), Some(e)) = (full_noise_flip, error) {
+            warned.push(format!(
+                "its FLIP on the full view, {e:.3} at {samples} samples a pixel, is estimated from two full-view pilots on other seeds (their FLIP {f:.3}: one render's noise at {twin_samples} samples), falling with the samples as the probe measured: a whole-view probe's own FLIP of noise is not the frame's"
+            ));
+        }
         Candidate {
             name: format!("brute force: render.reference at {samples} samples a pixel"),
             family: "brute force",
