@@ -366,7 +366,7 @@ fn a_flip_budget_is_judged_against_the_truth_too() {
         // is not the frame's: brute force's FLIP is the full view's, from two full-view pilots,
         // and says so with its figures.
         let brute = candidates(&doc)
-            .into_iter()
+            .iter()
             .find(|c| c["family"] == "brute force" && c["probe_seconds"].is_number())
             .unwrap_or_else(|| panic!("no measured brute force: {doc}"));
         let said = brute["warnings"].to_string();
