@@ -12,7 +12,7 @@ use std::time::Instant;
 
 fn engine(disk: Option<&std::path::Path>) -> Engine {
     Engine::new(
-        mesoflow_nodes::registry(),
+        mesoflow_nodes::registry::builtin(),
         EngineConfig {
             memory_budget: 1 << 30,
             disk: disk.map(DiskCache::new),
@@ -22,7 +22,7 @@ fn engine(disk: Option<&std::path::Path>) -> Engine {
 
 fn checked(text: &str) -> CheckedGraph {
     let file = GraphFile::parse(text).expect("parse");
-    check("bench", &file, &mesoflow_nodes::registry()).expect("check")
+    check("bench", &file, &mesoflow_nodes::registry::builtin()).expect("check")
 }
 
 fn chain(n: usize) -> String {
@@ -42,9 +42,11 @@ fn wide(n: usize) -> String {
 }
 
 fn opts(out: &std::path::Path) -> RunOptions {
-    let mut o = RunOptions::new("bench", ".".into(), out.to_path_buf());
-    o.device = DeviceMode::Cpu;
-    o
+    let policy = mesoflow_runtime::RunPolicy {
+        device: DeviceMode::Cpu,
+        ..Default::default()
+    };
+    RunOptions::new("bench", ".".into(), out.to_path_buf(), policy)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -109,7 +111,7 @@ fn main() {
     // Disk cache: a 256 MiB value (an 8192² height field) against reading the same bytes raw.
     let cache_dir = tmp.path().join("cache");
     let cache = DiskCache::new(&cache_dir);
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     let side = 8192;
     let hf = mesoflow_nodes::types::HeightField {
         width: side,
@@ -151,7 +153,7 @@ fn main() {
     );
 
     let t_registry = time(15, || {
-        std::hint::black_box(mesoflow_nodes::registry());
+        std::hint::black_box(mesoflow_nodes::registry::builtin());
     });
     println!(
         "| building the registry (schemas of every kind) | {:.3} ms | |",

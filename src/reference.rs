@@ -181,7 +181,7 @@ pub fn index(sigs: &[&KindSignature]) -> String {
 
 /// Every page of the reference, by file name.
 pub fn pages() -> BTreeMap<String, String> {
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     let mut sigs: Vec<&KindSignature> = registry.signatures().collect();
     sigs.sort_by(|a, b| a.kind.cmp(&b.kind));
     let mut out = BTreeMap::new();

@@ -9,7 +9,7 @@ use crate::exit::{self, invalid};
 use anyhow::Context;
 use mesoflow_graph::{CheckedGraph, PortRef};
 use mesoflow_runtime::cache::{default_memory_budget, DiskCache};
-use mesoflow_runtime::{DeviceMode, Engine, EngineConfig, RunReport};
+use mesoflow_runtime::{DeviceMode, Engine, EngineConfig, RunPolicy, RunReport};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -65,7 +65,7 @@ pub fn engine(opts: &CacheOptions, graph: &Path) -> anyhow::Result<Engine> {
     };
     let disk = (!opts.no_cache).then(|| DiskCache::new(cache_dir(opts, graph)));
     Ok(Engine::new(
-        mesoflow_nodes::registry(),
+        mesoflow_nodes::registry::builtin(),
         EngineConfig {
             memory_budget,
             disk,
@@ -88,6 +88,17 @@ pub fn device_mode(d: DeviceArg) -> DeviceMode {
 
 pub fn require_gpu() -> bool {
     mesoflow_runtime::require_gpu_from_env()
+}
+
+/// The command's run policy: its `--device`, its cache flags, `MESOFLOW_REQUIRE_GPU` and Ctrl-C.
+pub fn policy(device: DeviceArg, cache: &CacheOptions) -> RunPolicy {
+    RunPolicy {
+        device: device_mode(device),
+        use_cache: !cache.no_cache,
+        verify_cache: cache.verify_cache,
+        cancel: cancel_flag(),
+        ..RunPolicy::default()
+    }
 }
 
 /// `--output` targets checked against the graph, with a did-you-mean for a node or port.
@@ -129,11 +140,9 @@ pub fn parse_outputs(outputs: &[String]) -> anyhow::Result<Vec<PortRef>> {
 }
 
 pub fn write_report(report: &RunReport, out_dir: &Path) -> anyhow::Result<()> {
-    std::fs::create_dir_all(out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    let path = out_dir.join("report.json");
-    let text = serde_json::to_string_pretty(report)?;
-    mesoflow_runtime::write_atomic(&path, text + "\n")
-        .with_context(|| format!("writing {}", path.display()))?;
+    report
+        .write_into(out_dir)
+        .with_context(|| format!("writing {}", out_dir.join("report.json").display()))?;
     Ok(())
 }
 

@@ -3,11 +3,12 @@
 //! one engine, so nodes upstream of the varied parameters compute once, a row a run handed to
 //! the caller as it is measured) and [`Sweep::write`] (`sweep.csv`, and the charts of every
 //! measure against every varied parameter, against the measured node's time and against
-//! `versus` measures). `mesoflow sweep` and the studio prepare and run through it; the Python
-//! package's `mesoflow.sweep` runs in Python and writes through [`write_all`], so the three
-//! leave the same files.
+//! `versus` measures). `mesoflow sweep`, the studio and the Python package's `mesoflow.sweep`
+//! prepare, run and write through it, so the three refuse the same sweeps and leave the same
+//! files.
 
 use crate::chart::{self, Chart, Series};
+use anyhow::Context;
 use mesoflow_graph::{CheckedGraph, GraphErrors, GraphFile, Override, PortRef};
 use mesoflow_runtime::{Engine, Registry, RunOptions, RunReport, SilentObserver};
 use serde_json::Value;
@@ -22,13 +23,15 @@ use std::sync::Arc;
 #[derive(Debug)]
 pub enum Refusal {
     Asked(String),
+    /// A measure that is not a scalar output or timing of its node (or names no node).
+    Measure(PortRef, String),
     Graph(GraphErrors),
 }
 
 impl std::fmt::Display for Refusal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Refusal::Asked(m) => f.write_str(m),
+            Refusal::Asked(m) | Refusal::Measure(_, m) => f.write_str(m),
             Refusal::Graph(e) => f.write_str(e.to_string().trim_end()),
         }
     }
@@ -95,7 +98,8 @@ impl Sweep {
             graphs.push(mesoflow_graph::check(name, &file, registry).map_err(Refusal::Graph)?);
             texts.push(file.to_json());
         }
-        let outputs = sweep_outputs(registry, &graphs[0], &measures).map_err(Refusal::Asked)?;
+        let outputs = sweep_outputs(registry, &graphs[0], &measures)
+            .map_err(|(m, message)| Refusal::Measure(m, message))?;
         Ok(Sweep {
             measured_nodes: measured_nodes(&measures),
             varies,
@@ -124,14 +128,16 @@ impl Sweep {
         for (i, (combo, graph)) in self.combos.iter().zip(&self.graphs).enumerate() {
             let run_dir = out_dir.join("runs").join(format!("{i:03}"));
             let mut opts = options(&run_dir);
-            if opts.cancel.load(Ordering::SeqCst) {
+            if opts.policy.cancel.load(Ordering::SeqCst) {
                 break;
             }
             opts.outputs = self.outputs.clone();
             let report = engine
                 .run(graph, &opts, Arc::new(SilentObserver))
                 .map_err(|e| crate::exit::invalid(e.to_string()))?;
-            crate::session::write_report(&report, &run_dir)?;
+            report
+                .write_into(&run_dir)
+                .with_context(|| format!("writing {}", run_dir.join("report.json").display()))?;
             let row = row_of(&report, combo.clone(), &self.measures, &self.measured_nodes);
             on_row(i, &row, &report);
             rows.push(row);
@@ -152,6 +158,29 @@ impl Sweep {
             &self.measured_nodes,
             &self.versus,
             rows,
+        )
+    }
+
+    /// The line a front end prints as row `i` comes in: `[i/n] label: ok in s; measures`.
+    pub fn progress_line(&self, i: usize, row: &Row) -> String {
+        let shown: Vec<String> = self
+            .measures
+            .iter()
+            .zip(&row.measures)
+            .map(|(m, v)| match v {
+                Some(v) => format!("{m}={v:.4e}"),
+                None => format!("{m}=—"),
+            })
+            .collect();
+        format!(
+            "[{}/{}] {}: {} in {:.2} s{}{}",
+            i + 1,
+            self.combos.len(),
+            self.label(i),
+            if row.ok { "ok" } else { "FAILED" },
+            row.run_seconds,
+            if shown.is_empty() { "" } else { "; " },
+            shown.join(" ")
         )
     }
 
@@ -491,7 +520,7 @@ pub fn sweep_outputs(
     registry: &Registry,
     graph: &CheckedGraph,
     measures: &[PortRef],
-) -> Result<Vec<PortRef>, String> {
+) -> Result<Vec<PortRef>, (PortRef, String)> {
     let first_output = |kind: &str| {
         registry
             .node(kind)
@@ -500,7 +529,10 @@ pub fn sweep_outputs(
     let mut outputs: Vec<PortRef> = Vec::new();
     for m in measures {
         let Some(node) = graph.index(&m.node).map(|i| &graph.nodes[i]) else {
-            return Err(format!("--measure {m}: no node `{}` in the graph", m.node));
+            return Err((
+                m.clone(),
+                format!("--measure {m}: no node `{}` in the graph", m.node),
+            ));
         };
         let sig = registry.node(&node.kind).map(|n| n.signature());
         let ty = sig.and_then(|s| s.output(&m.port).map(|o| o.ty.clone()));
@@ -513,9 +545,12 @@ pub fn sweep_outputs(
                 port,
             })),
             Some(other) => {
-                return Err(format!(
-                    "--measure {m}: `{}` is a {other}; a measure must be a scalar output",
-                    m.port
+                return Err((
+                    m.clone(),
+                    format!(
+                        "--measure {m}: `{}` is a {other}; a measure must be a scalar output",
+                        m.port
+                    ),
                 ))
             }
             None => {
@@ -531,12 +566,15 @@ pub fn sweep_outputs(
                     .chain(["seconds"])
                     .collect();
                 let hint = mesoflow_graph::did_you_mean(&m.port, names.iter().copied());
-                return Err(format!(
-                    "--measure {m}: `{}` ({}) has no scalar output or timing `{}`{hint}; it has {}",
-                    m.node,
-                    node.kind,
-                    m.port,
-                    names.join(", ")
+                return Err((
+                    m.clone(),
+                    format!(
+                        "--measure {m}: `{}` ({}) has no scalar output or timing `{}`{hint}; it has {}",
+                        m.node,
+                        node.kind,
+                        m.port,
+                        names.join(", ")
+                    ),
                 ));
             }
         }

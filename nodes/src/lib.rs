@@ -1,4 +1,4 @@
-//! mesoflow's node kinds: the algorithms, one folder per stage, and [`registry`], the list of kinds
+//! mesoflow's node kinds: the algorithms, one folder per stage, and [`registry::builtin`], the list of kinds
 //! a graph can use. Nodes know nothing about scheduling or caching; each is a pure function of its
 //! parameters, inputs and declared files.
 
@@ -15,7 +15,7 @@ pub mod npy;
 pub mod points;
 pub mod qh;
 pub mod reflectance;
-mod registry;
+pub mod registry;
 pub mod render;
 pub mod scalar;
 pub mod scene;
@@ -24,5 +24,3 @@ pub mod support;
 pub mod synthesis;
 pub mod types;
 pub mod weathering;
-
-pub use registry::registry;

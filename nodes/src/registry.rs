@@ -2,7 +2,7 @@
 
 use mesoflow_runtime::Registry;
 
-pub fn registry() -> Registry {
+pub fn builtin() -> Registry {
     let mut r = Registry::new();
     crate::types::register(&mut r);
     r.register(crate::btf::capture::Capture);
@@ -93,12 +93,88 @@ mod tests {
         ]
     }
 
+    /// Ranges are stated once, in each kind's schema, which validation applies before the
+    /// kind's `check()` (which holds only what a schema cannot say). Every range below was once
+    /// restated by hand in a `check()`; the schema alone refuses each value now, naming the
+    /// parameter.
+    #[test]
+    fn the_schema_alone_holds_each_range() {
+        let r = super::builtin();
+        let cases: &[(&str, &str, Value)] = &[
+            ("image.blur", "sigma", json!(1000.5)),
+            ("image.ramp", "width", json!(0)),
+            ("image.ramp", "height", json!(16385)),
+            ("heightfield.normal_noise", "sigma_deg", json!(46.0)),
+            ("heightfield.normal_noise", "outliers", json!(1.5)),
+            ("heightfield.normal_noise", "outlier_deg", json!(-1.0)),
+            ("image.difference", "scale", json!(0.0)),
+            ("points.synthetic", "noise", json!(-0.1)),
+            ("sss.profile", "photons", json!(999)),
+            ("mesh.displace", "shell", json!(-1.0)),
+            ("mesh.displace", "depth", json!(2e6)),
+            ("mesh.displace", "density", json!(0.2)),
+            ("mesh.displace", "max_triangles", json!(0)),
+            ("btf.read_ubo2014", "stride", json!(0)),
+            ("btf.read_ubo2014", "downsample", json!(65)),
+            ("btf.capture", "samples", json!(17)),
+            ("scene.footprint", "shell", json!(-1.0)),
+            ("qh.fit_dipole", "eta", json!(0.0)),
+            ("qh.fit_dipole", "photons", json!(999)),
+            ("image.flip", "ppd", json!(0.1)),
+            (
+                "image.flip",
+                "viewer",
+                json!({"distance_m": 0.0, "width_m": 0.5}),
+            ),
+            ("image.write", "scale", json!(65)),
+            ("image.write", "exposure", json!(-1.0)),
+            ("render.reference", "specular", json!(1.5)),
+            ("render.reference", "roughness", json!(0.0)),
+            ("render.reference", "boundary_roughness", json!(0.005)),
+            ("render.reference", "samples", json!(0)),
+            ("render.mesh", "shell", json!(-1.0)),
+            ("render.relief", "shell", json!(2e9)),
+            ("render.relief", "linear_steps", json!(0)),
+            ("render.relief", "binary_steps", json!(33)),
+            ("render.relief", "frames", json!(1001)),
+            ("manifold.evolve", "step", json!(-1.0)),
+            ("weathering.sample", "radius", json!(0.0)),
+            ("weathering.sample", "roughness", json!(-1.0)),
+            ("weathering.sample", "noise", json!(-1.0)),
+            ("weathering.sample", "bumps", json!(-1.0)),
+            ("synthesis.texture", "levels", json!(0)),
+            ("synthesis.texture", "iterations", json!(0)),
+            ("synthesis.texture", "search_rounds", json!(0)),
+            ("synthesis.texture", "guide_weight", json!(-1.0)),
+            ("heightfield.edit", "amount", json!(101.0)),
+            ("brdf.edit", "hue_deg", json!(400.0)),
+            ("brdf.edit", "saturation", json!(-1.0)),
+            ("brdf.edit", "value", json!(101.0)),
+            ("brdf.edit", "specular_scale", json!(1001.0)),
+            ("brdf.edit", "roughness_scale", json!(0.0)),
+            ("brdf.fit_ward", "min_roughness", json!(0.001)),
+        ];
+        for (kind, param, value) in cases {
+            let sig = r
+                .signatures()
+                .find(|s| s.kind == *kind)
+                .unwrap_or_else(|| panic!("no kind {kind}"));
+            let params: Map<String, Value> =
+                [(param.to_string(), value.clone())].into_iter().collect();
+            let errors = check_params("n", kind, &sig.params, &params);
+            assert!(
+                errors.iter().any(|e| e.to_string().contains(param)),
+                "{kind}.{param} = {value} passed the schema: {errors:?}"
+            );
+        }
+    }
+
     /// The view parameters are declared once (`raytrace::view`): every kind that has one has
     /// the same schema for it (type, range, documentation), its default aside. A kind that
     /// declared `tiling` or `mm_per_unit` by hand again, with its own words or range, fails here.
     #[test]
     fn every_kind_with_a_view_parameter_shares_its_one_definition() {
-        let r = super::registry();
+        let r = super::builtin();
         let mut first: std::collections::BTreeMap<&str, (String, Value)> = Default::default();
         let mut seen = 0;
         for sig in r.signatures() {
@@ -138,7 +214,7 @@ mod tests {
         // `validate` runs both the schema and the typed check, so a user never meets a value
         // that validates and then fails to load. This holds the schema itself (what editors and
         // the studio read) to the same standard: every value it accepts, the struct accepts.
-        let r = super::registry();
+        let r = super::builtin();
         let mut disagree = Vec::new();
         let mut tried = 0;
         for sig in r.signatures() {
@@ -221,7 +297,7 @@ mod docs {
 
     #[test]
     fn every_parameter_field_is_documented() {
-        let r = super::registry();
+        let r = super::builtin();
         let mut missing = Vec::new();
         for sig in r.signatures() {
             let mut out = Vec::new();

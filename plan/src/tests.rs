@@ -758,7 +758,7 @@ fn synthesis_stops_early_only_where_the_view_cannot_show_its_texels() {
 /// kind accepts, and every connection it makes has matching types.
 #[test]
 fn every_parameter_the_planner_writes_is_in_its_kind_s_schema() {
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../graphs"));
     let mut planned = 0;
     for entry in std::fs::read_dir(dir).unwrap() {

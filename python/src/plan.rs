@@ -29,12 +29,14 @@ fn session(
     let engine = engine(cache_dir.as_deref());
     check(name, file, engine.registry())
         .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
-    let mut opts = RunOptions::new(name, base_dir, std::env::temp_dir());
-    opts.device = device_mode(device)?;
-    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
-    opts.use_cache = use_cache;
     let cancel = Arc::new(AtomicBool::new(false));
-    opts.cancel = cancel.clone();
+    let policy = mesoflow_runtime::RunPolicy {
+        device: device_mode(device)?,
+        use_cache,
+        cancel: cancel.clone(),
+        ..Default::default()
+    };
+    let opts = RunOptions::new(name, base_dir, std::env::temp_dir(), policy);
     Ok((engine, opts, cancel))
 }
 

@@ -50,7 +50,7 @@ fn registry(s: &mut State) -> Arc<Registry> {
             return r.clone();
         }
     }
-    let mut r = mesoflow_nodes::registry();
+    let mut r = mesoflow_nodes::registry::builtin();
     for node in s.python_kinds.values() {
         r.register_dyn(node.clone());
     }
@@ -137,7 +137,7 @@ pub fn register_node(
     func: Py<PyAny>,
     disk_cache: bool,
 ) -> PyResult<()> {
-    let builtin = mesoflow_nodes::registry();
+    let builtin = mesoflow_nodes::registry::builtin();
     if builtin.node(kind).is_some() {
         return Err(PyValueError::new_err(format!(
             "kind `{kind}` is a built-in kind; give the Python node another name (e.g. user.{})",
@@ -250,7 +250,15 @@ pub fn run<'py>(
     let engine = engine(cache_dir.as_deref());
     let graph = check(name, &file, engine.registry())
         .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;
-    let mut opts = RunOptions::new(name, base_dir, out_dir.clone());
+    let cancel = Arc::new(AtomicBool::new(false));
+    let policy = mesoflow_runtime::RunPolicy {
+        device: device_mode(device)?,
+        use_cache,
+        verify_cache,
+        cancel: cancel.clone(),
+        ..Default::default()
+    };
+    let mut opts = RunOptions::new(name, base_dir, out_dir.clone(), policy);
     opts.outputs = outputs
         .iter()
         .map(|o| {
@@ -259,12 +267,6 @@ pub fn run<'py>(
             })
         })
         .collect::<PyResult<_>>()?;
-    opts.device = device_mode(device)?;
-    opts.require_gpu = mesoflow_runtime::require_gpu_from_env();
-    opts.use_cache = use_cache;
-    opts.verify_cache = verify_cache;
-    let cancel = Arc::new(AtomicBool::new(false));
-    opts.cancel = cancel.clone();
     let requested = opts.outputs.clone();
 
     let worker = engine.clone();

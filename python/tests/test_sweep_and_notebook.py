@@ -70,3 +70,24 @@ def test_the_example_notebook_runs(repo, tmp_path):
                    resources={"metadata": {"path": str(tmp_path)}}).execute()
     assert (tmp_path / "out" / "rank_sweep.png").stat().st_size > 10_000
     assert (tmp_path / "out" / "sweep" / "sweep.csv").exists()
+
+
+def test_a_sweep_is_refused_before_any_run(tmp_path):
+    # The command line's own checks: a measure that is not a scalar names its node and port,
+    # a combination that does not check names its node, an oversized grid is a ValueError.
+    import pytest
+
+    g = mesoflow.Graph(base_dir=tmp_path)
+    g.add("scalar.constant", "c", value=1.0)
+    g.add("scalar.affine", "a", x="c.value", scale=2.0)
+    common = dict(out_dir=tmp_path / "s", cache_dir=tmp_path / "cache", progress=False)
+    with pytest.raises(mesoflow.GraphError) as e:
+        mesoflow.sweep(g, vary={"c.value": [1.0]}, measure=["a.nosuch"], **common)
+    assert (e.value.node, e.value.field) == ("a", "nosuch")
+    assert "measure a.nosuch" in str(e.value) and "--measure" not in str(e.value)
+    with pytest.raises(mesoflow.GraphError) as e:
+        mesoflow.sweep(g, vary={"c.value": [1.0, "x"]}, measure=["a.y"], **common)
+    assert e.value.node == "c"
+    with pytest.raises(ValueError, match="more than"):
+        mesoflow.sweep(g, vary={"c.value": [1.0, 2.0, 3.0]}, measure=["a.y"], max_runs=2, **common)
+    assert not (tmp_path / "s").exists()

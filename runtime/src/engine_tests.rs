@@ -92,8 +92,8 @@ fn run(
 ) -> crate::report::RunReport {
     let file = GraphFile::parse(text).unwrap();
     let graph = check("t.json", &file, engine.registry()).unwrap();
-    let mut opts = RunOptions::new("t.json", dir.into(), dir.join("out"));
-    opts.verify_cache = verify;
+    let mut opts = RunOptions::new("t.json", dir.into(), dir.join("out"), Default::default());
+    opts.policy.verify_cache = verify;
     engine.run(&graph, &opts, Arc::new(SilentObserver)).unwrap()
 }
 
@@ -277,7 +277,7 @@ fn run_into(
 ) -> crate::report::RunReport {
     let file = GraphFile::parse(text).unwrap();
     let graph = check("t.json", &file, engine.registry()).unwrap();
-    let opts = RunOptions::new("t.json", base.into(), base.join(out));
+    let opts = RunOptions::new("t.json", base.into(), base.join(out), Default::default());
     engine.run(&graph, &opts, Arc::new(SilentObserver)).unwrap()
 }
 

@@ -33,7 +33,7 @@ pub use progress::ProgressSteps;
 pub use registry::Registry;
 pub use report::{NodeReport, NodeStatus, RunReport, Warning};
 pub use run::{
-    require_gpu_from_env, DeviceMode, RunObserver, RunOptions, RunOutcome, SilentObserver,
-    NOT_IN_CACHE,
+    require_gpu_from_env, DeviceMode, RunObserver, RunOptions, RunOutcome, RunPolicy,
+    SilentObserver, NOT_IN_CACHE,
 };
 pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};

@@ -78,4 +78,13 @@ impl RunReport {
     pub fn node(&self, id: &str) -> Option<&NodeReport> {
         self.nodes.iter().find(|n| n.id == id)
     }
+
+    /// Writes `<out_dir>/report.json` whole or not at all (through [`crate::write_atomic`]),
+    /// creating the folder; returns the file's path.
+    pub fn write_into(&self, out_dir: &std::path::Path) -> std::io::Result<std::path::PathBuf> {
+        let path = out_dir.join("report.json");
+        let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
+        crate::write_atomic(&path, text + "\n")?;
+        Ok(path)
+    }
 }

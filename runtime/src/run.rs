@@ -31,6 +31,42 @@ pub trait RunObserver: Send + Sync {
 pub struct SilentObserver;
 impl RunObserver for SilentObserver {}
 
+/// What holds for every run of a session (a command, a studio, a Python process): the device
+/// policy, the caches, verification, the cancel flag and the folders runs are confined to.
+/// Built once per session; each run's [`RunOptions`] carries a copy.
+#[derive(Clone, Debug)]
+pub struct RunPolicy {
+    pub device: DeviceMode,
+    /// A GPU node without an adapter fails instead of falling back (`MESOFLOW_REQUIRE_GPU=1`).
+    pub require_gpu: bool,
+    /// Read and write the caches.
+    pub use_cache: bool,
+    /// Recompute cache hits and fail on a mismatch.
+    pub verify_cache: bool,
+    pub cancel: Arc<AtomicBool>,
+    /// Folders every input file must lie in, links followed, when it is hashed and when its node
+    /// opens it (the studio's folders); `None`: anywhere.
+    pub confine: Option<crate::confine::Confinement>,
+}
+
+impl Default for RunPolicy {
+    /// Automatic device choice, `require_gpu` from the environment, caches read and written, no
+    /// verification, a fresh cancel flag, no confinement.
+    fn default() -> Self {
+        RunPolicy {
+            device: DeviceMode::Auto,
+            require_gpu: require_gpu_from_env(),
+            use_cache: true,
+            verify_cache: false,
+            cancel: Arc::new(AtomicBool::new(false)),
+            confine: None,
+        }
+    }
+}
+
+/// One run: what it runs on and where (graph name, folders, outputs, the cluster's fields) and the
+/// session's [`RunPolicy`].
+#[derive(Clone, Debug)]
 pub struct RunOptions {
     /// The graph's path as the user gave it; it goes into the report.
     pub graph_name: String,
@@ -40,14 +76,6 @@ pub struct RunOptions {
     pub out_dir: PathBuf,
     /// Outputs to produce; empty means every sink of the graph.
     pub outputs: Vec<PortRef>,
-    pub device: DeviceMode,
-    /// A GPU node without an adapter fails instead of falling back (`MESOFLOW_REQUIRE_GPU=1`).
-    pub require_gpu: bool,
-    /// Read and write the caches.
-    pub use_cache: bool,
-    /// Recompute cache hits and fail on a mismatch.
-    pub verify_cache: bool,
-    pub cancel: Arc<AtomicBool>,
     /// Only these nodes may be computed; any other node whose value is not in a cache fails
     /// with [`NOT_IN_CACHE`] instead of running (a cluster job runs its unit, never its inputs;
     /// the driver's final pass computes nothing). `None`: every node may run.
@@ -56,14 +84,12 @@ pub struct RunOptions {
     /// recompute than to read (`NodeSpec::disk_cache` false): a cluster job hands its values
     /// over to other jobs only through the cache.
     pub cache_everything: bool,
-    /// Folders every input file must lie in, links followed, when it is hashed and when its node
-    /// opens it (the studio's folders); `None`: anywhere.
-    pub confine: Option<crate::confine::Confinement>,
+    pub policy: RunPolicy,
 }
 
 /// Whether `MESOFLOW_REQUIRE_GPU=1` asks that GPU nodes never fall back to their CPU path: the
-/// one place the variable is read (the command line, the studio, the cluster and Python all ask
-/// here; the command line also refuses a value other than 0 or 1 at start-up).
+/// one place the variable is read ([`RunPolicy::default`]; the command line also refuses a value
+/// other than 0 or 1 at start-up).
 pub fn require_gpu_from_env() -> bool {
     std::env::var("MESOFLOW_REQUIRE_GPU").is_ok_and(|v| v == "1")
 }
@@ -72,40 +98,28 @@ pub fn require_gpu_from_env() -> bool {
 pub const NOT_IN_CACHE: &str = "not in the cache, and not computed here";
 
 impl RunOptions {
-    pub fn new(graph_name: &str, base_dir: PathBuf, out_dir: PathBuf) -> Self {
+    /// A run of every sink under `policy`.
+    pub fn new(graph_name: &str, base_dir: PathBuf, out_dir: PathBuf, policy: RunPolicy) -> Self {
         RunOptions {
             graph_name: graph_name.into(),
             base_dir,
             out_dir,
             outputs: Vec::new(),
-            device: DeviceMode::Auto,
-            require_gpu: false,
-            use_cache: true,
-            verify_cache: false,
-            cancel: Arc::new(AtomicBool::new(false)),
             compute_only: None,
             cache_everything: false,
-            confine: None,
+            policy,
         }
     }
 
-    /// Options for another run of the same session: this one's graph name and folders and its
-    /// policy (device, require_gpu, caches, verification, cancel flag, confinement), none of its per-run
-    /// fields (outputs, compute_only, cache_everything).
+    /// Options for another run of the same session: this one's graph name, folders and policy,
+    /// none of its per-run fields (outputs, compute_only, cache_everything).
     pub fn same_policy(&self) -> RunOptions {
-        RunOptions {
-            device: self.device,
-            require_gpu: self.require_gpu,
-            use_cache: self.use_cache,
-            verify_cache: self.verify_cache,
-            cancel: self.cancel.clone(),
-            confine: self.confine.clone(),
-            ..RunOptions::new(
-                &self.graph_name,
-                self.base_dir.clone(),
-                self.out_dir.clone(),
-            )
-        }
+        RunOptions::new(
+            &self.graph_name,
+            self.base_dir.clone(),
+            self.out_dir.clone(),
+            self.policy.clone(),
+        )
     }
 }
 

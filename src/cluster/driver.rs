@@ -177,7 +177,7 @@ pub fn drive(
         }
     }
     loop {
-        if opts.cancel.load(Ordering::Relaxed) || folder.cancel_path().exists() {
+        if opts.policy.cancel.load(Ordering::Relaxed) || folder.cancel_path().exists() {
             let jobs: Vec<String> = state
                 .values()
                 .filter_map(|s| match s {

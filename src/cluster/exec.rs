@@ -9,7 +9,8 @@ use crate::exit;
 use mesoflow_graph::{check, GraphFile, PortRef};
 use mesoflow_runtime::cache::{default_memory_budget, DiskCache};
 use mesoflow_runtime::{
-    DeviceMode, Engine, EngineConfig, NodeStatus, RunOptions, SilentObserver, NOT_IN_CACHE,
+    DeviceMode, Engine, EngineConfig, NodeStatus, RunOptions, RunPolicy, SilentObserver,
+    NOT_IN_CACHE,
 };
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -86,7 +87,7 @@ pub fn exec(run_dir: &Path, unit: &str) -> anyhow::Result<i32> {
         ))
     })?;
     let engine = Engine::new(
-        mesoflow_nodes::registry(),
+        mesoflow_nodes::registry::builtin(),
         EngineConfig {
             memory_budget: default_memory_budget(),
             disk: Some(cache),
@@ -98,14 +99,16 @@ pub fn exec(run_dir: &Path, unit: &str) -> anyhow::Result<i32> {
         &spec.graph_name,
         spec.base_dir.clone(),
         run_dir.join("scratch").join(unit),
+        RunPolicy {
+            device: match spec.device.as_str() {
+                "cpu" => DeviceMode::Cpu,
+                "gpu" => DeviceMode::Gpu,
+                _ => DeviceMode::Auto,
+            },
+            cancel: crate::interrupt::cancel_flag(),
+            ..RunPolicy::default()
+        },
     );
-    opts.device = match spec.device.as_str() {
-        "cpu" => DeviceMode::Cpu,
-        "gpu" => DeviceMode::Gpu,
-        _ => DeviceMode::Auto,
-    };
-    opts.require_gpu = crate::session::require_gpu();
-    opts.cancel = crate::interrupt::cancel_flag();
     opts.outputs = u
         .nodes
         .iter()

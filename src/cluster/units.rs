@@ -120,7 +120,7 @@ mod tests {
     fn variant(engine: &Engine, text: &str) -> (CheckedGraph, BTreeMap<String, Key>) {
         let file = mesoflow_graph::GraphFile::parse(text).unwrap();
         let graph = mesoflow_graph::check("g", &file, engine.registry()).unwrap();
-        let opts = RunOptions::new("g", ".".into(), "out".into());
+        let opts = RunOptions::new("g", ".".into(), "out".into(), Default::default());
         let keys = engine
             .keys(&graph, &opts)
             .into_iter()
@@ -149,7 +149,7 @@ mod tests {
     #[test]
     fn chains_split_where_a_node_has_two_consumers_and_shared_keys_are_one_unit() {
         let engine = Engine::new(
-            mesoflow_nodes::registry(),
+            mesoflow_nodes::registry::builtin(),
             EngineConfig {
                 memory_budget: 1 << 20,
                 disk: None,
@@ -182,7 +182,7 @@ mod tests {
     #[test]
     fn dependants_follow_keys_transitively() {
         let engine = Engine::new(
-            mesoflow_nodes::registry(),
+            mesoflow_nodes::registry::builtin(),
             EngineConfig {
                 memory_budget: 1 << 20,
                 disk: None,

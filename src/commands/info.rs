@@ -8,7 +8,7 @@ use serde_json::{json, Value};
 use std::path::Path;
 
 pub fn validate(path: &Path, set: &[String]) -> anyhow::Result<i32> {
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     let graph = load::load(path, set, &registry)?;
     // Input files as a run would look for them: a missing one is an error here, not at run time.
     let base = crate::session::graph_dir(path);
@@ -165,7 +165,7 @@ fn describe(s: &KindSignature) -> String {
 }
 
 pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     let sigs: Vec<&KindSignature> = registry.signatures().collect();
     let chosen: Vec<&KindSignature> = match kind {
         None => sigs,
@@ -204,7 +204,7 @@ pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
 }
 
 pub fn schema() -> anyhow::Result<i32> {
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     println!(
         "{}",
         serde_json::to_string_pretty(&mesoflow_graph::schema::graph_schema(&registry))?
@@ -222,7 +222,7 @@ fn colour(s: NodeStatus) -> &'static str {
 }
 
 pub fn dot(graph: &Path, report: Option<&Path>) -> anyhow::Result<i32> {
-    let registry = mesoflow_nodes::registry();
+    let registry = mesoflow_nodes::registry::builtin();
     let graph = load::load(graph, &[], &registry)?;
     let report: Option<RunReport> = match report {
         Some(p) => {

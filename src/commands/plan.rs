@@ -7,12 +7,12 @@
 use crate::args::PlanArgs;
 use crate::exit::invalid;
 use crate::load;
-use crate::session::{device_mode, engine, graph_dir, require_gpu};
+use crate::session::{engine, graph_dir, policy};
 use mesoflow_graph::NodeDecl;
 use mesoflow_nodes::image::flip;
 use mesoflow_nodes::support::raytrace::camera::CameraParams;
 use mesoflow_plan as plan;
-use mesoflow_runtime::RunOptions;
+use mesoflow_runtime::{RunOptions, RunPolicy};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 
@@ -217,16 +217,15 @@ fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
 
 /// The probes' run options: the command's device, cache and Ctrl-C.
 fn run_options(args: &PlanArgs) -> RunOptions {
-    let mut opts = RunOptions::new(
+    RunOptions::new(
         &args.graph.display().to_string(),
         graph_dir(&args.graph),
         std::env::temp_dir(),
-    );
-    opts.device = device_mode(args.device);
-    opts.require_gpu = require_gpu();
-    opts.use_cache = !args.cache.no_cache;
-    opts.cancel = crate::session::cancel_flag();
-    opts
+        RunPolicy {
+            verify_cache: false,
+            ..policy(args.device, &args.cache)
+        },
+    )
 }
 
 /// Where the planned graph goes: `-o`, or `<graph>.planned.json` beside the graph.

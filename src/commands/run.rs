@@ -6,8 +6,8 @@ use crate::exit::{self, invalid};
 use crate::load;
 use crate::progress::{summary, Bars};
 use crate::session::{
-    cache_dir, cancel_flag, check_outputs, device_mode, device_name, engine, exit_code, graph_dir,
-    graph_name, parse_outputs, require_gpu, slurm_run_dir, write_report,
+    cache_dir, check_outputs, device_name, engine, exit_code, graph_dir, graph_name, parse_outputs,
+    policy, slurm_run_dir, write_report,
 };
 use mesoflow_graph::CheckedGraph;
 use mesoflow_runtime::{Engine, RunObserver, RunOptions, RunReport, SilentObserver};
@@ -34,13 +34,9 @@ impl Runner {
             &args.graph.display().to_string(),
             graph_dir(&args.graph),
             out_dir,
+            policy(args.device, &args.cache),
         );
         base.outputs = parse_outputs(&args.output)?;
-        base.device = device_mode(args.device);
-        base.require_gpu = require_gpu();
-        base.use_cache = !args.cache.no_cache;
-        base.verify_cache = args.cache.verify_cache;
-        base.cancel = cancel_flag();
         Ok(Runner {
             engine,
             base,
@@ -52,18 +48,8 @@ impl Runner {
     /// Runs once, writes report.json and prints the summary.
     pub fn run_once(&self, graph: &CheckedGraph, out_dir: &Path) -> anyhow::Result<RunReport> {
         let opts = RunOptions {
-            graph_name: self.base.graph_name.clone(),
-            base_dir: self.base.base_dir.clone(),
             out_dir: out_dir.to_path_buf(),
-            outputs: self.base.outputs.clone(),
-            device: self.base.device,
-            require_gpu: self.base.require_gpu,
-            use_cache: self.base.use_cache,
-            verify_cache: self.base.verify_cache,
-            compute_only: self.base.compute_only.clone(),
-            cache_everything: self.base.cache_everything,
-            cancel: self.base.cancel.clone(),
-            confine: None,
+            ..self.base.clone()
         };
         let shown: Arc<dyn RunObserver> = if self.quiet {
             Arc::new(SilentObserver)

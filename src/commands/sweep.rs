@@ -8,11 +8,11 @@ use crate::load;
 use crate::progress::summary;
 use crate::session::{
     cache_dir, cancel_flag, device_mode, device_name, engine, graph_dir, graph_name, parse_outputs,
-    require_gpu, slurm_run_dir,
+    policy, slurm_run_dir,
 };
 use crate::sweep::{Sweep, Vary};
 use mesoflow_graph::edit::parse_value;
-use mesoflow_runtime::RunOptions;
+use mesoflow_runtime::{RunOptions, RunPolicy};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -94,12 +94,11 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             &args.graph.display().to_string(),
             graph_dir(&args.graph),
             run_dir.to_path_buf(),
+            RunPolicy {
+                cancel: cancel.clone(),
+                ..policy(args.device, &args.cache)
+            },
         );
-        opts.device = device_mode(args.device);
-        opts.require_gpu = require_gpu();
-        opts.use_cache = !args.cache.no_cache;
-        opts.verify_cache = args.cache.verify_cache;
-        opts.cancel = cancel.clone();
         if slurm {
             // Every value came from the cluster, through the cache: this pass computes nothing.
             opts.compute_only = Some(Default::default());
@@ -114,10 +113,13 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             &args.graph.display().to_string(),
             graph_dir(&args.graph),
             out_dir.clone(),
+            RunPolicy {
+                device: device_mode(args.device),
+                cancel: cancel.clone(),
+                ..RunPolicy::default()
+            },
         );
         opts.outputs = sweep.outputs.clone();
-        opts.device = device_mode(args.device);
-        opts.cancel = cancel.clone();
         let variants: Vec<(String, mesoflow_graph::CheckedGraph)> = sweep
             .texts
             .iter()
@@ -138,29 +140,11 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             return Ok(crate::exit::CANCELLED);
         }
     }
-    let total = sweep.combos.len();
     let rows = sweep.run(&engine, &out_dir, options, |i, row, report| {
         if args.quiet {
             return;
         }
-        let shown: Vec<String> = sweep
-            .measures
-            .iter()
-            .zip(&row.measures)
-            .map(|(m, v)| match v {
-                Some(v) => format!("{m}={v:.4e}"),
-                None => format!("{m}=—"),
-            })
-            .collect();
-        println!(
-            "[{}/{total}] {}: {} in {:.2} s{}{}",
-            i + 1,
-            sweep.label(i),
-            if report.ok { "ok" } else { "FAILED" },
-            report.seconds,
-            if shown.is_empty() { "" } else { "; " },
-            shown.join(" ")
-        );
+        println!("{}", sweep.progress_line(i, row));
         if !report.ok {
             print!("{}", summary(report));
         }

@@ -64,7 +64,8 @@ pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyho
             }
         }
         runs += 1;
-        if max_runs.is_some_and(|m| runs >= m) || runner.base.cancel.load(Ordering::Relaxed) {
+        if max_runs.is_some_and(|m| runs >= m) || runner.base.policy.cancel.load(Ordering::Relaxed)
+        {
             return Ok(last_code);
         }
         println!(
@@ -73,7 +74,7 @@ pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyho
         );
         loop {
             std::thread::sleep(Duration::from_millis(interval_ms));
-            if runner.base.cancel.load(Ordering::Relaxed) {
+            if runner.base.policy.cancel.load(Ordering::Relaxed) {
                 return Ok(crate::exit::CANCELLED);
             }
             if fingerprint(&watched) != before {

@@ -380,7 +380,7 @@ mod tests {
             assert_ne!(d["view"], "none", "{}", v.type_name());
             assert_eq!(d["type"], v.type_name());
         }
-        let registry = mesoflow_nodes::registry();
+        let registry = mesoflow_nodes::registry::builtin();
         for kind in mesoflow_graph::Catalog::kinds(&registry) {
             let Some(node) = registry.node(kind) else {
                 continue;

@@ -383,19 +383,21 @@ impl Studio {
     }
 
     pub fn options(&self, out_dir: &Path, cancel: Arc<AtomicBool>) -> RunOptions {
-        let mut opts = RunOptions::new(
+        RunOptions::new(
             &self.graph_path.display().to_string(),
             self.base_dir.clone(),
             out_dir.to_path_buf(),
-        );
-        opts.device = self.device;
-        opts.require_gpu = self.require_gpu;
-        opts.verify_cache = self.verify_cache;
-        opts.cancel = cancel;
-        // Input files are checked against the studio's folders again when a run hashes and opens
-        // them: a file accepted by an edit may have become a link to one outside since.
-        opts.confine = Some(mesoflow_runtime::Confinement::new(&self.roots));
-        opts
+            mesoflow_runtime::RunPolicy {
+                device: self.device,
+                require_gpu: self.require_gpu,
+                verify_cache: self.verify_cache,
+                cancel,
+                // Input files are checked against the studio's folders again when a run hashes and
+                // opens them: a file accepted by an edit may have become a link to one outside since.
+                confine: Some(mesoflow_runtime::Confinement::new(&self.roots)),
+                ..Default::default()
+            },
+        )
     }
 
     /// The run worker: runs the graph whenever asked, one run at a time, until Ctrl-C.

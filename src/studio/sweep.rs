@@ -72,7 +72,7 @@ pub fn start(studio: &Arc<Studio>, spec: SweepSpec) -> Result<u64, Refused> {
         studio.engine.registry(),
     )
     .map_err(|r| match r {
-        Refusal::Asked(m) => refused(m),
+        Refusal::Asked(m) | Refusal::Measure(_, m) => refused(m),
         Refusal::Graph(e) => Refused {
             errors: e.errors.iter().map(Problem::of).collect(),
         },

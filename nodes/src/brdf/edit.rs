@@ -84,17 +84,6 @@ impl Node for Edit {
         if p.matrix.iter().flatten().any(|v| !v.is_finite()) {
             return Err(NodeError::param("matrix", "entries must be finite"));
         }
-        for (name, v, lo, hi) in [
-            ("hue_deg", p.hue_deg, -360.0, 360.0),
-            ("saturation", p.saturation, 0.0, 100.0),
-            ("value", p.value, 0.0, 100.0),
-            ("specular_scale", p.specular_scale, 0.0, 1000.0),
-            ("roughness_scale", p.roughness_scale, 0.001, 1000.0),
-        ] {
-            if !(v.is_finite() && (lo..=hi).contains(&v)) {
-                return Err(NodeError::param(name, format!("must be in [{lo}, {hi}]")));
-            }
-        }
         Ok(())
     }
 

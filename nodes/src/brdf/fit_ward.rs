@@ -141,12 +141,6 @@ impl Node for FitWard {
                 return Err(NodeError::param(name, "must be in [0, 1)"));
             }
         }
-        if !(ALPHA_MIN..=1.0).contains(&p.min_roughness) {
-            return Err(NodeError::param(
-                "min_roughness",
-                format!("must be in [{ALPHA_MIN}, 1]"),
-            ));
-        }
         Ok(())
     }
 

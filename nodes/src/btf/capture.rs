@@ -108,12 +108,6 @@ impl Node for Capture {
         for (name, set) in [("views", &p.views), ("lights", &p.lights)] {
             set.validate().map_err(|e| NodeError::param(name, e))?;
         }
-        if !(1..=16).contains(&p.samples) {
-            return Err(NodeError::param(
-                "samples",
-                "must be 1 to 16 rays per texel side",
-            ));
-        }
         Ok(())
     }
 

@@ -85,12 +85,6 @@ impl Node for ReadUbo2014 {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if !(1..=64).contains(&p.stride) {
-            return Err(NodeError::param("stride", "must be 1 to 64"));
-        }
-        if !(1..=64).contains(&p.downsample) {
-            return Err(NodeError::param("downsample", "must be 1 to 64"));
-        }
         if p.output == Output::Basis && (p.views.is_some() || p.lights.is_some()) {
             return Err(NodeError::param(
                 if p.views.is_some() { "views" } else { "lights" },

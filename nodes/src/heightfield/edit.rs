@@ -69,18 +69,11 @@ impl Node for Edit {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
-        let ok = match p.operation {
-            Operation::Blend => (0.0..=1.0).contains(&p.amount),
-            _ => p.amount.is_finite() && p.amount.abs() <= 100.0,
-        };
-        if !ok {
+        // The schema bounds `amount` to [-100, 100]; a blend's share is narrower.
+        if p.operation == Operation::Blend && !(0.0..=1.0).contains(&p.amount) {
             return Err(NodeError::param(
                 "amount",
-                if p.operation == Operation::Blend {
-                    "a blend's share must be in [0, 1]"
-                } else {
-                    "must be in [-100, 100]"
-                },
+                "a blend's share must be in [0, 1]",
             ));
         }
         Ok(())

@@ -62,19 +62,6 @@ impl Node for NormalNoise {
         }
     }
 
-    fn check(&self, p: &Params) -> Result<(), NodeError> {
-        for (name, v, max) in [
-            ("sigma_deg", p.sigma_deg, 45.0),
-            ("outliers", p.outliers, 1.0),
-            ("outlier_deg", p.outlier_deg, 80.0),
-        ] {
-            if !(v.is_finite() && (0.0..=max).contains(&v)) {
-                return Err(NodeError::param(name, format!("must be in [0, {max}]")));
-            }
-        }
-        Ok(())
-    }
-
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let n = inputs.get::<NormalMap>("normals")?;
         let texels = n.width * n.height;

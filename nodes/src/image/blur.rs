@@ -39,13 +39,6 @@ impl Node for Blur {
         }
     }
 
-    fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if !(p.sigma.is_finite() && (0.0..=1000.0).contains(&p.sigma)) {
-            return Err(NodeError::param("sigma", "must be in [0, 1000] pixels"));
-        }
-        Ok(())
-    }
-
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let img = inputs.get::<Image>("image")?;
         Ok(Outputs::new().with("image", blur(img, p.sigma)))

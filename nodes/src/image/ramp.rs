@@ -56,20 +56,6 @@ impl Node for Ramp {
         }
     }
 
-    fn check(&self, p: &Params) -> Result<(), NodeError> {
-        for (name, v) in [("width", p.width), ("height", p.height)] {
-            if v == 0 || v > 1 << 14 {
-                return Err(NodeError::param(name, "must be in 1 … 16384"));
-            }
-        }
-        for (name, v) in [("angle", p.angle), ("from", p.from), ("to", p.to)] {
-            if !v.is_finite() {
-                return Err(NodeError::param(name, "must be finite"));
-            }
-        }
-        Ok(())
-    }
-
     fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         let (w, h) = (p.width as usize, p.height as usize);
         let (dx, dy) = (p.angle.to_radians().cos(), p.angle.to_radians().sin());

@@ -77,12 +77,6 @@ impl Node for ImageWrite {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if !(1..=64).contains(&p.scale) {
-            return Err(NodeError::param("scale", "must be 1 to 64"));
-        }
-        if !(p.exposure.is_finite() && (0.0..=1e6).contains(&p.exposure)) {
-            return Err(NodeError::param("exposure", "must be in [0, 1e6]"));
-        }
         format_of(p).map(drop)
     }
 

@@ -106,9 +106,6 @@ impl Node for Evolve {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if !(p.step.is_finite() && p.step >= 0.0) {
-            return Err(NodeError::param("step", "must be finite and not negative"));
-        }
         if !(p.exposure.is_finite() && p.exposure > 0.0) {
             return Err(NodeError::param("exposure", "must be finite and positive"));
         }

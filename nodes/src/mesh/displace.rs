@@ -73,20 +73,6 @@ impl Node for Displace {
         if !p.tiling.iter().all(|t| t.is_finite() && *t > 0.0) {
             return Err(NodeError::param("tiling", "must be positive"));
         }
-        if !(p.shell.is_finite() && p.shell >= 0.0) {
-            return Err(NodeError::param("shell", "must be finite and not negative"));
-        }
-        if p.depth
-            .is_some_and(|d| !(d.is_finite() && (0.0..=1e6).contains(&d)))
-        {
-            return Err(NodeError::param("depth", "must be in [0, 10⁶] texels"));
-        }
-        if !(0.25..=16.0).contains(&p.density) {
-            return Err(NodeError::param("density", "must be in [0.25, 16]"));
-        }
-        if p.max_triangles == 0 {
-            return Err(NodeError::param("max_triangles", "must be at least 1"));
-        }
         Ok(())
     }
 

@@ -65,13 +65,6 @@ impl Node for PointsSynthetic {
         }
     }
 
-    fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if !(p.noise >= 0.0 && p.noise.is_finite()) {
-            return Err(NodeError::param("noise", "must be finite and not negative"));
-        }
-        Ok(())
-    }
-
     fn run(&self, _ctx: &NodeContext, p: &Params, _inputs: &Inputs) -> Result<Outputs, NodeError> {
         let (points, t) = generate(p);
         Ok(Outputs::new().with("points", points).with("parameter", t))

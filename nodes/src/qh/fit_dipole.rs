@@ -92,16 +92,6 @@ impl Node for FitDipole {
         }
     }
 
-    fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if !(p.eta.is_finite() && p.eta > 0.0) {
-            return Err(NodeError::param("eta", "must be a positive index ratio"));
-        }
-        if p.model == Model::Montecarlo && p.photons < 1000 {
-            return Err(NodeError::param("photons", "at least 1000"));
-        }
-        Ok(())
-    }
-
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let value = inputs.value("measured")?;
         let measured = if let Some(prof) = value.as_any().downcast_ref::<DiffusionProfile>() {

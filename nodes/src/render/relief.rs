@@ -91,18 +91,6 @@ impl Node for RenderRelief {
         if p.tiling.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
             return Err(NodeError::param("tiling", "must be finite and positive"));
         }
-        if !(p.shell.is_finite() && (0.0..=1e9).contains(&p.shell)) {
-            return Err(NodeError::param("shell", "must be in [0, 1e9]"));
-        }
-        if !(1..=4096).contains(&p.linear_steps) {
-            return Err(NodeError::param("linear_steps", "must be 1 to 4096"));
-        }
-        if p.binary_steps > 32 {
-            return Err(NodeError::param("binary_steps", "must be 0 to 32"));
-        }
-        if !(1..=1000).contains(&p.frames) {
-            return Err(NodeError::param("frames", "must be 1 to 1000"));
-        }
         Ok(())
     }
 

@@ -82,9 +82,6 @@ impl Node for SceneFootprint {
         if !(1e-9..=1e9).contains(&p.mm_per_unit) {
             return Err(NodeError::param("mm_per_unit", "must be in [1e-9, 1e9] mm"));
         }
-        if !(p.shell >= 0.0 && p.shell.is_finite()) {
-            return Err(NodeError::param("shell", "must be finite and not negative"));
-        }
         if p.tiling.iter().any(|t| !(t.is_finite() && *t > 0.0)) {
             return Err(NodeError::param("tiling", "must be positive"));
         }

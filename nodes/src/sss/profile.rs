@@ -110,16 +110,6 @@ impl Node for Profile {
         }
     }
 
-    fn check(&self, p: &Params) -> Result<(), NodeError> {
-        if p.model == Model::Montecarlo && p.photons < 1000 {
-            return Err(NodeError::param(
-                "photons",
-                "at least 1000 photons per channel",
-            ));
-        }
-        Ok(())
-    }
-
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
         let m = inputs.get::<ScatteringMaterial>("material")?;
         let chunks = if p.model == Model::Montecarlo {

@@ -111,12 +111,6 @@ impl Node for Texture {
         if !(p.exponent.is_finite() && p.exponent > 0.0 && p.exponent <= 2.0) {
             return Err(NodeError::param("exponent", "must be in (0, 2]"));
         }
-        if !(p.guide_weight.is_finite() && p.guide_weight >= 0.0) {
-            return Err(NodeError::param(
-                "guide_weight",
-                "must be finite and not negative",
-            ));
-        }
         if p.stop_level >= p.levels {
             return Err(NodeError::param(
                 "stop_level",
@@ -125,15 +119,6 @@ impl Node for Texture {
                     p.stop_level, p.levels
                 ),
             ));
-        }
-        for (name, v) in [
-            ("levels", p.levels),
-            ("iterations", p.iterations),
-            ("search_rounds", p.search_rounds),
-        ] {
-            if v == 0 {
-                return Err(NodeError::param(name, "must be at least 1"));
-            }
         }
         Ok(())
     }

@@ -136,19 +136,6 @@ impl Node for WeatheringSample {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
-        for (name, v) in [
-            ("radius", p.radius),
-            ("roughness", p.roughness),
-            ("noise", p.noise),
-            ("bumps", p.bumps),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(NodeError::param(name, "must be finite and not negative"));
-            }
-        }
-        if p.radius <= 0.0 {
-            return Err(NodeError::param("radius", "must be positive"));
-        }
         p.lights
             .validate()
             .map_err(|e| NodeError::param("lights", e))?;

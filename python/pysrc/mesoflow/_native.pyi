@@ -89,15 +89,29 @@ def plan_truth(
     """Plans a render node against the truth the graph makes (relative RMSE, or mean FLIP at
     ``ppd``); returns the plan document and the planned graph, both as JSON text."""
 
-def write_sweep(
+def sweep(
+    text: str,
+    name: str,
+    base_dir: str,
     out_dir: str,
-    varies: Sequence[Tuple[str, str]],
+    vary: Sequence[Tuple[str, str]],
     measures: Sequence[str],
-    measured_nodes: Sequence[str],
     versus: Sequence[str],
-    rows: Sequence[Tuple[str, Sequence[Optional[float]], Sequence[Optional[float]], float, bool]],
-) -> List[str]:
-    """Writes sweep.csv and the charts; returns the charts that could not be drawn."""
+    sets: Sequence[str],
+    max_runs: int,
+    device: str = "auto",
+    cache_dir: Optional[str] = None,
+    use_cache: bool = True,
+    progress: bool = True,
+) -> Tuple[
+    List[str],
+    List[str],
+    List[Tuple[str, List[Optional[float]], List[Optional[float]], float, bool]],
+    List[str],
+]:
+    """Runs the command line's sweep (prepare, run, write); returns the varied names, the
+    measured nodes, the rows and the charts that could not be drawn. A refusal raises
+    ``ValueError(message, problems)``."""
 
 def cli(args: Sequence[str]) -> int:
     """Runs the command line (``mesoflow ARGS…``) in this process; returns its exit code."""

@@ -46,13 +46,13 @@ pub(crate) fn demand(
         };
         let Some(key) = slot.key else { continue };
         let cn = &graph.nodes[i];
-        let hit = if opts.use_cache {
+        let hit = if opts.policy.use_cache {
             lookup(shared, &key, slot.node.spec().kind, cn.id.as_str(), sink)
         } else {
             None
         };
         match hit {
-            Some((outputs, status, seconds, record)) if !opts.verify_cache => {
+            Some((outputs, status, seconds, record)) if !opts.policy.verify_cache => {
                 // The warnings belong to the value: a cached render of a thin object is as thin.
                 for w in &record.warnings {
                     sink.push(cn.id.as_str(), w.clone());

@@ -48,7 +48,7 @@ pub(crate) fn memo_dir<'a>(
     shared
         .disk
         .as_ref()
-        .filter(|_| opts.use_cache)
+        .filter(|_| opts.policy.use_cache)
         .map(|d| d.dir())
 }
 
@@ -58,7 +58,7 @@ pub(crate) fn choose(
     pref: DevicePreference,
     opts: &RunOptions,
 ) -> Result<Choice, String> {
-    if planned(pref, opts.device) == DevicePreference::Cpu {
+    if planned(pref, opts.policy.device) == DevicePreference::Cpu {
         return Ok(Choice {
             gpu: false,
             fallback: None,
@@ -72,7 +72,7 @@ pub(crate) fn choose(
         remembered: remembered.then(|| found.clone()),
     };
     match found.clone() {
-        Found::Software(adapter) if opts.device == DeviceMode::Auto => {
+        Found::Software(adapter) if opts.policy.device == DeviceMode::Auto => {
             let why = format!(
                 "the only GPU adapter is {adapter}: a software adapter runs this node slower than \
                  the CPU path; ran the CPU path (--device gpu forces it)"
@@ -80,8 +80,10 @@ pub(crate) fn choose(
             Ok(choice(false, Some(why)))
         }
         Found::Software(_) | Found::Hardware(_) => Ok(choice(true, None)),
-        Found::Missing(e) if opts.device == DeviceMode::Gpu => Err(format!("{e} (--device gpu)")),
-        Found::Missing(e) if opts.require_gpu => Err(format!(
+        Found::Missing(e) if opts.policy.device == DeviceMode::Gpu => {
+            Err(format!("{e} (--device gpu)"))
+        }
+        Found::Missing(e) if opts.policy.require_gpu => Err(format!(
             "{e} (MESOFLOW_REQUIRE_GPU=1 forbids the CPU fallback)"
         )),
         Found::Missing(_) => Ok(choice(

@@ -67,7 +67,7 @@ pub(crate) fn run_all(
     let mut gpu_threads = Vec::new();
     let mut running = 0usize;
     loop {
-        while !opts.cancel.load(Ordering::Relaxed) {
+        while !opts.policy.cancel.load(Ordering::Relaxed) {
             let Some(i) = ready.pop_first() else { break };
             if slots[i].as_ref().is_none_or(|s| s.report.is_some()) {
                 continue; // failed while preparing
@@ -133,16 +133,18 @@ pub(crate) fn run_all(
                 ctx: NodeContext {
                     node: cn.id.clone(),
                     base_dir: opts.base_dir.clone(),
-                    cancel: opts.cancel.clone(),
+                    cancel: opts.policy.cancel.clone(),
                     gpu,
                     sink: sink.clone(),
                     timings: Default::default(),
                     warnings: Default::default(),
-                    confine: opts.confine.clone(),
+                    confine: opts.policy.confine.clone(),
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
-                memory: opts.use_cache.then(|| shared.memory.clone()),
-                disk: if opts.use_cache && (slot.node.spec().disk_cache || opts.cache_everything) {
+                memory: opts.policy.use_cache.then(|| shared.memory.clone()),
+                disk: if opts.policy.use_cache
+                    && (slot.node.spec().disk_cache || opts.cache_everything)
+                {
                     shared.disk.clone()
                 } else {
                     None

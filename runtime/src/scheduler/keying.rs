@@ -87,7 +87,7 @@ fn prepare_and_key(
     device: Option<&str>,
     read_files: &mut BTreeSet<String>,
 ) -> Result<(Prepared, Key), NodeError> {
-    let (base, confine) = (opts.base_dir.as_path(), opts.confine.as_ref());
+    let (base, confine) = (opts.base_dir.as_path(), opts.policy.confine.as_ref());
     let prepared = node.prepare(&cn.params)?;
     let declared = node.files(&prepared, base)?;
     let mut files = Vec::new();

@@ -194,7 +194,10 @@ pub(crate) fn execute(
         shared, graph, &plan, &mut slots, &compute, opts, &sink, &observer, files,
     );
 
-    let cancelled = opts.cancel.load(std::sync::atomic::Ordering::Relaxed);
+    let cancelled = opts
+        .policy
+        .cancel
+        .load(std::sync::atomic::Ordering::Relaxed);
     let mut nodes = Vec::new();
     let mut skipped = Vec::new();
     for (i, cn) in graph.nodes.iter().enumerate() {

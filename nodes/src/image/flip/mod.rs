@@ -114,27 +114,6 @@ impl Node for Flip {
                 "give `ppd` or `viewer`, not both",
             ));
         }
-        if let Some(ppd) = p.ppd {
-            if !(ppd.is_finite() && (0.5..=10_000.0).contains(&ppd)) {
-                return Err(NodeError::param(
-                    "ppd",
-                    "must be in [0.5, 10000] pixels per degree",
-                ));
-            }
-        }
-        if let Some(v) = p.viewer {
-            for (name, x) in [
-                ("viewer.distance_m", v.distance_m),
-                ("viewer.width_m", v.width_m),
-            ] {
-                if !(x.is_finite() && x > 0.0) {
-                    return Err(NodeError::param(
-                        name,
-                        "must be a positive length in metres",
-                    ));
-                }
-            }
-        }
         Ok(())
     }
 

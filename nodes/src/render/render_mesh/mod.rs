@@ -112,11 +112,7 @@ impl Node for RenderMesh {
             ));
         }
         Light::new(&p.light)?;
-        for (name, v) in [
-            ("tiling", p.tiling[0]),
-            ("tiling", p.tiling[1]),
-            ("shell", p.shell),
-        ] {
+        for (name, v) in [("tiling", p.tiling[0]), ("tiling", p.tiling[1])] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(NodeError::param(name, "must be finite and not negative"));
             }
