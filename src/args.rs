@@ -234,7 +234,7 @@ pub struct SweepArgs {
     pub max_runs: usize,
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,
-    /// Output folder (default: out/<graph name>-sweep/).
+    /// Output folder (default: out/<graph name>/sweep/, where the studio writes its sweeps).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]

@@ -443,6 +443,51 @@ fn run_says_where_its_files_went() {
     );
 }
 
+/// A run that fails names the files in its output folder that an earlier run wrote (issue 58:
+/// after a failed run they stayed in `out/` looking current).
+#[test]
+fn a_failed_run_names_the_earlier_runs_files_it_left() {
+    let s = Scratch::new();
+    let graph = Path::new(env!("CARGO_MANIFEST_DIR")).join("graphs/quickstart.json");
+    let args = |g: &str| {
+        vec![
+            "run".to_string(),
+            g.to_string(),
+            "--quiet".into(),
+            "--no-cache".into(),
+            "--out-dir".into(),
+            "o".into(),
+        ]
+    };
+    let mut first = args(graph.to_str().unwrap());
+    first.extend(["--set".into(), "surface.size=32".into()]);
+    let first: Vec<&str> = first.iter().map(String::as_str).collect();
+    let r = mesoflow(&first, s.dir.path());
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert!(!r.stderr.contains("earlier run"), "{}", r.stderr);
+    // A file that exists (so the graph validates) but is not an image: the run fails.
+    s.write("bad.png", "not a png");
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "photo": {"kind": "image.read", "params": {"path": "bad.png"}},
+            "save": {"kind": "image.write", "inputs": {"image": "photo.image"}, "params": {"path": "copy.png"}}
+        }}"#,
+    );
+    let second = args(g.to_str().unwrap());
+    let second: Vec<&str> = second.iter().map(String::as_str).collect();
+    let r = mesoflow(&second, s.dir.path());
+    assert_ne!(r.code, 0);
+    assert!(
+        r.stderr
+            .contains("from an earlier run that this run did not write")
+            && r.stderr.contains("normals.png")
+            && !r.stderr.contains("report.json,"),
+        "{}",
+        r.stderr
+    );
+}
+
 /// `cache clear` without a graph or `--cache-dir` lists the caches it would clear and clears
 /// nothing (issue 58: it wiped every cache here and one folder down without asking); `--all`
 /// clears them.

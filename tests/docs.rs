@@ -293,14 +293,14 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         ),
     ),
     (
-        "status out/btf_compress-sweep/cluster",
+        "status out/btf_compress/sweep/cluster",
         How::By(
             "slurm::status_follows_a_run_and_cancel_stops_it",
             "follows a cluster run, which needs Slurm",
         ),
     ),
     (
-        "cancel out/btf_compress-sweep/cluster",
+        "cancel out/btf_compress/sweep/cluster",
         How::By(
             "slurm::status_follows_a_run_and_cancel_stops_it",
             "stops a cluster run, which needs Slurm",

@@ -61,6 +61,7 @@ impl Runner {
             out_dir.to_path_buf(),
             shown,
         ));
+        let started = std::time::SystemTime::now();
         let mut report = self
             .engine
             .run(graph, &opts, observer)
@@ -76,6 +77,24 @@ impl Runner {
             }
         }
         write_report(&report, out_dir)?;
+        if !report.ok {
+            // A failed run rewrites only some of the folder's files: say which ones are older,
+            // so they are not taken for this run's.
+            let old = files_older_than(out_dir, started);
+            if !old.is_empty() {
+                eprintln!(
+                    "warning: {} still holds {} file{} from an earlier run that this run did not write: {}",
+                    out_dir.display(),
+                    old.len(),
+                    if old.len() == 1 { "" } else { "s" },
+                    if old.len() > 20 {
+                        format!("{}, …", old[..20].join(", "))
+                    } else {
+                        old.join(", ")
+                    }
+                );
+            }
+        }
         if !self.quiet {
             print!("{}", summary(&report));
             // Where the files went: the output folder is relative to the current folder, not
@@ -171,4 +190,36 @@ pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
     }
     let report = runner.run_once(&graph, &runner.base.out_dir)?;
     Ok(exit_code(&report))
+}
+
+/// Files under `dir` (not `report.json`) last written before `t`, by path relative to `dir`,
+/// sorted.
+fn files_older_than(dir: &Path, t: std::time::SystemTime) -> Vec<String> {
+    let mut found = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    let mut seen = 0usize;
+    while let Some(d) = stack.pop() {
+        let Ok(entries) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            seen += 1;
+            if seen > 100_000 {
+                break;
+            }
+            let path = e.path();
+            let Ok(meta) = e.metadata() else { continue };
+            if meta.is_dir() {
+                // A sweep's folder (`out/<graph>/sweep/`) is its own, not a run's.
+                if !(d == dir && e.file_name() == "sweep") {
+                    stack.push(path);
+                }
+            } else if meta.modified().is_ok_and(|m| m < t) && e.file_name() != "report.json" {
+                let rel = path.strip_prefix(dir).unwrap_or(&path);
+                found.push(rel.display().to_string());
+            }
+        }
+    }
+    found.sort();
+    found
 }

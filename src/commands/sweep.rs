@@ -83,10 +83,11 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         engine.registry(),
     )
     .map_err(|r| invalid(r.to_string()))?;
-    let out_dir = args
-        .out_dir
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("out").join(format!("{}-sweep", graph_name(&args.graph))));
+    let out_dir = args.out_dir.clone().unwrap_or_else(|| {
+        PathBuf::from("out")
+            .join(graph_name(&args.graph))
+            .join("sweep")
+    });
     let cancel = cancel_flag();
     let slurm = args.cluster.engine == EngineArg::Slurm;
     let options = |run_dir: &Path| {

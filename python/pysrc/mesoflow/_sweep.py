@@ -33,7 +33,7 @@ def sweep(
     order, and measures scalar outputs or timings (``"node.port"``; ``"node.seconds"`` is the
     node's compute time). Writes ``sweep.csv``, the charts (each measure against each varied
     parameter and against its node's time; against each ``versus`` measure) and each run's
-    ``runs/NNN/report.json`` under ``out_dir`` (default ``out/<name>-sweep``).
+    ``runs/NNN/report.json`` under ``out_dir`` (default ``out/<name>/sweep``, as the command line and the studio).
 
     Returns the rows, the columns of ``sweep.csv`` (a list of dicts; a pandas DataFrame when
     pandas is installed). Every combination is checked before any runs (GraphError); a grid of
@@ -49,7 +49,7 @@ def sweep(
         cache = str(cache) if cache else str(graph.base_dir / ".mesoflow" / "cache")
     else:
         cache = None
-    out = Path(out_dir) if out_dir is not None else Path("out") / f"{Path(graph.name).stem}-sweep"
+    out = Path(out_dir) if out_dir is not None else Path("out") / Path(graph.name).stem / "sweep"
     try:
         names, measured_nodes, native_rows, problems = _native.sweep(
             graph.to_json(),
