@@ -18,6 +18,10 @@ pub struct Cli {
 pub enum Command {
     /// Run a graph: compute the requested outputs, reusing cached results.
     Run(RunArgs),
+    /// What `run` with the same arguments would re-run and why, without running anything:
+    /// every node the outputs need, read from a cache, not needed, or run (the first run,
+    /// --no-cache, an evicted value, or what changed since the last run into the output folder).
+    Explain(RunArgs),
     /// Check a graph without running it.
     Validate {
         graph: PathBuf,
@@ -142,12 +146,21 @@ pub enum DeviceArg {
     Gpu,
 }
 
+/// The graph a command works on and the `--set`s applied to it (run, watch, sweep, plan).
 #[derive(Args, Clone)]
-pub struct RunArgs {
-    pub graph: PathBuf,
+pub struct GraphArgs {
+    /// The graph file (JSON).
+    #[arg(value_name = "GRAPH")]
+    pub path: PathBuf,
     /// Override a parameter (value read as JSON, else as a string).
     #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
     pub set: Vec<String>,
+}
+
+#[derive(Args, Clone)]
+pub struct RunArgs {
+    #[command(flatten)]
+    pub graph: GraphArgs,
     /// Produce only these outputs (default: every sink); each is printed after the run's table
     /// (a scalar by value), and alone with -q.
     #[arg(long = "output", value_name = "ID.PORT")]
@@ -160,6 +173,11 @@ pub struct RunArgs {
     /// No progress bars or summary table.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Say in the run table why each computed node ran: the first run, --no-cache, an evicted
+    /// value, or what changed (a parameter, an input and the node that changed it, a file, the
+    /// kind's version) since the last run into the same output folder.
+    #[arg(long)]
+    pub explain: bool,
     #[command(flatten)]
     pub cache: CacheOptions,
     #[command(flatten)]
@@ -218,7 +236,8 @@ pub struct CacheOptions {
 
 #[derive(Args)]
 pub struct SweepArgs {
-    pub graph: PathBuf,
+    #[command(flatten)]
+    pub graph: GraphArgs,
     /// A parameter and its values: id.param=v1,v2,… (repeat for a grid).
     #[arg(long = "vary", value_name = "ID.PARAM=V1,V2,…", required = true)]
     pub vary: Vec<String>,
@@ -232,8 +251,6 @@ pub struct SweepArgs {
     /// The most runs the varies may make; a larger grid is refused before anything runs.
     #[arg(long, value_name = "N", default_value_t = crate::sweep::MAX_RUNS)]
     pub max_runs: usize,
-    #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
-    pub set: Vec<String>,
     /// Output folder (default: out/<graph name>/sweep/, where the studio writes its sweeps).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
@@ -256,7 +273,8 @@ pub enum AgainstArg {
 
 #[derive(Args)]
 pub struct PlanArgs {
-    pub graph: PathBuf,
+    #[command(flatten)]
+    pub graph: GraphArgs,
     /// The render node to plan (render.mesh, sss.render or qh.render).
     #[arg(long, value_name = "ID")]
     pub render: String,
@@ -272,8 +290,6 @@ pub struct PlanArgs {
     /// falls back to the graph's own model.
     #[arg(long, value_enum, value_name = "truth")]
     pub against: Option<AgainstArg>,
-    #[arg(long = "set", value_name = "ID.PARAM=VALUE")]
-    pub set: Vec<String>,
     /// The planned graph (default: <graph>.planned.json beside the graph; its plan, <graph>.plan.json, goes beside it).
     #[arg(short = 'o', long = "output", value_name = "OUT.json")]
     pub output: Option<PathBuf>,

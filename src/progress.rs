@@ -94,6 +94,12 @@ pub fn status_text(s: NodeStatus) -> &'static str {
 
 /// The summary table, warnings and errors, as printed after a run.
 pub fn summary(report: &RunReport) -> String {
+    summary_with(report, false)
+}
+
+/// The run table; with `explain`, a last column `why` gives each computed node's reason (what
+/// changed since the last run into the same output folder).
+pub fn summary_with(report: &RunReport, explain: bool) -> String {
     let header = ["node", "kind", "device", "status", "seconds", "bytes"];
     let rows: Vec<[String; 6]> = report
         .nodes
@@ -129,9 +135,26 @@ pub fn summary(report: &RunReport) -> String {
         }
         s.trim_end().to_string() + "\n"
     };
-    let mut out = line(header);
-    for r in &rows {
-        out.push_str(&line([&r[0], &r[1], &r[2], &r[3], &r[4], &r[5]]));
+    let why = |s: String, i: Option<usize>| -> String {
+        if !explain {
+            return s;
+        }
+        let reason = match i {
+            None => "why",
+            Some(i) => report.nodes[i].reason.as_deref().unwrap_or(""),
+        };
+        if reason.is_empty() {
+            s
+        } else {
+            format!("{}  {reason}\n", s.trim_end())
+        }
+    };
+    let mut out = why(line(header), None);
+    for (i, r) in rows.iter().enumerate() {
+        out.push_str(&why(
+            line([&r[0], &r[1], &r[2], &r[3], &r[4], &r[5]]),
+            Some(i),
+        ));
     }
     if !report.skipped.is_empty() {
         out.push_str(&format!(

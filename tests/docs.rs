@@ -254,6 +254,10 @@ enum How {
 const GUIDE_COMMANDS: &[(&str, How)] = &[
     ("run graphs/btf_compress.json", How::AsWritten),
     (
+        "explain graphs/btf_compress.json --set pca.rank=8",
+        How::AsWritten,
+    ),
+    (
         "run graphs/btf_compress.json --set pca.rank=4",
         How::AsWritten,
     ),

@@ -600,6 +600,21 @@ fn saving_changes_only_the_edited_value_and_an_editor_change_is_picked_up() {
         (st["nodes"][0]["params"]["count"] == 4 && st["running"] == false && surface_computed)
             .then_some(())
     });
+    // Its report says why it re-ran (what the studio shows on the node and in its Report tab).
+    let st = s.state();
+    let surface = st["report"]["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "surface")
+        .unwrap()
+        .clone();
+    assert!(
+        surface["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("parameter `count` ") && r.ends_with("→ 4")),
+        "{surface}"
+    );
 }
 
 #[test]

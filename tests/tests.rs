@@ -10,6 +10,7 @@ mod common;
 mod devices;
 mod docs;
 mod every_graph;
+mod explain;
 mod families;
 mod flip_peer;
 mod hostile;

@@ -17,6 +17,10 @@ use std::sync::Arc;
 /// seconds, the run's seconds and whether it ran.
 type PyRow = (String, Vec<Option<f64>>, Vec<Option<f64>>, f64, bool);
 
+/// What the sweep hands back: the varied names, the measured nodes, the rows and the charts
+/// that could not be drawn.
+type Swept = (Vec<String>, Vec<String>, Vec<PyRow>, Vec<String>);
+
 /// (node, field, message): how a refusal reaches Python's `GraphError`.
 type Problem = (Option<String>, Option<String>, String);
 
@@ -71,7 +75,7 @@ pub fn sweep(
     cache_dir: Option<String>,
     use_cache: bool,
     progress: bool,
-) -> PyResult<(Vec<String>, Vec<String>, Vec<PyRow>, Vec<String>)> {
+) -> PyResult<Swept> {
     let file: GraphFile = parse_with_sets(text, &sets)?;
     let engine = engine(cache_dir.as_deref());
     let measures = measures

@@ -90,6 +90,16 @@ impl Engine {
         crate::scheduler::keys(&self.shared, graph, opts)
     }
 
+    /// What a run would do, without running anything: per node the requested outputs need,
+    /// whether it would run (and why), be read from a cache, or not be needed.
+    pub fn explain(
+        &self,
+        graph: &CheckedGraph,
+        opts: &RunOptions,
+    ) -> Vec<crate::scheduler::dry_run::Explained> {
+        crate::scheduler::dry_run::dry_run(&self.shared, graph, opts)
+    }
+
     /// [`Engine::run`], also handing back the values of the requested nodes.
     pub fn run_values(
         &self,

@@ -9,6 +9,7 @@ pub mod cache;
 pub mod codec;
 pub mod confine;
 pub mod engine;
+pub mod explain;
 pub mod gpu;
 pub mod gpu_memo;
 pub mod key;
@@ -36,4 +37,5 @@ pub use run::{
     require_gpu_from_env, DeviceMode, RunObserver, RunOptions, RunOutcome, RunPolicy,
     SilentObserver, NOT_IN_CACHE,
 };
+pub use scheduler::dry_run::Explained;
 pub use value::{ArrayView, Artifact, Artifacts, Scalar, Value, ValueRef};

@@ -36,6 +36,11 @@ pub struct NodeReport {
     /// With `--verify-cache`: the cached value was recomputed and matched.
     #[serde(skip_serializing_if = "std::ops::Not::not", default)]
     pub verified: bool,
+    /// Why a computed node ran (`crate::explain`): the first run, `--no-cache`, an evicted
+    /// value, or what changed since the last run into the same output folder. Absent on cache
+    /// hits and on nodes that did not run.
+    #[serde(skip_serializing_if = "Option::is_none", default)]
+    pub reason: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]

@@ -152,6 +152,7 @@ pub fn drive(
     let finished = |id: &str, ok: bool| {
         if let Some(b) = &bars {
             b.node_finished(&mesoflow_runtime::NodeReport {
+                reason: None,
                 id: label(id),
                 kind: "unit".into(),
                 device: "slurm".into(),

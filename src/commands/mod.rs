@@ -12,6 +12,7 @@ use crate::args::{CacheAction, Cli, Command};
 pub fn dispatch(cli: Cli) -> anyhow::Result<i32> {
     match cli.command {
         Command::Run(args) => run::run(&args),
+        Command::Explain(args) => run::explain(&args),
         Command::Validate { graph, set } => info::validate(&graph, &set),
         Command::Nodes { kind, json } => info::nodes(kind.as_deref(), json),
         Command::Schema => info::schema(),

@@ -122,10 +122,10 @@ pub fn plan(args: &PlanArgs) -> anyhow::Result<i32> {
 /// truth` was asked and the graph cannot make a truth. The plan says which judge it used and why.
 fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
     let budget = parse_budget(&args.budget)?;
-    let engine = engine(&args.cache, &args.graph)?;
-    let mut file = load::read(&args.graph)?;
-    load::apply_sets(&mut file, &args.set)?;
-    load::checked(&args.graph, &file, engine.registry())?;
+    let engine = engine(&args.cache, &args.graph.path)?;
+    let mut file = load::read(&args.graph.path)?;
+    load::apply_sets(&mut file, &args.graph.set)?;
+    load::checked(&args.graph.path, &file, engine.registry())?;
     plan::render_kind(&file, &args.render)
         .map_err(|e| invalid(format!("--render {}: {e}", args.render)))?;
     let decl = file.node(&args.render).cloned().unwrap_or(NodeDecl {
@@ -144,7 +144,7 @@ fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
         crate::args::SplitArg::Joint => plan::Split::Joint,
         crate::args::SplitArg::Equal => plan::Split::Equal,
     };
-    let name = args.graph.display().to_string();
+    let name = args.graph.path.display().to_string();
     if !(args.probe_budget.is_finite() && args.probe_budget >= 0.0) {
         return Err(invalid(format!(
             "--probe-budget {}: a number of renders ≥ 0",
@@ -218,8 +218,8 @@ fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
 /// The probes' run options: the command's device, cache and Ctrl-C.
 fn run_options(args: &PlanArgs) -> RunOptions {
     RunOptions::new(
-        &args.graph.display().to_string(),
-        graph_dir(&args.graph),
+        &args.graph.path.display().to_string(),
+        graph_dir(&args.graph.path),
         std::env::temp_dir(),
         RunPolicy {
             verify_cache: false,
@@ -233,10 +233,11 @@ fn planned_path(args: &PlanArgs) -> PathBuf {
     args.output.clone().unwrap_or_else(|| {
         let stem = args
             .graph
+            .path
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "graph".into());
-        graph_dir(&args.graph).join(format!("{stem}.planned.json"))
+        graph_dir(&args.graph.path).join(format!("{stem}.planned.json"))
     })
 }
 
@@ -273,7 +274,7 @@ fn write_plan(
     write(&out_path, &(planned.to_json() + "\n"))?;
     let plan_path = plan_file(&out_path);
     let mut all = json!({
-        "graph": args.graph.display().to_string(),
+        "graph": args.graph.path.display().to_string(),
         "planned": out_path.display().to_string(),
     });
     if let (Some(o), Value::Object(rest)) = (all.as_object_mut(), doc) {
@@ -291,10 +292,10 @@ fn write_plan(
 fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
     let (flip, budget) = parse_truth_budget(&args.budget)?;
     let probe_share = share(args, plan::TRUTH_SHARE)?;
-    let engine = engine(&args.cache, &args.graph)?;
-    let mut file = load::read(&args.graph)?;
-    load::apply_sets(&mut file, &args.set)?;
-    load::checked(&args.graph, &file, engine.registry())?;
+    let engine = engine(&args.cache, &args.graph.path)?;
+    let mut file = load::read(&args.graph.path)?;
+    load::apply_sets(&mut file, &args.graph.set)?;
+    load::checked(&args.graph.path, &file, engine.registry())?;
     let opts = run_options(args);
     let measure = match (flip, file.node(&args.render)) {
         (true, Some(decl)) => plan::Measure::Flip {
@@ -312,7 +313,7 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
             args.render
         );
     }
-    let name = args.graph.display().to_string();
+    let name = args.graph.path.display().to_string();
     let a = plan::arbitrate(
         &engine,
         &name,

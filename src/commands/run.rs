@@ -4,7 +4,7 @@
 use crate::args::{EngineArg, RunArgs};
 use crate::exit::{self, invalid};
 use crate::load;
-use crate::progress::{summary, Bars};
+use crate::progress::{summary_with, Bars};
 use crate::session::{
     cache_dir, check_outputs, device_name, engine, exit_code, graph_dir, graph_name, parse_outputs,
     policy, slurm_run_dir, write_report,
@@ -18,6 +18,8 @@ pub struct Runner {
     pub engine: Engine,
     pub base: RunOptions,
     pub quiet: bool,
+    /// The run table says why each computed node ran (`--explain`; always in `watch`).
+    pub explain: bool,
     /// After a cluster run, the errors of nodes that failed in their jobs: the final pass finds
     /// them missing from the cache, and its report says why, as the job saw it.
     pub cluster_errors: std::collections::BTreeMap<String, String>,
@@ -25,14 +27,14 @@ pub struct Runner {
 
 impl Runner {
     pub fn new(args: &RunArgs) -> anyhow::Result<Runner> {
-        let engine = engine(&args.cache, &args.graph)?;
+        let engine = engine(&args.cache, &args.graph.path)?;
         let out_dir = args
             .out_dir
             .clone()
-            .unwrap_or_else(|| PathBuf::from("out").join(graph_name(&args.graph)));
+            .unwrap_or_else(|| PathBuf::from("out").join(graph_name(&args.graph.path)));
         let mut base = RunOptions::new(
-            &args.graph.display().to_string(),
-            graph_dir(&args.graph),
+            &args.graph.path.display().to_string(),
+            graph_dir(&args.graph.path),
             out_dir,
             policy(args.device, &args.cache),
         );
@@ -41,6 +43,7 @@ impl Runner {
             engine,
             base,
             quiet: args.quiet,
+            explain: args.explain,
             cluster_errors: Default::default(),
         })
     }
@@ -96,7 +99,7 @@ impl Runner {
             }
         }
         if !self.quiet {
-            print!("{}", summary(&report));
+            print!("{}", summary_with(&report, self.explain));
             // Where the files went: the output folder is relative to the current folder, not
             // the graph's (a new user looked beside the graph).
             let shown = std::fs::canonicalize(out_dir).unwrap_or_else(|_| out_dir.to_path_buf());
@@ -145,19 +148,19 @@ impl Runner {
 
 pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
     let mut runner = Runner::new(args)?;
-    let graph = load::load(&args.graph, &args.set, runner.engine.registry())?;
+    let graph = load::load(&args.graph.path, &args.graph.set, runner.engine.registry())?;
     check_outputs(&runner.base.outputs, &graph, &runner.engine)?;
     if args.cluster.engine == EngineArg::Slurm {
         let Some(run_dir) = slurm_run_dir(&args.cluster, &args.cache, &runner.base.out_dir)? else {
             return Ok(exit::OK);
         };
-        let mut file = load::read(&args.graph)?;
-        load::apply_sets(&mut file, &args.set)?;
+        let mut file = load::read(&args.graph.path)?;
+        load::apply_sets(&mut file, &args.graph.set)?;
         let outcome = crate::cluster::driver::drive(
             &runner.engine,
             &[(file.to_json(), graph.clone())],
             &runner.base,
-            &cache_dir(&args.cache, &args.graph),
+            &cache_dir(&args.cache, &args.graph.path),
             &run_dir,
             &args.cluster,
             device_name(args.device),
@@ -192,6 +195,46 @@ pub fn run(args: &RunArgs) -> anyhow::Result<i32> {
     Ok(exit_code(&report))
 }
 
+/// `mesoflow explain`: what `run` with these arguments would do, node by node, and why a node
+/// would run; nothing runs and nothing is written. Exit 0.
+pub fn explain(args: &RunArgs) -> anyhow::Result<i32> {
+    let runner = Runner::new(args)?;
+    let graph = load::load(&args.graph.path, &args.graph.set, runner.engine.registry())?;
+    check_outputs(&runner.base.outputs, &graph, &runner.engine)?;
+    let rows = runner.engine.explain(&graph, &runner.base);
+    let width = |f: &dyn Fn(&mesoflow_runtime::Explained) -> usize, h: &str| {
+        rows.iter().map(f).max().unwrap_or(0).max(h.len())
+    };
+    let (wi, wk, wa) = (
+        width(&|r| r.id.chars().count(), "node"),
+        width(&|r| r.kind.chars().count(), "kind"),
+        width(&|r| r.action.chars().count(), "would"),
+    );
+    println!("{:<wi$}  {:<wk$}  {:<wa$}  why", "node", "kind", "would");
+    for r in &rows {
+        let line = format!(
+            "{:<wi$}  {:<wk$}  {:<wa$}  {}",
+            r.id,
+            r.kind,
+            r.action,
+            r.reason.as_deref().unwrap_or("")
+        );
+        println!("{}", line.trim_end());
+    }
+    let runs = rows.iter().filter(|r| r.action == "run").count();
+    println!(
+        "{runs} of {} node{} would run (records of the last runs: {})",
+        rows.len(),
+        if rows.len() == 1 { "" } else { "s" },
+        runner
+            .base
+            .out_dir
+            .join(mesoflow_runtime::explain::RECORD_FILE)
+            .display()
+    );
+    Ok(exit::OK)
+}
+
 /// Files under `dir` (not `report.json`) last written before `t`, by path relative to `dir`,
 /// sorted.
 fn files_older_than(dir: &Path, t: std::time::SystemTime) -> Vec<String> {
@@ -214,7 +257,10 @@ fn files_older_than(dir: &Path, t: std::time::SystemTime) -> Vec<String> {
                 if !(d == dir && e.file_name() == "sweep") {
                     stack.push(path);
                 }
-            } else if meta.modified().is_ok_and(|m| m < t) && e.file_name() != "report.json" {
+            } else if meta.modified().is_ok_and(|m| m < t)
+                && e.file_name() != "report.json"
+                && e.file_name() != mesoflow_runtime::explain::RECORD_FILE
+            {
                 let rel = path.strip_prefix(dir).unwrap_or(&path);
                 found.push(rel.display().to_string());
             }

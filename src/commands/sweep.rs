@@ -69,12 +69,12 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
         .collect::<anyhow::Result<_>>()?;
     let measures = parse_outputs(&args.measure)?;
     let versus = parse_outputs(&args.versus)?;
-    let engine = engine(&args.cache, &args.graph)?;
-    let mut base_file = load::read(&args.graph)?;
-    load::apply_sets(&mut base_file, &args.set)?;
+    let engine = engine(&args.cache, &args.graph.path)?;
+    let mut base_file = load::read(&args.graph.path)?;
+    load::apply_sets(&mut base_file, &args.graph.set)?;
     // Every combination is checked before any runs, so a bad value fails fast with exit code 2.
     let sweep = Sweep::prepare(
-        &args.graph.display().to_string(),
+        &args.graph.path.display().to_string(),
         &base_file,
         varies,
         measures,
@@ -85,15 +85,15 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
     .map_err(|r| invalid(r.to_string()))?;
     let out_dir = args.out_dir.clone().unwrap_or_else(|| {
         PathBuf::from("out")
-            .join(graph_name(&args.graph))
+            .join(graph_name(&args.graph.path))
             .join("sweep")
     });
     let cancel = cancel_flag();
     let slurm = args.cluster.engine == EngineArg::Slurm;
     let options = |run_dir: &Path| {
         let mut opts = RunOptions::new(
-            &args.graph.display().to_string(),
-            graph_dir(&args.graph),
+            &args.graph.path.display().to_string(),
+            graph_dir(&args.graph.path),
             run_dir.to_path_buf(),
             RunPolicy {
                 cancel: cancel.clone(),
@@ -111,8 +111,8 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             return Ok(0);
         };
         let mut opts = RunOptions::new(
-            &args.graph.display().to_string(),
-            graph_dir(&args.graph),
+            &args.graph.path.display().to_string(),
+            graph_dir(&args.graph.path),
             out_dir.clone(),
             RunPolicy {
                 device: device_mode(args.device),
@@ -131,7 +131,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             &engine,
             &variants,
             &opts,
-            &cache_dir(&args.cache, &args.graph),
+            &cache_dir(&args.cache, &args.graph.path),
             &run_dir,
             &args.cluster,
             device_name(args.device),
@@ -159,7 +159,7 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
             "{}: {} runs; cache {}",
             out_dir.join("sweep.csv").display(),
             rows.len(),
-            cache_dir(&args.cache, &args.graph).display()
+            cache_dir(&args.cache, &args.graph.path).display()
         );
     }
     let code = if cancel.load(std::sync::atomic::Ordering::Relaxed) {

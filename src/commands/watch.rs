@@ -27,15 +27,17 @@ pub fn watch(args: &RunArgs, interval_ms: u64, max_runs: Option<usize>) -> anyho
             "watch runs here: --engine slurm is for run and sweep",
         ));
     }
-    let runner = Runner::new(args)?;
+    let mut runner = Runner::new(args)?;
+    // A re-run says what changed.
+    runner.explain = true;
     let mut runs = 0usize;
     loop {
         let last_code;
-        let mut watched = vec![args.graph.clone()];
+        let mut watched = vec![args.graph.path.clone()];
         // The graph's state as loaded: an edit saved while the run is under way is then seen
         // as a change afterwards instead of becoming the baseline.
         let mut before = fingerprint(&watched);
-        match load::load(&args.graph, &args.set, runner.engine.registry()) {
+        match load::load(&args.graph.path, &args.graph.set, runner.engine.registry()) {
             Ok(graph) => {
                 let report = runner.run_once(&graph, &runner.base.out_dir)?;
                 last_code = exit_code(&report);

@@ -59,6 +59,7 @@ pub(crate) fn demand(
                 }
                 let spec = slot.node.spec();
                 slot.report = Some(NodeReport {
+                    reason: None,
                     id: cn.id.clone(),
                     kind: cn.kind.clone(),
                     // Every keyed node has its device chosen (the path is part of the key).

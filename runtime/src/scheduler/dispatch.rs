@@ -195,6 +195,7 @@ pub(crate) fn run_all(
                     _ => NodeStatus::Computed,
                 };
                 let r = NodeReport {
+                    reason: None,
                     id: cn.id.clone(),
                     kind: cn.kind.clone(),
                     device: done.device.into(),

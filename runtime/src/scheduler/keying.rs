@@ -3,6 +3,7 @@
 //! made fails here; its dependants are cancelled.
 
 use super::{failure, Slot};
+use crate::explain::{FileRecord, InputRecord, KeyRecord};
 use crate::key::{self, Key, KeyParts};
 use crate::node::{DynNode, NodeError, Prepared};
 use crate::report::NodeStatus;
@@ -59,14 +60,15 @@ pub(crate) fn key_all(
                         path,
                         &mut read_files,
                     )
-                    .map(|(prepared, key)| (prepared, key, choice))
+                    .map(|(prepared, key, record)| (prepared, key, record, choice))
                     .map_err(|e| (NodeStatus::Failed, e.to_string()))
                 }),
         };
         match keyed {
-            Ok((prepared, key, choice)) => {
+            Ok((prepared, key, record, choice)) => {
                 slot.prepared = Some(Arc::new(prepared));
                 slot.key = Some(key);
+                slot.record = Some(record);
                 slot.device = Some(choice);
             }
             Err((status, error)) => {
@@ -86,11 +88,12 @@ fn prepare_and_key(
     opts: &RunOptions,
     device: Option<&str>,
     read_files: &mut BTreeSet<String>,
-) -> Result<(Prepared, Key), NodeError> {
+) -> Result<(Prepared, Key, KeyRecord), NodeError> {
     let (base, confine) = (opts.base_dir.as_path(), opts.policy.confine.as_ref());
     let prepared = node.prepare(&cn.params)?;
     let declared = node.files(&prepared, base)?;
     let mut files = Vec::new();
+    let mut file_records = Vec::new();
     for path in declared.iter().cloned() {
         if !path.exists() {
             return Err(NodeError::file(
@@ -109,9 +112,14 @@ fn prepare_and_key(
             .unwrap_or_default();
         files.push((name, hash));
         let shown = std::fs::canonicalize(&path).unwrap_or(path);
+        file_records.push(FileRecord {
+            path: shown.display().to_string(),
+            hash: Key(hash).hex(),
+        });
         read_files.insert(shown.display().to_string());
     }
     let mut inputs = Vec::new();
+    let mut input_records = BTreeMap::new();
     for e in &cn.inputs {
         let k = index
             .get(e.from.node.as_str())
@@ -119,6 +127,13 @@ fn prepare_and_key(
             .and_then(|s| s.key)
             .ok_or_else(|| NodeError::input(&e.port, format!("`{}` has no key", e.from)))?;
         inputs.push((e.port.as_str(), k, e.from.port.as_str()));
+        input_records.insert(
+            e.port.clone(),
+            InputRecord {
+                from: e.from.to_string(),
+                key: k.hex(),
+            },
+        );
     }
     let spec = node.spec();
     let params = paths_as_files(&prepared.canonical, base, &declared);
@@ -130,7 +145,16 @@ fn prepare_and_key(
         files,
         device,
     });
-    Ok((prepared, key))
+    let record = KeyRecord {
+        key: key.hex(),
+        kind: spec.kind.into(),
+        version: spec.version,
+        params: prepared.canonical.clone(),
+        inputs: input_records,
+        files: file_records,
+        device: device.map(String::from),
+    };
+    Ok((prepared, key, record))
 }
 
 /// A parameter that names a declared file enters the key as its place in the list of files

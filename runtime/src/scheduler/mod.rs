@@ -7,11 +7,13 @@
 //!    [`device`]); [`write`] puts their files under the output folder; [`verify`] holds
 //!    `--verify-cache` hits to their recomputation.
 //!
-//! then the report is assembled here.
+//! then the report is assembled here, with each computed node's reason ([`crate::explain`]).
+//! [`dry_run`] repeats phases 1–3 without running anything (`mesoflow explain`).
 
 mod demand;
 mod device;
 mod dispatch;
+pub mod dry_run;
 mod keying;
 mod plan;
 mod verify;
@@ -67,6 +69,8 @@ pub(crate) struct Slot {
     pub expected: Option<(Outputs, NodeStatus)>,
     /// Where the node runs, chosen before its key (the path is part of it).
     pub device: Option<device::Choice>,
+    /// What the key was made of, for the next run's reasons.
+    pub record: Option<crate::explain::KeyRecord>,
 }
 
 impl Slot {
@@ -79,6 +83,7 @@ impl Slot {
             report: None,
             expected: None,
             device: None,
+            record: None,
         }
     }
 }
@@ -198,6 +203,7 @@ pub(crate) fn execute(
         .policy
         .cancel
         .load(std::sync::atomic::Ordering::Relaxed);
+    explain_and_record(shared, graph, &mut slots, opts, &sink);
     let mut nodes = Vec::new();
     let mut skipped = Vec::new();
     for (i, cn) in graph.nodes.iter().enumerate() {
@@ -248,6 +254,61 @@ pub(crate) fn execute(
     RunOutcome { report, values }
 }
 
+/// Gives each computed node its reason (what changed since the records of the last run into
+/// this output folder) and records what every node that ran or was read had its key made of.
+fn explain_and_record(
+    shared: &Resources,
+    graph: &CheckedGraph,
+    slots: &mut [Option<Slot>],
+    opts: &RunOptions,
+    sink: &Sink,
+) {
+    let order: Vec<String> = graph.nodes.iter().map(|n| n.id.clone()).collect();
+    let now: BTreeMap<String, crate::explain::KeyRecord> = graph
+        .nodes
+        .iter()
+        .zip(slots.iter())
+        .filter_map(|(cn, s)| Some((cn.id.clone(), s.as_ref()?.record.clone()?)))
+        .collect();
+    let prev = crate::explain::load(&opts.out_dir);
+    let changes = crate::explain::changes(&order, &now, prev.as_ref());
+    let mut done = BTreeMap::new();
+    for (cn, slot) in graph.nodes.iter().zip(slots.iter_mut()) {
+        let Some(slot) = slot.as_mut() else { continue };
+        let Some(r) = slot.report.as_mut() else {
+            continue;
+        };
+        if r.status == NodeStatus::Computed {
+            let on_disk =
+                shared.disk.is_some() && (slot.node.spec().disk_cache || opts.cache_everything);
+            r.reason = Some(crate::explain::reason(
+                opts.policy.use_cache,
+                changes.get(&cn.id),
+                on_disk,
+            ));
+        }
+        if matches!(
+            r.status,
+            NodeStatus::Computed | NodeStatus::Memory | NodeStatus::Disk
+        ) {
+            if let Some(rec) = &slot.record {
+                done.insert(cn.id.clone(), rec.clone());
+            }
+        }
+    }
+    if !done.is_empty() {
+        if let Err(e) = crate::explain::save(&opts.out_dir, &done) {
+            sink.push(
+                "",
+                format!(
+                    "could not record the keys' ingredients in {} ({e}): the next run cannot say why a node re-ran",
+                    opts.out_dir.join(crate::explain::RECORD_FILE).display()
+                ),
+            );
+        }
+    }
+}
+
 pub(crate) fn failure(
     cn: &mesoflow_graph::CheckedNode,
     node: &Arc<dyn DynNode>,
@@ -256,6 +317,7 @@ pub(crate) fn failure(
     key: Option<Key>,
 ) -> NodeReport {
     NodeReport {
+        reason: None,
         id: cn.id.clone(),
         kind: cn.kind.clone(),
         device: device_name(node.spec().device).into(),

@@ -96,7 +96,10 @@ function drawGraph() {
     g.append(sv("text", { class: "kind", x: 10, y: 32 }, n.kind));
     const stats = r ? `${status} · ${secs(r.seconds)} · ${bytes(r.bytes)}` :
       status === "skipped" ? "not needed: its dependants were cached" : "not run yet";
-    g.append(sv("text", { class: "stats", x: 10, y: 45 }, stats));
+    const statsText = sv("text", { class: "stats", x: 10, y: 45 }, stats);
+    // Why it ran, on hover: the first run, --no-cache, evicted, or what changed.
+    if (r && r.reason) statsText.append(sv("title", {}, "why it ran: " + r.reason));
+    g.append(statsText);
     n.ports.forEach((port, i) => {
       g.append(sv("circle", { class: "pin", cx: 0, cy: 64 + 15 * i, r: 3.5 }));
       g.append(sv("text", { class: "port", x: 8, y: 68 + 15 * i }, port.name));

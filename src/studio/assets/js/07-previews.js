@@ -39,6 +39,7 @@ function metricsTable(id) {
   const r = reportOf(id);
   if (!r) return el("p", { class: "muted" }, "not in the last run");
   const rows = [["status", r.status], ["device", r.device], ["seconds", secs(r.seconds)], ["bytes", bytes(r.bytes)]];
+  if (r.reason) rows.push(["why it ran", r.reason]);
   for (const [k, v] of Object.entries(r.metrics || {})) rows.push([k, fmt(v)]);
   for (const [k, v] of Object.entries(r.timings || {})) rows.push([k + " (timing)", fmt(v)]);
   return el("div", {}, el("h3", {}, "Metrics"), el("table", { class: "data", id: "metrics" },
