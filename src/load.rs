@@ -10,14 +10,16 @@ pub fn read(path: &Path) -> anyhow::Result<GraphFile> {
     let name = path.display().to_string();
     let text =
         std::fs::read_to_string(path).map_err(|e| invalid(format!("{name}: cannot read: {e}")))?;
-    GraphFile::parse(&text).map_err(|errors| {
-        invalid(
-            GraphErrors { file: name, errors }
-                .to_string()
-                .trim_end()
-                .to_string(),
-        )
-    })
+    GraphFile::parse(&text)
+        .map(|f| f.located(path))
+        .map_err(|errors| {
+            invalid(
+                GraphErrors { file: name, errors }
+                    .to_string()
+                    .trim_end()
+                    .to_string(),
+            )
+        })
 }
 
 pub fn apply_sets(file: &mut GraphFile, sets: &[String]) -> anyhow::Result<()> {

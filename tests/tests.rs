@@ -24,6 +24,7 @@ mod shipped_graphs;
 mod slurm;
 mod static_checks;
 mod studio;
+mod subgraphs;
 mod translucency;
 mod truth;
 mod ubo2014;

@@ -60,6 +60,17 @@ pub fn check(
     file: &GraphFile,
     catalog: &dyn Catalog,
 ) -> Result<CheckedGraph, GraphErrors> {
+    // Subgraphs are checked as if inlined: every node under its path (`pipeline/pca`).
+    let expanded;
+    let file = if crate::subgraph::uses_subgraphs(file) {
+        expanded = crate::subgraph::expand(file).map_err(|errors| GraphErrors {
+            file: file_name.into(),
+            errors,
+        })?;
+        &expanded
+    } else {
+        file
+    };
     let mut errors = Vec::new();
     let ids: Vec<&str> = file.nodes.iter().map(|(id, _)| id.as_str()).collect();
     // Looked up once per input: a map keeps the check linear in the size of the file (a linear

@@ -93,6 +93,30 @@ impl GraphFile {
                 *slot = o.value.clone();
                 Ok(())
             }
+            // `sub/inner.param`: a parameter inside the subgraph `sub`, kept in its `set`.
+            None if o.node.contains(crate::subgraph::SEP) => {
+                let (head, rest) = o
+                    .node
+                    .split_once(crate::subgraph::SEP)
+                    .unwrap_or((&o.node, ""));
+                match self.node_mut(head) {
+                    Some(decl) if decl.kind == crate::subgraph::KIND => {
+                        let set = decl
+                            .params
+                            .entry("set".to_string())
+                            .or_insert_with(|| Value::Object(Default::default()));
+                        let Value::Object(set) = set else {
+                            return Err(format!("--set {}.{}: `{head}.set` is not an object", o.node, o.param));
+                        };
+                        set.insert(format!("{rest}.{}", o.param), o.value.clone());
+                        Ok(())
+                    }
+                    _ => Err(format!(
+                        "--set {}.{}: no subgraph `{head}` in the graph (a path `a/b` names node `b` inside the graph node `a`)",
+                        o.node, o.param
+                    )),
+                }
+            }
             None => {
                 let hint = crate::nearest(&o.node, ids.iter().map(String::as_str))
                     .map(|s| format!(" (did you mean `{s}`?)"))

@@ -1,5 +1,7 @@
-//! The graph file, format version 1 (see the design brief): parsing, with every structural problem
-//! collected rather than the first one only, and migration of older versions.
+//! The graph file, format version 2 (see the design brief): parsing, with every structural problem
+//! collected rather than the first one only, and migration of older versions. Version 2 adds the
+//! `interface` a file exposes when another graph uses it as a node (`crate::subgraph`); a
+//! version-1 file is a version-2 file without one.
 
 use crate::error::GraphError;
 use serde::de::{Deserializer, MapAccess, Visitor};
@@ -9,7 +11,7 @@ use std::collections::BTreeMap;
 use std::fmt;
 
 /// The newest format version this crate reads and writes.
-pub const FORMAT_VERSION: u64 = 1;
+pub const FORMAT_VERSION: u64 = 2;
 
 /// One node declaration as written in the file.
 #[derive(Clone, Debug, PartialEq)]
@@ -24,7 +26,14 @@ pub struct NodeDecl {
 #[derive(Clone, Debug, PartialEq)]
 pub struct GraphFile {
     pub description: Option<String>,
+    /// What the file exposes to a graph that uses it as a node (version 2).
+    pub interface: Option<crate::subgraph::Interface>,
     pub nodes: Vec<(String, NodeDecl)>,
+    /// The folder its relative paths (input files, subgraphs) resolve against, where known.
+    pub base: Option<std::path::PathBuf>,
+    /// The file it was read from, canonical, where known (a subgraph that includes it again is
+    /// refused).
+    pub source: Option<std::path::PathBuf>,
 }
 
 /// A reference to an output: `node.port`.
@@ -97,6 +106,7 @@ fn structure(node: Option<&str>, field: Option<&str>, message: String) -> GraphE
 /// is the first; a later version adds `migrate_vN_to_vN+1(Map) -> Map` here and a line below.
 fn migrate(version: u64, rest: Map<String, Value>) -> Result<Map<String, Value>, GraphError> {
     match version {
+        1 => migrate(2, migrate_v1_to_v2(rest)?),
         FORMAT_VERSION => Ok(rest),
         found => Err(GraphError::Version {
             found,
@@ -105,7 +115,35 @@ fn migrate(version: u64, rest: Map<String, Value>) -> Result<Map<String, Value>,
     }
 }
 
+/// Version 2 adds `interface`, which a version-1 file cannot have (it is refused there, so a
+/// version-1 reader never meets a file it would half understand).
+fn migrate_v1_to_v2(rest: Map<String, Value>) -> Result<Map<String, Value>, GraphError> {
+    if rest.contains_key("interface") {
+        return Err(structure(
+            None,
+            Some("interface"),
+            "`interface` needs `\"mesoflow\": 2`".into(),
+        ));
+    }
+    Ok(rest)
+}
+
 impl GraphFile {
+    /// The same graph, located: relative paths and subgraphs resolve against `path`'s folder,
+    /// and `path` is the file it came from.
+    pub fn located(mut self, path: &std::path::Path) -> GraphFile {
+        let canonical = std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf());
+        self.base = canonical.parent().map(std::path::Path::to_path_buf);
+        self.source = Some(canonical);
+        self
+    }
+
+    /// The same graph with relative paths resolving against `dir` (a graph given as text).
+    pub fn in_folder(mut self, dir: &std::path::Path) -> GraphFile {
+        self.base = Some(dir.to_path_buf());
+        self
+    }
+
     /// Parses a graph file, collecting every structural error (node-level problems of several
     /// nodes are reported together).
     pub fn parse(text: &str) -> Result<GraphFile, Vec<GraphError>> {
@@ -158,8 +196,18 @@ impl GraphFile {
                 None
             }
         };
+        let interface = match rest.remove("interface") {
+            None => None,
+            Some(v) => match crate::subgraph::Interface::parse(&v) {
+                Ok(i) => Some(i),
+                Err(mut es) => {
+                    errors.append(&mut es);
+                    None
+                }
+            },
+        };
         for key in rest.keys() {
-            let hint = crate::nearest(key, ["mesoflow", "description", "nodes"])
+            let hint = crate::nearest(key, ["mesoflow", "description", "interface", "nodes"])
                 .map(|s| format!(" (did you mean `{s}`?)"))
                 .unwrap_or_default();
             errors.push(structure(
@@ -192,7 +240,13 @@ impl GraphFile {
             }
         }
         if errors.is_empty() {
-            Ok(GraphFile { description, nodes })
+            Ok(GraphFile {
+                description,
+                interface,
+                nodes,
+                base: None,
+                source: None,
+            })
         } else {
             Err(errors)
         }
@@ -206,7 +260,8 @@ impl GraphFile {
         self.nodes.iter_mut().find(|(n, _)| n == id).map(|(_, d)| d)
     }
 
-    /// Serializes back to the version-1 format (pretty-printed).
+    /// Serializes back (pretty-printed): version 2 with an interface, else version 1, which every
+    /// earlier mesoflow reads.
     pub fn to_json(&self) -> String {
         let mut nodes = Map::new();
         for (id, d) in &self.nodes {
@@ -225,9 +280,13 @@ impl GraphFile {
             nodes.insert(id.clone(), Value::Object(obj));
         }
         let mut top = Map::new();
-        top.insert("mesoflow".into(), Value::from(FORMAT_VERSION));
+        let version = if self.interface.is_some() { 2 } else { 1 };
+        top.insert("mesoflow".into(), Value::from(version));
         if let Some(d) = &self.description {
             top.insert("description".into(), Value::String(d.clone()));
+        }
+        if let Some(i) = &self.interface {
+            top.insert("interface".into(), i.to_value());
         }
         top.insert("nodes".into(), Value::Object(nodes));
         serde_json::to_string_pretty(&Value::Object(top)).unwrap_or_default()

@@ -17,6 +17,7 @@ pub mod params;
 pub mod ports;
 pub mod schema;
 pub mod source_edit;
+pub mod subgraph;
 mod suggest;
 
 pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec, TypedProblem};

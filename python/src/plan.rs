@@ -75,7 +75,7 @@ pub fn plan(
         share: probe_share,
         budget: probe_budget,
     });
-    let file = parse_with_sets(text, &sets)?;
+    let file = parse_with_sets(text, &sets, &base_dir)?;
     let split = match split {
         "joint" => Split::Joint,
         "equal" => Split::Equal,
@@ -144,7 +144,7 @@ pub fn plan_truth(
             )))
         }
     };
-    let file = parse_with_sets(text, &sets)?;
+    let file = parse_with_sets(text, &sets, &base_dir)?;
     let (engine, opts, cancel) = session(name, &file, base_dir, device, cache_dir, use_cache)?;
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();

@@ -97,10 +97,15 @@ pub fn catalog() -> PyResult<String> {
 /// Checks a graph file's text as `mesoflow validate` does. Returns the errors as
 /// `(node, field, message)`; an empty list means the graph is valid.
 #[pyfunction]
-pub fn validate(text: &str, name: &str) -> PyResult<Vec<Problem>> {
+#[pyo3(signature = (text, name, base_dir=None))]
+pub fn validate(text: &str, name: &str, base_dir: Option<PathBuf>) -> PyResult<Vec<Problem>> {
     let errors = match GraphFile::parse(text) {
         Err(errors) => errors,
         Ok(file) => {
+            let file = match &base_dir {
+                Some(dir) => file.in_folder(dir),
+                None => file,
+            };
             let reg = registry(&mut state());
             match check(name, &file, &*reg) {
                 Ok(_) => Vec::new(),
@@ -208,8 +213,13 @@ pub(crate) fn device_mode(device: &str) -> PyResult<DeviceMode> {
 }
 
 /// A graph file's text with `sets` ("id.param=value") applied; errors as `ValueError`.
-pub(crate) fn parse_with_sets(text: &str, sets: &[String]) -> PyResult<GraphFile> {
-    let mut file = GraphFile::parse(text).map_err(|e| {
+/// Relative paths and subgraphs in it resolve against `base_dir`.
+pub(crate) fn parse_with_sets(
+    text: &str,
+    sets: &[String],
+    base_dir: &std::path::Path,
+) -> PyResult<GraphFile> {
+    let file = GraphFile::parse(text).map_err(|e| {
         PyValueError::new_err(
             e.iter()
                 .map(|e| e.to_string())
@@ -217,6 +227,7 @@ pub(crate) fn parse_with_sets(text: &str, sets: &[String]) -> PyResult<GraphFile
                 .join("\n"),
         )
     })?;
+    let mut file = file.in_folder(base_dir);
     for s in sets {
         let o = parse_override(s).map_err(|e| PyValueError::new_err(format!("set {e}")))?;
         file.apply(&o).map_err(PyValueError::new_err)?;
@@ -246,7 +257,7 @@ pub fn run<'py>(
     verify_cache: bool,
     progress: Option<Py<PyAny>>,
 ) -> PyResult<(String, Bound<'py, PyDict>)> {
-    let file = parse_with_sets(text, &sets)?;
+    let file = parse_with_sets(text, &sets, &base_dir)?;
     let engine = engine(cache_dir.as_deref());
     let graph = check(name, &file, engine.registry())
         .map_err(|e| PyValueError::new_err(e.to_string().trim_end().to_string()))?;

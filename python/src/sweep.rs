@@ -76,7 +76,7 @@ pub fn sweep(
     use_cache: bool,
     progress: bool,
 ) -> PyResult<Swept> {
-    let file: GraphFile = parse_with_sets(text, &sets)?;
+    let file: GraphFile = parse_with_sets(text, &sets, &base_dir)?;
     let engine = engine(cache_dir.as_deref());
     let measures = measures
         .iter()

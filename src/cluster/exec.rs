@@ -77,15 +77,17 @@ pub fn exec(run_dir: &Path, unit: &str) -> anyhow::Result<i32> {
             u.variant
         )));
     };
-    let file = GraphFile::parse(text).map_err(|e| {
-        exit::invalid(format!(
-            "unit {unit}: {}",
-            e.iter()
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join("; ")
-        ))
-    })?;
+    let file = GraphFile::parse(text)
+        .map(|f| f.in_folder(&spec.base_dir))
+        .map_err(|e| {
+            exit::invalid(format!(
+                "unit {unit}: {}",
+                e.iter()
+                    .map(|e| e.to_string())
+                    .collect::<Vec<_>>()
+                    .join("; ")
+            ))
+        })?;
     let engine = Engine::new(
         mesoflow_nodes::registry::builtin(),
         EngineConfig {

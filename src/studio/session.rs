@@ -146,7 +146,10 @@ impl Studio {
                 load_error: None,
                 file: GraphFile {
                     description: None,
+                    interface: None,
                     nodes: Vec::new(),
+                    base: None,
+                    source: None,
                 },
                 errors: Vec::new(),
                 blocked: Vec::new(),
@@ -211,7 +214,7 @@ impl Studio {
     /// Takes the file's text as the graph (at start, and when an editor changed the file).
     pub fn load_text(&self, text: String) {
         let mut doc = self.doc();
-        match GraphFile::parse(&text) {
+        match GraphFile::parse(&text).map(|f| f.located(&self.graph_path)) {
             Ok(file) => {
                 doc.disk = Some(file.clone());
                 doc.load_error = None;

@@ -182,6 +182,18 @@ class Graph:
         """Sets ``"node.param"`` (or ``"node.param.field"`` inside an object parameter), checked
         like ``--set``."""
         node, _, path = target.partition(".")
+        head, slash, inner = node.partition("/")
+        if slash and path and self._nodes.get(head, {}).get("kind") == "graph":
+            # `sub/inner.param`: a parameter inside the subgraph `sub`, kept in its `set`.
+            old = json.loads(json.dumps(self._nodes[head]))
+            sets = self._nodes[head].setdefault("params", {}).setdefault("set", {})
+            sets[f"{inner}.{path}"] = _jsonable(value, node, path)
+            try:
+                self.validate()
+            except GraphError:
+                self._nodes[head] = old
+                raise
+            return
         if node not in self._nodes or not path:
             raise GraphError([(node or None, None, f"set {target}: no node `{node}`")])
         old = json.loads(json.dumps(self._nodes[node]))
@@ -226,7 +238,9 @@ class Graph:
     # -- the graph file ------------------------------------------------------------------------
 
     def to_dict(self) -> Dict[str, Any]:
-        d: Dict[str, Any] = {"mesoflow": 1}
+        # Version 2 only where it is needed (an `interface`), so files stay readable by older
+        # mesoflow otherwise.
+        d: Dict[str, Any] = {"mesoflow": 2 if "interface" in self._extra else 1}
         if self.description:
             d["description"] = self.description
         d.update(self._extra)
@@ -234,7 +248,8 @@ class Graph:
         return d
 
     def to_json(self) -> str:
-        """The graph file's text (format version 1), as ``mesoflow run`` reads it."""
+        """The graph file's text (format version 1, or 2 with an ``interface``), as ``mesoflow
+        run`` reads it."""
         return json.dumps(self.to_dict(), indent=2, ensure_ascii=False) + "\n"
 
     def save(self, path: PathLike) -> Path:
@@ -264,7 +279,7 @@ class Graph:
 
     def validate(self) -> None:
         """Checks the whole graph as ``mesoflow validate`` does; raises :class:`GraphError`."""
-        errors = _native.validate(self.to_json(), self.name)
+        errors = _native.validate(self.to_json(), self.name, str(self.base_dir))
         if errors:
             raise GraphError(errors)
 
@@ -416,7 +431,7 @@ def load(path: PathLike) -> Graph:
     """Reads a graph file; its relative paths keep resolving against its folder."""
     path = Path(path)
     text = path.read_text(encoding="utf-8")
-    errors = _native.validate(text, str(path))
+    errors = _native.validate(text, str(path), str(Path(path).parent))
     try:
         d = json.loads(text)
     except json.JSONDecodeError:

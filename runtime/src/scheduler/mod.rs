@@ -203,7 +203,7 @@ pub(crate) fn execute(
         .policy
         .cancel
         .load(std::sync::atomic::Ordering::Relaxed);
-    explain_and_record(shared, graph, &mut slots, opts, &sink);
+    explain_and_record(shared, graph, &mut slots, &compute, opts, &sink);
     let mut nodes = Vec::new();
     let mut skipped = Vec::new();
     for (i, cn) in graph.nodes.iter().enumerate() {
@@ -260,6 +260,7 @@ fn explain_and_record(
     shared: &Resources,
     graph: &CheckedGraph,
     slots: &mut [Option<Slot>],
+    compute: &[bool],
     opts: &RunOptions,
     sink: &Sink,
 ) {
@@ -273,9 +274,14 @@ fn explain_and_record(
     let prev = crate::explain::load(&opts.out_dir);
     let changes = crate::explain::changes(&order, &now, prev.as_ref());
     let mut done = BTreeMap::new();
-    for (cn, slot) in graph.nodes.iter().zip(slots.iter_mut()) {
+    for ((cn, slot), &computing) in graph.nodes.iter().zip(slots.iter_mut()).zip(compute) {
         let Some(slot) = slot.as_mut() else { continue };
         let Some(r) = slot.report.as_mut() else {
+            // Keyed but not needed (every value depending on it was cached): its key stands.
+            // One that was to run and has no report was cancelled: its record stays as it was.
+            if let (Some(rec), false) = (&slot.record, computing) {
+                done.insert(cn.id.clone(), rec.clone());
+            }
             continue;
         };
         if r.status == NodeStatus::Computed {

@@ -1,0 +1,189 @@
+//! Subgraphs: a graph file used as a node. Static errors name the path through the nesting; an
+//! inner node's key is its key when its file runs alone; `--set` reaches exposed and inner
+//! parameters; the report lists inner nodes under their path and says why they re-ran.
+
+use crate::common::{mesoflow, Scratch};
+use serde_json::Value;
+use std::path::Path;
+
+/// c → a → b, exposing `x` (a's input, fed inside by c), `y` (b's output) and `scale` (a's).
+const INNER: &str = r#"{"mesoflow": 2,
+  "interface": {"inputs": {"x": "a.x"}, "outputs": {"y": "b.y"}, "params": {"scale": "a.scale"}},
+  "nodes": {
+    "c": {"kind": "scalar.constant", "params": {"value": 1.0}},
+    "a": {"kind": "scalar.affine", "inputs": {"x": "c.value"}, "params": {"scale": 2.0}},
+    "b": {"kind": "scalar.affine", "inputs": {"x": "a.y"}, "params": {"scale": 3.0}}
+}}"#;
+
+fn report(out: &Path) -> Value {
+    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
+}
+
+fn node<'a>(r: &'a Value, id: &str) -> &'a Value {
+    r["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == id)
+        .unwrap_or_else(|| panic!("no node {id} in {r}"))
+}
+
+fn metric(r: &Value, id: &str, m: &str) -> f64 {
+    node(r, id)["metrics"][m].as_f64().unwrap()
+}
+
+fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> Value {
+    let out = s.path(out);
+    let mut args = vec![
+        "run",
+        graph.to_str().unwrap(),
+        "--quiet",
+        "--out-dir",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let r = mesoflow(&args, s.dir.path());
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    report(&out)
+}
+
+#[test]
+fn a_subgraph_runs_as_if_inlined_with_the_keys_of_its_file() {
+    let s = Scratch::new();
+    let inner = s.write("inner.json", INNER);
+    let outer = s.write(
+        "outer.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "p": {"kind": "graph", "params": {"path": "inner.json"}},
+            "twice": {"kind": "scalar.affine", "inputs": {"x": "p.y"}, "params": {"scale": 2.0}}
+        }}"#,
+    );
+    let alone = run(&s, &inner, "alone", &[]);
+    let used = run(&s, &outer, "outer", &[]);
+    // Every inner node is there under its path, with the key it has when its file runs alone.
+    for id in ["c", "a", "b"] {
+        assert_eq!(
+            node(&used, &format!("p/{id}"))["key"],
+            node(&alone, id)["key"],
+            "{id}"
+        );
+    }
+    assert_eq!(metric(&used, "twice", "y"), 2.0 * 3.0 * 2.0 * 1.0);
+
+    // An exposed parameter and an inner one by its path, from `--set`.
+    let r = run(&s, &outer, "outer", &["--set", "p.scale=5"]);
+    assert_eq!(metric(&r, "twice", "y"), 2.0 * 3.0 * 5.0);
+    assert_eq!(
+        node(&r, "p/a")["reason"],
+        "parameter `scale` 2.0 → 5.0",
+        "why it re-ran, inside the subgraph"
+    );
+    let r = run(&s, &outer, "outer", &["--set", "p/b.scale=7"]);
+    assert_eq!(metric(&r, "twice", "y"), 2.0 * 7.0 * 2.0);
+
+    // An exposed input given from outside replaces c, which fed only it: c is dropped, and a
+    // constant of the same value gives the same keys as the file alone.
+    let fed = s.write(
+        "fed.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "one": {"kind": "scalar.constant", "params": {"value": 1.0}},
+            "p": {"kind": "graph", "params": {"path": "inner.json"}, "inputs": {"x": "one.value"}}
+        }}"#,
+    );
+    let r = run(&s, &fed, "fed", &[]);
+    assert!(
+        r["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|n| n["id"] != "p/c"),
+        "{r}"
+    );
+    assert_eq!(node(&r, "p/b")["key"], node(&alone, "b")["key"]);
+
+    // Nested: a file that uses inner.json, used in turn; `--set` by the whole path.
+    s.write(
+        "middle.json",
+        r#"{"mesoflow": 2,
+          "interface": {"outputs": {"y": "q.y"}, "params": {"scale": "q.scale"}},
+          "nodes": {"q": {"kind": "graph", "params": {"path": "inner.json"}}}}"#,
+    );
+    let top = s.write(
+        "top.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "m": {"kind": "graph", "params": {"path": "middle.json", "scale": 4.0}},
+            "end": {"kind": "scalar.affine", "inputs": {"x": "m.y"}, "params": {"scale": 1.0}}
+        }}"#,
+    );
+    let r = run(&s, &top, "top", &["--set", "m/q/b.scale=10"]);
+    assert_eq!(metric(&r, "end", "y"), 10.0 * 4.0);
+    assert_eq!(node(&r, "m/q/c")["key"], node(&alone, "c")["key"]);
+}
+
+#[test]
+fn subgraph_mistakes_are_refused_naming_their_path() {
+    let s = Scratch::new();
+    s.write("inner.json", INNER);
+    let validate = |text: &str| {
+        let g = s.write("g.json", text);
+        let r = mesoflow(&["validate", g.to_str().unwrap()], s.dir.path());
+        assert_eq!(r.code, 2, "{}{}", r.stdout, r.stderr);
+        r.stderr
+    };
+    // An exposed parameter that is not, with the nearest name.
+    let e = validate(
+        r#"{"mesoflow": 1, "nodes": {"p": {"kind": "graph", "params": {"path": "inner.json", "scael": 2}}}}"#,
+    );
+    assert!(
+        e.contains("p/scael") && e.contains("did you mean `scale`"),
+        "{e}"
+    );
+    // An exposed input or output that is not.
+    let e = validate(
+        r#"{"mesoflow": 1, "nodes": {
+            "one": {"kind": "scalar.constant"},
+            "p": {"kind": "graph", "params": {"path": "inner.json"}, "inputs": {"z": "one.value"}},
+            "t": {"kind": "scalar.affine", "inputs": {"x": "p.w"}}}}"#,
+    );
+    assert!(
+        e.contains("exposes no input `z`") && e.contains("exposes no output `w`"),
+        "{e}"
+    );
+    // A value the inner kind's schema refuses, set two levels down: the path names it.
+    s.write(
+        "middle.json",
+        r#"{"mesoflow": 2, "interface": {}, "nodes": {"q": {"kind": "graph", "params": {"path": "inner.json"}}}}"#,
+    );
+    let e = validate(
+        r#"{"mesoflow": 1, "nodes": {"m": {"kind": "graph", "params": {"path": "middle.json", "set": {"q/a.scale": "big"}}}}}"#,
+    );
+    assert!(e.contains("m/q/a") && e.contains("scale"), "{e}");
+    // A file that includes itself, directly or through another.
+    s.write(
+        "loop_a.json",
+        r#"{"mesoflow": 1, "nodes": {"b": {"kind": "graph", "params": {"path": "loop_b.json"}}}}"#,
+    );
+    s.write(
+        "loop_b.json",
+        r#"{"mesoflow": 1, "nodes": {"a": {"kind": "graph", "params": {"path": "loop_a.json"}}}}"#,
+    );
+    let r = mesoflow(
+        &["validate", s.path("loop_a.json").to_str().unwrap()],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 2);
+    assert!(
+        r.stderr.contains("includes itself")
+            && r.stderr.contains("loop_a.json → loop_b.json → loop_a.json"),
+        "{}",
+        r.stderr
+    );
+    // A missing file names the folder it was looked for in.
+    let e = validate(
+        r#"{"mesoflow": 1, "nodes": {"p": {"kind": "graph", "params": {"path": "nosuch.json"}}}}"#,
+    );
+    assert!(e.contains("p/path") && e.contains("nosuch.json"), "{e}");
+    // `interface` is version 2.
+    let e = validate(r#"{"mesoflow": 1, "interface": {}, "nodes": {}}"#);
+    assert!(e.contains("`interface` needs `\"mesoflow\": 2`"), "{e}");
+}
