@@ -125,6 +125,7 @@ fn the_reference_renderer_agrees_with_mitsuba() {
 /// Measured: relative RMSE 0.051 against a combined noise of 0.052 (marble), 0.044 against 0.046
 /// (skin1); channel sums within 1.4%.
 #[test]
+#[ignore = "slow: two materials at 1024 samples a pixel and Mitsuba at 2 × 2048, 145 s here"]
 fn the_volumetric_reference_agrees_with_mitsuba() {
     volumes_against_mitsuba(
         &[
@@ -170,6 +171,7 @@ const SPHERE: &str = r#"{ "shape": "sphere", "size": 0.7, "segments": [96, 48] }
 /// Mitsuba render of 8192. Measured: relative RMSE 0.105 against a combined noise of 0.107;
 /// channel sums within 0.7%.
 #[test]
+#[ignore = "slow: 8192 samples a pixel through a rough boundary and Mitsuba at 2 × 2048, 124 s here"]
 fn the_rough_dielectric_reference_agrees_with_mitsuba() {
     volumes_against_mitsuba(
         &[("skin1", 0.5, [0.74, 0.88, 1.01], [0.032, 0.17, 0.48])],

@@ -118,6 +118,46 @@ fn a_subgraph_runs_as_if_inlined_with_the_keys_of_its_file() {
     let r = run(&s, &top, "top", &["--set", "m/q/b.scale=10"]);
     assert_eq!(metric(&r, "end", "y"), 10.0 * 4.0);
     assert_eq!(node(&r, "m/q/c")["key"], node(&alone, "c")["key"]);
+
+    // `dot` draws each subgraph as a box around its nodes, nested.
+    let d = mesoflow(&["dot", top.to_str().unwrap()], s.dir.path());
+    assert_eq!(d.code, 0, "{}", d.stderr);
+    let (m, q, c) = (
+        d.stdout.find("subgraph \"cluster_m\"").unwrap(),
+        d.stdout.find("subgraph \"cluster_m/q\"").unwrap(),
+        d.stdout.find("\"m/q/c\" [label=\"c").unwrap(),
+    );
+    assert!(m < q && q < c, "{}", d.stdout);
+
+    // A sweep over an exposed parameter and an inner one by its path, measuring inside.
+    let sweep = s.path("sweep");
+    let r = mesoflow(
+        &[
+            "sweep",
+            outer.to_str().unwrap(),
+            "--quiet",
+            "--vary",
+            "p.scale=1,2",
+            "--vary",
+            "p/b.scale=1,10",
+            "--measure",
+            "twice.y",
+            "--measure",
+            "p/a.y",
+            "--out-dir",
+            sweep.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let csv = std::fs::read_to_string(sweep.join("sweep.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert!(
+        rows[0].starts_with("p.scale,p/b.scale,twice.y,p/a.y"),
+        "{csv}"
+    );
+    // scale 2, b 10: 1 × 2 × 10 × 2.
+    assert!(rows[4].starts_with("2,10,40,2"), "{csv}");
 }
 
 #[test]

@@ -236,6 +236,7 @@ pub fn dot(graph: &Path, report: Option<&Path>) -> anyhow::Result<i32> {
         None => None,
     };
     let mut out = String::from("digraph mesoflow {\n  rankdir=LR;\n  node [shape=box, style=\"rounded,filled\", fillcolor=white, fontname=\"Helvetica\"];\n");
+    let mut by_parent: std::collections::BTreeMap<String, Vec<String>> = Default::default();
     for n in &graph.nodes {
         let (fill, extra) = match report.as_ref() {
             Some(r) => match r.node(&n.id) {
@@ -248,15 +249,22 @@ pub fn dot(graph: &Path, report: Option<&Path>) -> anyhow::Result<i32> {
             },
             None => ("white", String::new()),
         };
-        out.push_str(&format!(
-            "  {} [label=\"{}\\n{}{}\", fillcolor={}];\n",
-            n.id, n.id, n.kind, extra, fill
-        ));
+        let (parent, name) = n.id.rsplit_once('/').unwrap_or(("", &n.id));
+        by_parent
+            .entry(parent.to_string())
+            .or_default()
+            .push(format!(
+                "\"{}\" [label=\"{}\\n{}{}\", fillcolor={}];",
+                n.id, name, n.kind, extra, fill
+            ));
     }
+    // A subgraph's nodes (`p/inner`) drawn inside a box labelled with its id, nested as deep
+    // as the graph files nest.
+    emit_cluster("", &by_parent, 1, &mut out);
     for n in &graph.nodes {
         for e in &n.inputs {
             out.push_str(&format!(
-                "  {} -> {} [label=\"{}→{}\"];\n",
+                "  \"{}\" -> \"{}\" [label=\"{}→{}\"];\n",
                 e.from.node, n.id, e.from.port, e.port
             ));
         }
@@ -264,4 +272,41 @@ pub fn dot(graph: &Path, report: Option<&Path>) -> anyhow::Result<i32> {
     out.push_str("}\n");
     print!("{out}");
     Ok(0)
+}
+
+/// The nodes whose path's folder is `prefix`, then each subgraph below it as a cluster.
+fn emit_cluster(
+    prefix: &str,
+    by_parent: &std::collections::BTreeMap<String, Vec<String>>,
+    depth: usize,
+    out: &mut String,
+) {
+    let pad = "  ".repeat(depth);
+    for line in by_parent.get(prefix).into_iter().flatten() {
+        out.push_str(&format!("{pad}{line}\n"));
+    }
+    let children: std::collections::BTreeSet<String> = by_parent
+        .keys()
+        .filter_map(|k| {
+            let rest = if prefix.is_empty() {
+                Some(k.as_str()).filter(|k| !k.is_empty())
+            } else {
+                k.strip_prefix(prefix).and_then(|r| r.strip_prefix('/'))
+            }?;
+            let first = rest.split('/').next()?;
+            Some(if prefix.is_empty() {
+                first.to_string()
+            } else {
+                format!("{prefix}/{first}")
+            })
+        })
+        .collect();
+    for child in children {
+        let label = child.rsplit('/').next().unwrap_or(&child);
+        out.push_str(&format!(
+            "{pad}subgraph \"cluster_{child}\" {{\n{pad}  label=\"{label} (graph)\";\n{pad}  style=rounded;\n"
+        ));
+        emit_cluster(&child, by_parent, depth + 1, out);
+        out.push_str(&format!("{pad}}}\n"));
+    }
 }
