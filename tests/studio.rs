@@ -55,7 +55,15 @@ const SLOW: &str = r#"{
 "#;
 
 fn start(text: &str) -> Studio {
+    start_with(text, &[])
+}
+
+/// The studio on `text`, with `files` (path under the graph's folder, text) written beside it.
+fn start_with(text: &str, files: &[(&str, &str)]) -> Studio {
     let scratch = Scratch::new();
+    for (path, body) in files {
+        scratch.write(&format!("g/{path}"), body);
+    }
     let graph = scratch.write("g/graph.json", text);
     let mut child = bin()
         .args([
@@ -1182,4 +1190,45 @@ fn a_plan_against_the_truth_is_shown_with_its_candidates_and_applied_as_an_edit(
     assert_eq!(state["dirty"], true);
     // The graph changed since: the same plan is not applied twice.
     assert_eq!(s.post("/api/plan/apply", json!({})).0, 422);
+}
+
+/// A graph file used as a node is one box: its exposed ports, the nodes inside it with their
+/// status, its outputs previewed through the inner outputs they name.
+#[test]
+fn a_subgraph_is_one_box_that_opens_onto_its_nodes() {
+    let inner = r#"{"mesoflow": 2,
+      "interface": {"inputs": {"x": "a.x"}, "outputs": {"y": "a.y"}, "params": {"scale": "a.scale"}},
+      "nodes": {"c": {"kind": "scalar.constant", "params": {"value": 1.5}},
+                "a": {"kind": "scalar.affine", "inputs": {"x": "c.value"}, "params": {"scale": 2.0}}}}"#;
+    let s = start_with(
+        r#"{"mesoflow": 1, "nodes": {
+            "p": {"kind": "graph", "params": {"path": "inner.json", "scale": 4.0}},
+            "t": {"kind": "scalar.affine", "inputs": {"x": "p.y"}}}}"#,
+        &[("inner.json", inner)],
+    );
+    s.settle();
+    let st = s.state();
+    let p = st["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|n| n["id"] == "p")
+        .unwrap()
+        .clone();
+    assert_eq!(p["inner"], json!(["p/c", "p/a"]), "{p}");
+    assert_eq!(p["outputs"][0]["name"], "y");
+    assert_eq!(p["outputs"][0]["type"], "Scalar");
+    assert_eq!(p["ports"][0]["name"], "x");
+    assert!(p["schema"]["properties"]["scale"].is_object(), "{p}");
+    let ran: Vec<&str> = st["report"]["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| n["id"].as_str().unwrap())
+        .collect();
+    assert_eq!(ran, ["p/c", "p/a", "t"]);
+    // The box's output is the inner one it names.
+    let (code, v) = s.get("/api/value?node=p&port=y");
+    assert_eq!(code, 200, "{v}");
+    assert_eq!(v["value"], json!(6.0), "{v}");
 }

@@ -547,3 +547,63 @@ fn dropped(file: &GraphFile, injected: &BTreeMap<(String, String), String>) -> B
         }
     }
 }
+
+/// What a front end shows of one graph node: its exposed inputs and parameters, its exposed
+/// outputs with the expanded output each reads, and the expanded ids of the nodes inside it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Face {
+    pub inputs: Vec<String>,
+    pub params: Vec<String>,
+    /// (exposed name, expanded `node.port`).
+    pub outputs: Vec<(String, String)>,
+    pub inner: Vec<String>,
+}
+
+/// The [`Face`] of every graph node of `file` (top level), as far as its files can be read;
+/// problems are left to [`expand`], which reports them.
+pub fn faces(file: &GraphFile) -> BTreeMap<String, Face> {
+    let mut out = BTreeMap::new();
+    if !uses_subgraphs(file) {
+        return out;
+    }
+    let mut errors = Vec::new();
+    let mut stack: Vec<PathBuf> = file.source.iter().cloned().collect();
+    let loaded = load_subs(
+        file.clone(),
+        Interface::default(),
+        "",
+        &mut stack,
+        &mut errors,
+    );
+    let mut nodes = Vec::new();
+    flatten(&loaded, "", &BTreeMap::new(), &mut nodes, &mut errors);
+    for (id, sub) in &loaded.subs {
+        let prefix = format!("{id}{SEP}");
+        let outputs = sub
+            .interface
+            .outputs
+            .iter()
+            .map(|(name, r)| {
+                (
+                    name.clone(),
+                    resolve(sub, &prefix, &r.to_string(), &mut Vec::new()),
+                )
+            })
+            .collect();
+        out.insert(
+            id.clone(),
+            Face {
+                inputs: sub.interface.inputs.keys().cloned().collect(),
+                params: sub.interface.params.keys().cloned().collect(),
+                outputs,
+                inner: nodes
+                    .iter()
+                    .map(|(n, _)| n)
+                    .filter(|n| n.starts_with(&prefix))
+                    .cloned()
+                    .collect(),
+            },
+        );
+    }
+    out
+}

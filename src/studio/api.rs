@@ -224,7 +224,7 @@ pub fn handle(studio: &Arc<Studio>, call: &Call) -> Reply {
             json_response(200, &json!(kinds))
         }
         ("GET", "/api/value") => match target(query) {
-            Ok(t) => match value(studio, &t) {
+            Ok(t) => match value(studio, &through_subgraphs(studio, t)) {
                 Ok(v) => json_response(200, &preview::describe(&v)),
                 Err((s, m)) => error(s, &m),
             },
@@ -233,6 +233,7 @@ pub fn handle(studio: &Arc<Studio>, call: &Call) -> Reply {
         ("GET", "/api/pixels") => match target(query) {
             Ok(t) => {
                 let index = q(query, "index").and_then(|i| i.parse().ok()).unwrap_or(0);
+                let t = through_subgraphs(studio, t);
                 match value(studio, &t).map(|v| preview::pixels(&v, index)) {
                     Ok(Some(p)) => pixels_response(p),
                     Ok(None) => error(404, &format!("{t} has no image {index}")),
@@ -424,11 +425,43 @@ fn connect(studio: &Studio, call: &Call) -> Result<Result<u64, Refused>, String>
 fn state(studio: &Studio) -> Value {
     let doc = studio.doc();
     let reg = studio.engine.registry();
+    // A graph node is one box: its exposed ports and parameters, and the nodes inside it (by
+    // their path in the report) for its status and its panel.
+    let faces = mesoflow_graph::subgraph::faces(&doc.file);
+    let flat = mesoflow_graph::subgraph::expand(&doc.file).ok();
     let nodes: Vec<Value> = doc
         .file
         .nodes
         .iter()
         .map(|(id, d)| {
+            if let Some(face) = faces.get(id) {
+                let type_of = |r: &str| -> String {
+                    let p = PortRef::parse(r);
+                    p.as_ref()
+                        .and_then(|p| flat.as_ref()?.node(&p.node))
+                        .and_then(|decl| reg.node(&decl.kind))
+                        .and_then(|n| n.signature().output(&p.as_ref()?.port).map(|o| o.ty.clone()))
+                        .unwrap_or_default()
+                };
+                let outputs: Vec<Value> = face
+                    .outputs
+                    .iter()
+                    .map(|(name, r)| json!({ "name": name, "type": type_of(r), "doc": format!("{r} inside") }))
+                    .collect();
+                let ports: Vec<Value> = face
+                    .inputs
+                    .iter()
+                    .map(|name| json!({ "name": name, "type": "", "required": false, "doc": "an exposed input" }))
+                    .collect();
+                let mut props = serde_json::Map::new();
+                props.insert("path".into(), json!({ "type": "string", "description": "the graph file" }));
+                for p in &face.params {
+                    props.insert(p.clone(), json!({ "description": "an exposed parameter" }));
+                }
+                return json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
+                    "outputs": outputs, "ports": ports, "timings": [], "inner": face.inner,
+                    "schema": { "type": "object", "properties": props } });
+            }
             let sig = reg.node(&d.kind).map(|n| n.signature());
             json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
                     "outputs": sig.map(|s| json!(s.outputs)).unwrap_or(json!([])),
@@ -465,6 +498,16 @@ fn target(query: &[(String, String)]) -> Result<PortRef, String> {
         }),
         _ => Err("?node=…&port=… are required".into()),
     }
+}
+
+/// A graph node's exposed output is the inner output it names (`p.y` is `p/b.y`).
+fn through_subgraphs(studio: &Studio, t: PortRef) -> PortRef {
+    let doc = studio.doc();
+    mesoflow_graph::subgraph::faces(&doc.file)
+        .get(&t.node)
+        .and_then(|f| f.outputs.iter().find(|(n, _)| *n == t.port))
+        .and_then(|(_, r)| PortRef::parse(r))
+        .unwrap_or(t)
 }
 
 /// A value of the current graph, from the caches the runs filled; computed (with what it needs)

@@ -55,7 +55,20 @@ function layout(nodes) {
   return pos;
 }
 
+// A graph node (a graph file used as a node) has the status of the nodes inside it: failed or
+// running if one is, computed if one re-ran, else from the cache.
+function innerOf(id) {
+  const n = S.state && S.state.nodes.find(m => m.id === id);
+  return n && n.inner ? n.inner : null;
+}
 function statusOf(id) {
+  const inner = innerOf(id);
+  if (inner) {
+    const st = inner.map(statusOf);
+    for (const s of ["failed", "running", "computed", "cancelled"]) if (st.includes(s)) return s;
+    if (st.length && st.every(s => s === "memory" || s === "disk" || s === "skipped")) return st.includes("disk") ? "disk" : "memory";
+    return "stale";
+  }
   if (S.live[id]) return S.live[id];
   const r = reportOf(id);
   if (r) return r.status;
@@ -94,7 +107,9 @@ function drawGraph() {
     g.append(sv("rect", { class: "body", width: p.w, height: p.h, rx: 6 }));
     g.append(sv("text", { class: "title", x: 10, y: 18 }, n.id));
     g.append(sv("text", { class: "kind", x: 10, y: 32 }, n.kind));
-    const stats = r ? `${status} · ${secs(r.seconds)} · ${bytes(r.bytes)}` :
+    const inner = innerOf(n.id);
+    const stats = inner ? `graph · ${inner.length} nodes · ${inner.filter(i => statusOf(i) === "computed").length} re-ran` :
+      r ? `${status} · ${secs(r.seconds)} · ${bytes(r.bytes)}` :
       status === "skipped" ? "not needed: its dependants were cached" : "not run yet";
     const statsText = sv("text", { class: "stats", x: 10, y: 45 }, stats);
     // Why it ran, on hover: the first run, --no-cache, evicted, or what changed.

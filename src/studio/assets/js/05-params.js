@@ -83,7 +83,7 @@ function renderNode() {
   box.dataset.shown = shown;
   box.replaceChildren();
   if (!n) { box.append(el("p", { class: "muted" }, "Select a node in the graph.")); return; }
-  const sig = S.kinds[n.kind];
+  const sig = S.kinds[n.kind] || (n.schema && { doc: "a graph file used as a node: its exposed inputs, outputs and parameters; the nodes inside it are listed under Preview", params: n.schema });
   box.append(el("h2", {}, n.id), el("div", { class: "doc" }, n.kind + (sig ? " — " + sig.doc : " (unknown kind)")));
   const errs = S.state.errors.filter(e => e.node === n.id);
   if (errs.length) box.append(el("div", { class: "error-box" }, errs.map(e => e.message).join("\n")));
