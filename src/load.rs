@@ -30,6 +30,22 @@ pub fn apply_sets(file: &mut GraphFile, sets: &[String]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The graph with its subgraphs inlined (`crate::subgraph::expand`): what the planner edits,
+/// node by node, under their paths (`tile/capture`); its planned graph is written flat.
+pub fn flat(path: &Path, file: &GraphFile) -> anyhow::Result<GraphFile> {
+    mesoflow_graph::subgraph::expand(file).map_err(|errors| {
+        invalid(
+            GraphErrors {
+                file: path.display().to_string(),
+                errors,
+            }
+            .to_string()
+            .trim_end()
+            .to_string(),
+        )
+    })
+}
+
 pub fn checked(path: &Path, file: &GraphFile, registry: &Registry) -> anyhow::Result<CheckedGraph> {
     check(&path.display().to_string(), file, registry)
         .map_err(|e| invalid(e.to_string().trim_end().to_string()))

@@ -104,9 +104,9 @@ fn a_machine_whose_only_adapter_is_software_opengl_runs_the_gpu_graphs_on_the_cp
         out.display().to_string(),
     ];
     let mut sets: Vec<String> = vec![
-        "surface.size=16".into(),
-        format!("capture.views={dirs}"),
-        format!("capture.lights={dirs}"),
+        "tile.size=16".into(),
+        format!("tile.views={dirs}"),
+        format!("tile.lights={dirs}"),
         format!("mdf.views={dirs}"),
     ];
     for r in [

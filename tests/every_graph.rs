@@ -35,7 +35,12 @@ fn small(graph: &str) -> Vec<String> {
         v
     };
     let mut s: Vec<String> = match graph {
-        "btf_capture" => vec!["surface.size=16".into()],
+        "btf_capture" => vec!["tile.size=16".into()],
+        "woven_capture" => vec![
+            "surface.size=16".into(),
+            format!("capture.views={DIRS}"),
+            format!("capture.lights={DIRS}"),
+        ],
         "btf_edit" => vec![
             format!("capture.views={DIRS}"),
             format!("capture.lights={DIRS}"),
@@ -77,9 +82,9 @@ fn small(graph: &str) -> Vec<String> {
         "isomap" => vec!["roll.n=300".into(), "landmark.landmarks=50".into()],
         "mdf_render" => {
             let mut v: Vec<String> = vec![
-                "surface.size=16".into(),
-                format!("capture.views={DIRS}"),
-                format!("capture.lights={DIRS}"),
+                "tile.size=16".into(),
+                format!("tile.views={DIRS}"),
+                format!("tile.lights={DIRS}"),
                 format!("mdf.views={DIRS}"),
                 "pca.rank=4".into(),
             ];
@@ -137,9 +142,9 @@ fn small(graph: &str) -> Vec<String> {
         ],
         "qh_render" => {
             let mut v: Vec<String> = vec![
-                "surface.size=16".into(),
-                format!("lrf.views={DIRS}"),
-                format!("lrf.lights={DIRS}"),
+                "tile.size=16".into(),
+                format!("tile.views={DIRS}"),
+                format!("tile.lights={DIRS}"),
                 "torus.segments=[32,16]".into(),
             ];
             v.extend(sss(&["homogeneous", "qh"]));

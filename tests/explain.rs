@@ -44,17 +44,8 @@ fn every_computed_node_says_why_it_ran() {
     write_npy(&s.path("h.npy"), 4, 4, |x, y| (x + y) as f32);
     let out = s.path("out");
     let run = |extra: &[&str]| {
-        let mut args = vec![
-            "run",
-            g.to_str().unwrap(),
-            "--quiet",
-            "--out-dir",
-            out.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        let r = mesoflow(&args, s.dir.path());
+        let (r, _) = crate::common::run(&s, &g, "out", extra);
         assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-        r
     };
 
     // First run: every node, with no record to compare with.

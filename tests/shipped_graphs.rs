@@ -51,7 +51,7 @@ fn ubo2003_files_written_by_one_graph_read_back_bit_exactly_in_another() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = Scratch::new();
     let out = s.path("o");
-    let small = ["--set", "surface.size=16", "--set", "surface.count=2"];
+    let small = ["--set", "tile.size=16", "--set", "tile.count=2"];
     let mut args = vec![
         "run".to_string(),
         root.join("graphs/btf_capture.json")
@@ -68,6 +68,12 @@ fn ubo2003_files_written_by_one_graph_read_back_bit_exactly_in_another() {
     let nodes = g["nodes"].as_object_mut().unwrap();
     nodes.remove("files");
     nodes.remove("preview_png");
+    // The copy lives in another folder: its subgraph by its absolute path.
+    nodes["tile"]["params"]["path"] = root
+        .join("graphs/woven_capture.json")
+        .display()
+        .to_string()
+        .into();
     nodes.insert(
         "read".into(),
         serde_json::json!({ "kind": "btf.read_ubo2003", "params": { "path": "o/ubo2003" } }),
@@ -75,7 +81,7 @@ fn ubo2003_files_written_by_one_graph_read_back_bit_exactly_in_another() {
     nodes.insert(
         "compare".into(),
         serde_json::json!({ "kind": "btf.compare",
-            "inputs": { "reference": "capture.btf", "btf": "read.btf" } }),
+            "inputs": { "reference": "tile.btf", "btf": "read.btf" } }),
     );
     let graph = s.write("readback.json", &g.to_string());
     let out2 = s.path("o2");
@@ -113,10 +119,10 @@ fn mdf_render_graph_renders_with_and_without_silhouettes() {
         args.push("--set".into());
         args.push(kv);
     };
-    set("surface.size=16".into());
-    set("surface.count=2".into());
-    set(format!("capture.views={dirs}"));
-    set(format!("capture.lights={dirs}"));
+    set("tile.size=16".into());
+    set("tile.count=2".into());
+    set(format!("tile.views={dirs}"));
+    set(format!("tile.lights={dirs}"));
     set(format!("mdf.views={dirs}"));
     for r in [
         "sphere_plain",
@@ -216,10 +222,10 @@ fn sss_render_and_qh_render_graphs_render() {
     assert!(s.path("a").join("marble_and_skin.png").exists());
     let mut sets = small(&["homogeneous", "qh"]);
     sets.extend([
-        "surface.size=16".into(),
-        "surface.count=2".into(),
-        r#"lrf.views={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#.into(),
-        r#"lrf.lights={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#.into(),
+        "tile.size=16".into(),
+        "tile.count=2".into(),
+        r#"tile.views={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#.into(),
+        r#"tile.lights={"thetas": [0, 40, 80], "phis": [0, 90, 180, 270]}"#.into(),
     ]);
     run_graph(root, "graphs/qh_render.json", &s.path("b"), &sets);
     assert!(s.path("b").join("homogeneous_vs_qh.png").exists());

@@ -2,7 +2,7 @@
 //! inner node's key is its key when its file runs alone; `--set` reaches exposed and inner
 //! parameters; the report lists inner nodes under their path and says why they re-ran.
 
-use crate::common::{mesoflow, Scratch};
+use crate::common::{mesoflow, metric, Scratch};
 use serde_json::Value;
 use std::path::Path;
 
@@ -15,36 +15,18 @@ const INNER: &str = r#"{"mesoflow": 2,
     "b": {"kind": "scalar.affine", "inputs": {"x": "a.y"}, "params": {"scale": 3.0}}
 }}"#;
 
-fn report(out: &Path) -> Value {
-    serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap()
-}
-
+/// Node `id` of a report; absent is a failure (a missing inner node must not compare equal).
 fn node<'a>(r: &'a Value, id: &str) -> &'a Value {
-    r["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|n| n["id"] == id)
-        .unwrap_or_else(|| panic!("no node {id} in {r}"))
+    let n = mesoflow_testkit::cli::node(r, id);
+    assert!(!n.is_null(), "no node {id} in {r}");
+    n
 }
 
-fn metric(r: &Value, id: &str, m: &str) -> f64 {
-    node(r, id)["metrics"][m].as_f64().unwrap()
-}
-
+/// `mesoflow run GRAPH --quiet --out-dir OUT EXTRA…`, which must succeed; its report.
 fn run(s: &Scratch, graph: &Path, out: &str, extra: &[&str]) -> Value {
-    let out = s.path(out);
-    let mut args = vec![
-        "run",
-        graph.to_str().unwrap(),
-        "--quiet",
-        "--out-dir",
-        out.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let r = mesoflow(&args, s.dir.path());
+    let (r, report) = crate::common::run(s, graph, out, extra);
     assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    report(&out)
+    report
 }
 
 #[test]

@@ -94,13 +94,13 @@ impl GraphFile {
                 Ok(())
             }
             // `sub/inner.param`: a parameter inside the subgraph `sub`, kept in its `set`.
-            None if o.node.contains(crate::subgraph::SEP) => {
+            None if o.node.contains(crate::interface::SEP) => {
                 let (head, rest) = o
                     .node
-                    .split_once(crate::subgraph::SEP)
+                    .split_once(crate::interface::SEP)
                     .unwrap_or((&o.node, ""));
                 match self.node_mut(head) {
-                    Some(decl) if decl.kind == crate::subgraph::KIND => {
+                    Some(decl) if decl.kind == crate::interface::KIND => {
                         let set = decl
                             .params
                             .entry("set".to_string())

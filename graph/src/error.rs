@@ -37,7 +37,7 @@ pub enum GraphError {
     },
     #[error("unsupported format version {found}; this mesoflow reads versions 1 to {supported}")]
     Version { found: u64, supported: u64 },
-    #[error("node id `{node}` is invalid: ids match [a-z][a-z0-9_]*")]
+    #[error("node id `{node}` is invalid: ids match [a-z][a-z0-9_]* (or a path of them, `sub/node`, for a node inside a subgraph)")]
     BadNodeId { node: String },
     #[error("node id `{node}` is defined more than once")]
     DuplicateId { node: String },

@@ -10,6 +10,8 @@ use serde_json::{Map, Value};
 use std::collections::BTreeMap;
 use std::fmt;
 
+pub use crate::port_ref::PortRef;
+
 /// The newest format version this crate reads and writes.
 pub const FORMAT_VERSION: u64 = 2;
 
@@ -23,44 +25,17 @@ pub struct NodeDecl {
 }
 
 /// A parsed graph file. Nodes keep the order of the file.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct GraphFile {
     pub description: Option<String>,
     /// What the file exposes to a graph that uses it as a node (version 2).
-    pub interface: Option<crate::subgraph::Interface>,
+    pub interface: Option<crate::interface::Interface>,
     pub nodes: Vec<(String, NodeDecl)>,
     /// The folder its relative paths (input files, subgraphs) resolve against, where known.
     pub base: Option<std::path::PathBuf>,
     /// The file it was read from, canonical, where known (a subgraph that includes it again is
     /// refused).
     pub source: Option<std::path::PathBuf>,
-}
-
-/// A reference to an output: `node.port`.
-#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub struct PortRef {
-    pub node: String,
-    pub port: String,
-}
-
-impl PortRef {
-    /// Parses "node.port"; `None` if the text has not that shape.
-    pub fn parse(text: &str) -> Option<PortRef> {
-        let (node, port) = text.split_once('.')?;
-        if node.is_empty() || port.is_empty() || port.contains('.') {
-            return None;
-        }
-        Some(PortRef {
-            node: node.to_string(),
-            port: port.to_string(),
-        })
-    }
-}
-
-impl fmt::Display for PortRef {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}.{}", self.node, self.port)
-    }
 }
 
 /// A JSON object that keeps duplicate keys, so that a duplicated node id can be reported instead
@@ -112,6 +87,16 @@ fn migrate(version: u64, rest: Map<String, Value>) -> Result<Map<String, Value>,
             found,
             supported: FORMAT_VERSION,
         }),
+    }
+}
+
+/// Two files are the same graph when what they say is the same: where each was read from
+/// (`base`, `source`) is not part of it.
+impl PartialEq for GraphFile {
+    fn eq(&self, other: &Self) -> bool {
+        self.description == other.description
+            && self.interface == other.interface
+            && self.nodes == other.nodes
     }
 }
 
@@ -198,7 +183,7 @@ impl GraphFile {
         };
         let interface = match rest.remove("interface") {
             None => None,
-            Some(v) => match crate::subgraph::Interface::parse(&v) {
+            Some(v) => match crate::interface::Interface::parse(&v) {
                 Ok(i) => Some(i),
                 Err(mut es) => {
                     errors.append(&mut es);
@@ -231,7 +216,7 @@ impl GraphFile {
                 errors.push(GraphError::DuplicateId { node: id });
                 continue;
             }
-            if !valid_id(&id) {
+            if !valid_path_id(&id) {
                 errors.push(GraphError::BadNodeId { node: id.clone() });
             }
             match parse_node(&id, value) {
@@ -298,6 +283,13 @@ fn strip_position(message: &str) -> String {
         Some(i) => message[..i].to_string(),
         None => message.to_string(),
     }
+}
+
+/// A node id as a graph file may write it: `[a-z][a-z0-9_]*`, or a path of them, `a/b`, the id
+/// of node `b` inside the subgraph `a` (what a graph with subgraphs expands to, and a planned
+/// graph of one is written with).
+pub fn valid_path_id(id: &str) -> bool {
+    id.split(crate::interface::SEP).all(valid_id)
 }
 
 /// `[a-z][a-z0-9_]*`
@@ -447,6 +439,31 @@ mod tests {
         for bad in ["", "2a", "Surface", "a-b", "a.b", "_a"] {
             assert!(!valid_id(bad), "{bad}");
         }
+        assert!(valid_path_id("weave/capture") && valid_path_id("a/b/c"));
+        for bad in ["a/", "/a", "a//b", "a/B", "a/b.c"] {
+            assert!(!valid_path_id(bad), "{bad}");
+        }
+    }
+
+    #[test]
+    fn version_1_migrates_and_an_interface_needs_version_2() {
+        let v1 = GraphFile::parse(r#"{"mesoflow":1,"nodes":{"a":{"kind":"k"}}}"#).unwrap();
+        assert!(v1.interface.is_none());
+        assert!(v1.to_json().contains("\"mesoflow\": 1"));
+        let text = r#"{"mesoflow":2,"interface":{"outputs":{"y":"a.y"},"params":{"s":"a.scale"},
+            "inputs":{"x":["a.x","a.z"]}},"nodes":{"a":{"kind":"k"}}}"#;
+        let v2 = GraphFile::parse(text).unwrap();
+        let i = v2.interface.clone().unwrap();
+        assert_eq!(i.inputs["x"].len(), 2);
+        assert_eq!(i.params["s"], ("a".to_string(), "scale".to_string()));
+        // Written back as version 2, the same graph.
+        assert!(v2.to_json().contains("\"mesoflow\": 2"));
+        assert_eq!(GraphFile::parse(&v2.to_json()).unwrap(), v2);
+        let errs = GraphFile::parse(r#"{"mesoflow":1,"interface":{},"nodes":{}}"#).unwrap_err();
+        assert!(
+            errs[0].to_string().contains("needs `\"mesoflow\": 2`"),
+            "{errs:?}"
+        );
     }
 
     #[test]
@@ -456,7 +473,7 @@ mod tests {
             errs,
             vec![GraphError::Version {
                 found: 7,
-                supported: 1
+                supported: 2
             }]
         );
     }

@@ -300,7 +300,10 @@ pub fn rewrite(text: &str, old: &GraphFile, new: &GraphFile) -> String {
 }
 
 fn edit_in_place(text: &str, old: &GraphFile, new: &GraphFile) -> Option<String> {
-    if GraphFile::parse(text).ok()? != *old || old.description != new.description {
+    if GraphFile::parse(text).ok()? != *old
+        || old.description != new.description
+        || old.interface != new.interface
+    {
         return None;
     }
     let root = scan(text)?;

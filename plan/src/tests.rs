@@ -766,7 +766,11 @@ fn every_parameter_the_planner_writes_is_in_its_kind_s_schema() {
         if path.extension().is_none_or(|e| e != "json") {
             continue;
         }
-        let file = GraphFile::parse(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        // As `mesoflow plan` reads it: located, its subgraphs inlined.
+        let file = GraphFile::parse(&std::fs::read_to_string(&path).unwrap())
+            .unwrap()
+            .located(&path);
+        let file = mesoflow_graph::subgraph::expand(&file).unwrap();
         for (id, decl) in &file.nodes {
             let Some(kind) = RenderKind::of(&decl.kind) else {
                 continue;

@@ -5,7 +5,7 @@
 //! makes (`mesoflow_plan::arbitrate`).
 
 use crate::session::{device_mode, engine, parse_with_sets};
-use mesoflow_graph::check;
+use mesoflow_graph::{check, GraphFile};
 use mesoflow_plan::{
     arbitrate, plan_view, Budget, Measure, PlanError, ProbeOptions, Split, TruthOptions,
 };
@@ -75,7 +75,7 @@ pub fn plan(
         share: probe_share,
         budget: probe_budget,
     });
-    let file = parse_with_sets(text, &sets, &base_dir)?;
+    let file = flat(parse_with_sets(text, &sets, &base_dir)?)?;
     let split = match split {
         "joint" => Split::Joint,
         "equal" => Split::Equal,
@@ -144,7 +144,7 @@ pub fn plan_truth(
             )))
         }
     };
-    let file = parse_with_sets(text, &sets, &base_dir)?;
+    let file = flat(parse_with_sets(text, &sets, &base_dir)?)?;
     let (engine, opts, cancel) = session(name, &file, base_dir, device, cache_dir, use_cache)?;
     let (name, render) = (name.to_string(), render.to_string());
     let worker = engine.clone();
@@ -183,4 +183,11 @@ fn interruptible<T: Send + 'static>(
 
 fn json_text(v: &serde_json::Value) -> PyResult<String> {
     serde_json::to_string(v).map_err(|e| PyRuntimeError::new_err(e.to_string()))
+}
+
+/// The planner edits nodes one by one: the graph with its subgraphs inlined, their nodes under
+/// their paths.
+fn flat(file: GraphFile) -> PyResult<GraphFile> {
+    mesoflow_graph::subgraph::expand(&file)
+        .map_err(|e| PyValueError::new_err(crate::session::errors_text(&e)))
 }

@@ -212,6 +212,15 @@ pub(crate) fn device_mode(device: &str) -> PyResult<DeviceMode> {
     }
 }
 
+/// Graph errors as one message, a line each.
+pub(crate) fn errors_text(errors: &[mesoflow_graph::GraphError]) -> String {
+    errors
+        .iter()
+        .map(|e| e.to_string())
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// A graph file's text with `sets` ("id.param=value") applied; errors as `ValueError`.
 /// Relative paths and subgraphs in it resolve against `base_dir`.
 pub(crate) fn parse_with_sets(
@@ -219,14 +228,7 @@ pub(crate) fn parse_with_sets(
     sets: &[String],
     base_dir: &std::path::Path,
 ) -> PyResult<GraphFile> {
-    let file = GraphFile::parse(text).map_err(|e| {
-        PyValueError::new_err(
-            e.iter()
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join("\n"),
-        )
-    })?;
+    let file = GraphFile::parse(text).map_err(|e| PyValueError::new_err(errors_text(&e)))?;
     let mut file = file.in_folder(base_dir);
     for s in sets {
         let o = parse_override(s).map_err(|e| PyValueError::new_err(format!("set {e}")))?;

@@ -165,6 +165,17 @@ fn describe(s: &KindSignature) -> String {
 }
 
 pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
+    if kind == Some(mesoflow_graph::subgraph::KIND) && !as_json {
+        println!(
+            "graph — a graph file used as a node (docs/guide/concepts.md, \"Subgraphs\")\n\n\
+             parameters\n  path   the graph file, relative to this graph's folder\n  \
+             set    {{\"node.param\": value}}: any parameter inside it\n  \
+             (name) an exposed parameter: the file's interface.params\n\n\
+             inputs and outputs: the file's interface.inputs and interface.outputs; its nodes\n\
+             run as if inlined, each under the path `id/node`"
+        );
+        return Ok(0);
+    }
     let registry = mesoflow_nodes::registry::builtin();
     let sigs: Vec<&KindSignature> = registry.signatures().collect();
     let chosen: Vec<&KindSignature> = match kind {

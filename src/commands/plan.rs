@@ -125,6 +125,7 @@ fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
     let engine = engine(&args.cache, &args.graph.path)?;
     let mut file = load::read(&args.graph.path)?;
     load::apply_sets(&mut file, &args.graph.set)?;
+    let file = load::flat(&args.graph.path, &file)?;
     load::checked(&args.graph.path, &file, engine.registry())?;
     plan::render_kind(&file, &args.render)
         .map_err(|e| invalid(format!("--render {}: {e}", args.render)))?;
@@ -295,6 +296,7 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
     let engine = engine(&args.cache, &args.graph.path)?;
     let mut file = load::read(&args.graph.path)?;
     load::apply_sets(&mut file, &args.graph.set)?;
+    let file = load::flat(&args.graph.path, &file)?;
     load::checked(&args.graph.path, &file, engine.registry())?;
     let opts = run_options(args);
     let measure = match (flip, file.node(&args.render)) {

@@ -55,10 +55,17 @@ pub fn start(studio: &Arc<Studio>, spec: PlanSpec) -> Result<u64, Refused> {
         if doc.checked.is_none() {
             return Err(refused("the graph has errors; fix them to plan it"));
         }
-        if doc.file.node(&spec.render).is_none() {
+        // The planner edits nodes one by one: subgraphs inlined (their nodes under their paths).
+        let flat = mesoflow_graph::subgraph::expand(&doc.file).map_err(|e| {
+            refused(format!(
+                "{}",
+                e.first().map(|e| e.to_string()).unwrap_or_default()
+            ))
+        })?;
+        if flat.node(&spec.render).is_none() {
             return Err(refused(format!("no node `{}`", spec.render)));
         }
-        (doc.file.clone(), doc.revision)
+        (flat, doc.revision)
     };
     let cancel = Arc::new(AtomicBool::new(false));
     let id = {

@@ -29,8 +29,10 @@ impl Scratch {
     }
 }
 
+/// The `mesoflow` binary as the test kit finds it (one place for every test and bench), with
+/// no inherited cache folder.
 pub fn bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_mesoflow"));
+    let mut c = Command::new(mesoflow_testkit::cli::bin());
     c.env_remove("MESOFLOW_CACHE");
     c
 }
