@@ -56,12 +56,8 @@ pub fn start(studio: &Arc<Studio>, spec: PlanSpec) -> Result<u64, Refused> {
             return Err(refused("the graph has errors; fix them to plan it"));
         }
         // The planner edits nodes one by one: subgraphs inlined (their nodes under their paths).
-        let flat = mesoflow_graph::subgraph::expand(&doc.file).map_err(|e| {
-            refused(format!(
-                "{}",
-                e.first().map(|e| e.to_string()).unwrap_or_default()
-            ))
-        })?;
+        let flat = mesoflow_graph::subgraph::expand(&doc.file)
+            .map_err(|e| refused(e.first().map(|e| e.to_string()).unwrap_or_default()))?;
         if flat.node(&spec.render).is_none() {
             return Err(refused(format!("no node `{}`", spec.render)));
         }
