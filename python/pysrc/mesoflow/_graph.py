@@ -209,6 +209,20 @@ class Graph:
             self._nodes[node] = old
             raise
 
+    def _run_settings(
+        self, set: Optional[Mapping[str, Any]], cache_dir: Optional[PathLike], use_cache: bool
+    ) -> Tuple[List[str], Optional[str]]:
+        """The ``--set``s of a run (checked) and its cache folder, as the command line chooses it:
+        ``cache_dir``, else ``MESOFLOW_CACHE``, else ``.mesoflow/cache`` beside the graph; none
+        without the cache."""
+        if set:
+            self._check_sets(set)
+        sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
+        if not use_cache:
+            return sets, None
+        cache = cache_dir if cache_dir is not None else os.environ.get("MESOFLOW_CACHE")
+        return sets, str(cache) if cache else str(self.base_dir / ".mesoflow" / "cache")
+
     def _check_sets(self, sets: Mapping[str, Any]) -> None:
         """Checks ``run``'s ``set`` on a copy as :meth:`set` checks one value: an invalid one
         raises :class:`GraphError` naming the node and parameter, and this graph is unchanged."""
@@ -314,14 +328,7 @@ class Graph:
         ``KeyboardInterrupt`` once it has stopped (``report.json`` is still written).
         """
         outs = [str(o) for o in (outputs or [])]
-        if set:
-            self._check_sets(set)
-        sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
-        if use_cache:
-            cache = cache_dir if cache_dir is not None else os.environ.get("MESOFLOW_CACHE")
-            cache = str(cache) if cache else str(self.base_dir / ".mesoflow" / "cache")
-        else:
-            cache = None
+        sets, cache = self._run_settings(set, cache_dir, use_cache)
         out = Path(out_dir) if out_dir is not None else Path("out") / Path(self.name).stem
         report_text, values = _native.run(
             self.to_json(),

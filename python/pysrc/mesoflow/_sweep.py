@@ -5,7 +5,6 @@ checks, runs and writes it (``_native.sweep``); this module turns its rows into 
 from __future__ import annotations
 
 import json
-import os
 import sys
 from pathlib import Path
 from typing import Any, Dict, Mapping, Optional, Sequence, Union
@@ -41,14 +40,7 @@ def sweep(
     """
     measures = [str(m) for m in measure]
     names = list(vary)
-    if set:
-        graph._check_sets(set)
-    sets = [f"{k}={json.dumps(v)}" for k, v in (set or {}).items()]
-    if use_cache:
-        cache = cache_dir if cache_dir is not None else os.environ.get("MESOFLOW_CACHE")
-        cache = str(cache) if cache else str(graph.base_dir / ".mesoflow" / "cache")
-    else:
-        cache = None
+    sets, cache = graph._run_settings(set, cache_dir, use_cache)
     out = Path(out_dir) if out_dir is not None else Path("out") / Path(graph.name).stem / "sweep"
     try:
         names, measured_nodes, native_rows, problems = _native.sweep(
