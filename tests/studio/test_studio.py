@@ -49,6 +49,10 @@ class Studio:
         self.dir = tmp
         self.graph = tmp / graph.name
         shutil.copy(graph, self.graph)
+        # The graph files it uses as nodes go with it (graphs/mdf_render.json's `tile`).
+        for node in json.loads(graph.read_text()).get("nodes", {}).values():
+            if node.get("kind") == "graph":
+                shutil.copy(graph.parent / node["params"]["path"], tmp / node["params"]["path"])
         # Run from the graph's folder with relative paths, as a user would (the page shows them).
         self.proc = subprocess.Popen(
             [BIN, "serve", graph.name, "--port", "0", "--out-dir", "out", "--cache-dir", "cache",
