@@ -46,6 +46,24 @@ pub fn flat(path: &Path, file: &GraphFile) -> anyhow::Result<GraphFile> {
     })
 }
 
+/// `--output`s and measures as a run reads them: a graph node's exposed output (`p.y`) as the
+/// inner output it names (`p/b.y`).
+pub fn through_subgraphs(
+    path: &Path,
+    sets: &[String],
+    ports: Vec<mesoflow_graph::PortRef>,
+) -> anyhow::Result<Vec<mesoflow_graph::PortRef>> {
+    if ports.is_empty() {
+        return Ok(ports);
+    }
+    let mut file = read(path)?;
+    apply_sets(&mut file, sets)?;
+    Ok(ports
+        .into_iter()
+        .map(|p| mesoflow_graph::subgraph::through(&file, p))
+        .collect())
+}
+
 pub fn checked(path: &Path, file: &GraphFile, registry: &Registry) -> anyhow::Result<CheckedGraph> {
     check(&path.display().to_string(), file, registry)
         .map_err(|e| invalid(e.to_string().trim_end().to_string()))

@@ -51,6 +51,20 @@ fn a_subgraph_runs_as_if_inlined_with_the_keys_of_its_file() {
         );
     }
     assert_eq!(metric(&used, "twice", "y"), 2.0 * 3.0 * 2.0 * 1.0);
+    // An exposed output asked for by name is the inner output it names.
+    let r = mesoflow(
+        &[
+            "run",
+            outer.to_str().unwrap(),
+            "--quiet",
+            "--output",
+            "p.y",
+            "--out-dir",
+            s.path("asked").to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!((r.code, r.stdout.trim()), (0, "p/b.y = 6"), "{}", r.stderr);
 
     // An exposed parameter and an inner one by its path, from `--set`.
     let r = run(&s, &outer, "outer", &["--set", "p.scale=5"]);

@@ -477,3 +477,13 @@ pub fn faces(file: &GraphFile) -> BTreeMap<String, Face> {
     }
     out
 }
+
+/// `id.name`, where `id` is a graph node and `name` one of its exposed outputs, as the inner
+/// output it names (`p.y` is `p/b.y`); any other reference as given.
+pub fn through(file: &GraphFile, r: PortRef) -> PortRef {
+    faces(file)
+        .get(&r.node)
+        .and_then(|f| f.outputs.iter().find(|(name, _)| *name == r.port))
+        .and_then(|(_, inner)| PortRef::parse(inner))
+        .unwrap_or(r)
+}

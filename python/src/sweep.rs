@@ -78,13 +78,15 @@ pub fn sweep(
 ) -> PyResult<Swept> {
     let file: GraphFile = parse_with_sets(text, &sets, &base_dir)?;
     let engine = engine(cache_dir.as_deref());
+    // A subgraph's exposed output (`p.y`) is measured as the inner output it names.
+    let through = |p: PortRef| mesoflow_graph::subgraph::through(&file, p);
     let measures = measures
         .iter()
-        .map(|m| port(m, "measure"))
+        .map(|m| port(m, "measure").map(through))
         .collect::<PyResult<Vec<_>>>()?;
     let versus = versus
         .iter()
-        .map(|m| port(m, "versus"))
+        .map(|m| port(m, "versus").map(through))
         .collect::<PyResult<Vec<_>>>()?;
     let sweep = Sweep::prepare(
         name,

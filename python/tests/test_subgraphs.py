@@ -44,3 +44,14 @@ def test_a_subgraph_from_python(tmp_path):
         assert "did you mean `scale`" in str(e)
     else:
         raise AssertionError("an unknown exposed parameter was accepted")
+
+
+def test_a_sweep_over_a_subgraphs_exposed_parameter(tmp_path):
+    (tmp_path / "inner.json").write_text(json.dumps(INNER))
+    g = mesoflow.Graph(base_dir=tmp_path)
+    g.add("graph", "p", path="inner.json")
+    rows = mesoflow.sweep(g, vary={"p.scale": [1.0, 2.0]}, measure=["p.y"],
+                          out_dir=tmp_path / "s", cache_dir=tmp_path / "cache", progress=False)
+    records = rows.to_dict("records") if hasattr(rows, "to_dict") else rows
+    # p.y is b's output inside: 1 × scale × 3.
+    assert [r["p.y"] for r in records] == [3.0, 6.0]

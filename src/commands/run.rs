@@ -38,7 +38,11 @@ impl Runner {
             out_dir,
             policy(args.device, &args.cache),
         );
-        base.outputs = parse_outputs(&args.output)?;
+        base.outputs = load::through_subgraphs(
+            &args.graph.path,
+            &args.graph.set,
+            parse_outputs(&args.output)?,
+        )?;
         Ok(Runner {
             engine,
             base,

@@ -502,12 +502,7 @@ fn target(query: &[(String, String)]) -> Result<PortRef, String> {
 
 /// A graph node's exposed output is the inner output it names (`p.y` is `p/b.y`).
 fn through_subgraphs(studio: &Studio, t: PortRef) -> PortRef {
-    let doc = studio.doc();
-    mesoflow_graph::subgraph::faces(&doc.file)
-        .get(&t.node)
-        .and_then(|f| f.outputs.iter().find(|(n, _)| *n == t.port))
-        .and_then(|(_, r)| PortRef::parse(r))
-        .unwrap_or(t)
+    mesoflow_graph::subgraph::through(&studio.doc().file, t)
 }
 
 /// A value of the current graph, from the caches the runs filled; computed (with what it needs)
