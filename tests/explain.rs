@@ -14,9 +14,7 @@ const GRAPH: &str = r#"{"mesoflow": 1, "nodes": {
 }}"#;
 
 fn reasons(out: &Path) -> Vec<(String, String, Option<String>)> {
-    let report: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    report["nodes"]
+    crate::common::report(out)["nodes"]
         .as_array()
         .unwrap()
         .iter()

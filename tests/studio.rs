@@ -610,13 +610,7 @@ fn saving_changes_only_the_edited_value_and_an_editor_change_is_picked_up() {
     });
     // Its report says why it re-ran (what the studio shows on the node and in its Report tab).
     let st = s.state();
-    let surface = st["report"]["nodes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|n| n["id"] == "surface")
-        .unwrap()
-        .clone();
+    let surface = mesoflow_testkit::cli::node(&st["report"], "surface");
     assert!(
         surface["reason"]
             .as_str()
