@@ -437,6 +437,8 @@ pub struct Face {
     /// (exposed name, expanded `node.port`).
     pub outputs: Vec<(String, String)>,
     pub inner: Vec<String>,
+    /// The kind of each node inside, by expanded id (what its outputs' types follow from).
+    pub kinds: BTreeMap<String, String>,
 }
 
 /// The [`Face`] of every graph node of `file` (top level), as far as its files can be read;
@@ -460,17 +462,20 @@ pub fn faces(file: &GraphFile) -> BTreeMap<String, Face> {
                 )
             })
             .collect();
+        let inside: Vec<&(String, NodeDecl)> = nodes
+            .iter()
+            .filter(|(n, _)| n.starts_with(&prefix))
+            .collect();
         out.insert(
             id.clone(),
             Face {
                 inputs: sub.interface.inputs.keys().cloned().collect(),
                 params: sub.interface.params.keys().cloned().collect(),
                 outputs,
-                inner: nodes
+                inner: inside.iter().map(|(n, _)| n.clone()).collect(),
+                kinds: inside
                     .iter()
-                    .map(|(n, _)| n)
-                    .filter(|n| n.starts_with(&prefix))
-                    .cloned()
+                    .map(|(n, d)| (n.clone(), d.kind.clone()))
                     .collect(),
             },
         );

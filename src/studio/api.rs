@@ -428,7 +428,6 @@ fn state(studio: &Studio) -> Value {
     // A graph node is one box: its exposed ports and parameters, and the nodes inside it (by
     // their path in the report) for its status and its panel.
     let faces = mesoflow_graph::subgraph::faces(&doc.file);
-    let flat = mesoflow_graph::subgraph::expand(&doc.file).ok();
     let nodes: Vec<Value> = doc
         .file
         .nodes
@@ -438,8 +437,8 @@ fn state(studio: &Studio) -> Value {
                 let type_of = |r: &str| -> String {
                     let p = PortRef::parse(r);
                     p.as_ref()
-                        .and_then(|p| flat.as_ref()?.node(&p.node))
-                        .and_then(|decl| reg.node(&decl.kind))
+                        .and_then(|p| face.kinds.get(&p.node))
+                        .and_then(|kind| reg.node(kind))
                         .and_then(|n| n.signature().output(&p.as_ref()?.port).map(|o| o.ty.clone()))
                         .unwrap_or_default()
                 };
