@@ -356,6 +356,7 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
     ),
     ("run out/plan/planned.json", How::AsWritten),
     ("serve graphs/mdf_render.json", How::Serve),
+    ("run graphs/export.json", How::AsWritten),
     (
         "sweep graphs/sss_models.json --vary material.preset=apple,chicken1,chicken2,cream,\
          ketchup,marble,potato,skimmilk,skin1,skin2,spectralon,wholemilk --vary \

@@ -135,6 +135,11 @@ fn small(graph: &str) -> Vec<String> {
             v.extend(sss(&["qh_full", "qh_view"]));
             v
         }
+        "export" => vec![
+            "skin.photons=40000".into(),
+            "skin/measured.photons=20000".into(),
+            "skin/refit.photons=20000".into(),
+        ],
         "qh_fit" => vec![
             "measured.photons=20000".into(),
             "fit_mc.photons=40000".into(),

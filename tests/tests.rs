@@ -11,6 +11,7 @@ mod devices;
 mod docs;
 mod every_graph;
 mod explain;
+mod export;
 mod families;
 mod flip_peer;
 mod hostile;

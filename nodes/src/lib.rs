@@ -5,6 +5,7 @@
 pub mod brdf;
 pub mod btf;
 pub mod debug;
+pub mod export;
 pub mod heightfield;
 pub mod image;
 pub mod manifold;

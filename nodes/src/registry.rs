@@ -42,6 +42,8 @@ pub fn builtin() -> Registry {
     r.register(crate::mesh::read::Read);
     r.register(crate::render::render_mesh::RenderMesh);
     r.register(crate::render::reference::Reference);
+    r.register(crate::export::mitsuba::ExportMitsuba);
+    r.register(crate::export::pbrt::ExportPbrt);
     r.register(crate::render::relief::RenderRelief);
     r.register(crate::image::write::ImageWrite);
     r.register(crate::npy::write::NpyWrite);

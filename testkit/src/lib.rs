@@ -7,6 +7,7 @@ pub mod args;
 pub mod cli;
 pub mod node;
 pub mod npy;
+pub mod pbrt;
 pub mod plan_families;
 pub mod plan_sweep;
 pub mod scenes;
