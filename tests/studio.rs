@@ -1225,4 +1225,19 @@ fn a_subgraph_is_one_box_that_opens_onto_its_nodes() {
     let (code, v) = s.get("/api/value?node=p&port=y");
     assert_eq!(code, 200, "{v}");
     assert_eq!(v["value"], json!(6.0), "{v}");
+    // What the box opens onto in place: each node inside under its path, with its kind's ports
+    // and its inputs inside the box by path; and its values by that path.
+    let inside = p["inside"].as_array().expect("the nodes inside");
+    let a = inside.iter().find(|n| n["id"] == "p/a").expect("p/a");
+    assert_eq!(a["kind"], "scalar.affine");
+    assert_eq!(a["inputs"]["x"], "p/c.value", "{a}");
+    assert_eq!(
+        a["params"]["scale"],
+        json!(4.0),
+        "the exposed parameter, set: {a}"
+    );
+    assert_eq!(a["outputs"][0]["name"], "y", "{a}");
+    let (code, v) = s.get("/api/value?node=p/c&port=value");
+    assert_eq!(code, 200, "{v}");
+    assert_eq!(v["value"], json!(1.5), "{v}");
 }

@@ -437,8 +437,10 @@ pub struct Face {
     /// (exposed name, expanded `node.port`).
     pub outputs: Vec<(String, String)>,
     pub inner: Vec<String>,
-    /// The kind of each node inside, by expanded id (what its outputs' types follow from).
-    pub kinds: BTreeMap<String, String>,
+    /// Each node inside, by expanded id, as expanded: its kind (what its outputs' types follow
+    /// from), parameters and inputs (inner ones by expanded id), for front ends that open the
+    /// box onto them.
+    pub decls: BTreeMap<String, NodeDecl>,
 }
 
 /// The [`Face`] of every graph node of `file` (top level), as far as its files can be read;
@@ -473,10 +475,7 @@ pub fn faces(file: &GraphFile) -> BTreeMap<String, Face> {
                 params: sub.interface.params.keys().cloned().collect(),
                 outputs,
                 inner: inside.iter().map(|(n, _)| n.clone()).collect(),
-                kinds: inside
-                    .iter()
-                    .map(|(n, d)| (n.clone(), d.kind.clone()))
-                    .collect(),
+                decls: inside.iter().map(|(n, d)| (n.clone(), d.clone())).collect(),
             },
         );
     }

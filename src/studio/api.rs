@@ -437,8 +437,8 @@ fn state(studio: &Studio) -> Value {
                 let type_of = |r: &str| -> String {
                     let p = PortRef::parse(r);
                     p.as_ref()
-                        .and_then(|p| face.kinds.get(&p.node))
-                        .and_then(|kind| reg.node(kind))
+                        .and_then(|p| face.decls.get(&p.node))
+                        .and_then(|d| reg.node(&d.kind))
                         .and_then(|n| n.signature().output(&p.as_ref()?.port).map(|o| o.ty.clone()))
                         .unwrap_or_default()
                 };
@@ -457,15 +457,18 @@ fn state(studio: &Studio) -> Value {
                 for p in &face.params {
                     props.insert(p.clone(), json!({ "description": "an exposed parameter" }));
                 }
+                // What the box opens onto: each node inside as a node of its own, under its
+                // path, its inputs inside the box by path too.
+                let inside: Vec<Value> = face
+                    .decls
+                    .iter()
+                    .map(|(inner, d)| declared(inner, d, reg))
+                    .collect();
                 return json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
                     "outputs": outputs, "ports": ports, "timings": [], "inner": face.inner,
-                    "schema": { "type": "object", "properties": props } });
+                    "inside": inside, "schema": { "type": "object", "properties": props } });
             }
-            let sig = reg.node(&d.kind).map(|n| n.signature());
-            json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
-                    "outputs": sig.map(|s| json!(s.outputs)).unwrap_or(json!([])),
-                    "ports": sig.map(|s| json!(s.inputs)).unwrap_or(json!([])),
-                    "timings": sig.map(|s| json!(s.timings)).unwrap_or(json!([])) })
+            declared(id, d, reg)
         })
         .collect();
     let errors: Vec<Problem> = doc
@@ -487,6 +490,15 @@ fn state(studio: &Studio) -> Value {
         "clients": studio.hub.clients(),
         "out_dir": studio.out_dir.display().to_string(),
     })
+}
+
+/// A node as the page draws it: its declaration and its kind's ports and timings.
+fn declared(id: &str, d: &NodeDecl, reg: &mesoflow_runtime::Registry) -> Value {
+    let sig = reg.node(&d.kind).map(|n| n.signature());
+    json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
+            "outputs": sig.map(|s| json!(s.outputs)).unwrap_or(json!([])),
+            "ports": sig.map(|s| json!(s.inputs)).unwrap_or(json!([])),
+            "timings": sig.map(|s| json!(s.timings)).unwrap_or(json!([])) })
 }
 
 fn target(query: &[(String, String)]) -> Result<PortRef, String> {

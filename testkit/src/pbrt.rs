@@ -292,12 +292,12 @@ fn check_values(
             }
         }
         "point2" | "vector2" => {
-            if !numbers() || v.len() % 2 != 0 {
+            if !numbers() || !v.len().is_multiple_of(2) {
                 return bad("pairs of numbers expected");
             }
         }
         "point3" | "vector3" | "normal3" | "normal" | "point" | "vector" => {
-            if !numbers() || v.len() % 3 != 0 {
+            if !numbers() || !v.len().is_multiple_of(3) {
                 return bad("triples of numbers expected");
             }
         }
@@ -313,7 +313,7 @@ fn check_values(
         }
         "spectrum" => {
             let named = v.len() == 1 && quoted[0];
-            if !named && (!numbers() || v.len() % 2 != 0) {
+            if !named && (!numbers() || !v.len().is_multiple_of(2)) {
                 return bad("(wavelength, value) pairs or a quoted name expected");
             }
         }
@@ -559,13 +559,11 @@ pub fn check_file(path: &Path) -> Result<Checked, String> {
                 }
                 materials.insert(st.args[0].clone());
             }
-            "NamedMaterial" => {
-                if !materials.contains(&st.args[0]) {
-                    return Err(format!(
-                        "line {at}: material \"{}\" is not made",
-                        st.args[0]
-                    ));
-                }
+            "NamedMaterial" if !materials.contains(&st.args[0]) => {
+                return Err(format!(
+                    "line {at}: material \"{}\" is not made",
+                    st.args[0]
+                ));
             }
             "MakeNamedMedium" => {
                 let ty = st

@@ -427,3 +427,39 @@ def test_a_plan_against_the_truth_is_shown_and_applied(studio_of, browser, tmp_p
     wait(browser, """const s = window.studio.state;
         const n = s && s.nodes.find(n => n.id === 'ours');
         return n && n.kind === 'render.reference' ? true : null;""", 60, "the plan applied")
+
+
+@needs_browser
+def test_a_subgraph_box_opens_in_place_onto_its_nodes(studio_of, browser):
+    """graphs/btf_capture.json uses graphs/woven_capture.json as its node `tile`: the box opens in
+    place onto the nodes inside it (inside its frame, wired to each other), each one's status,
+    panel and preview under its path, and closes again."""
+    s = studio_of(ROOT / "graphs" / "btf_capture.json")
+    browser.get(s.url)
+    wait_loaded(browser)
+    assert not browser.find_elements("css selector", 'g.node[data-id="tile/surface"]')
+    click(browser, 'g.node[data-id="tile"] text[data-toggle="tile"]')
+    inner = json.loads(wait(browser, """const g = document.querySelectorAll('g.node[data-id^="tile/"]');
+        return g.length ? JSON.stringify([...g].map(e => e.dataset.id)) : null;""", 30, "the nodes inside tile"))
+    state = browser.execute_script("return window.studio.state")
+    tile = next(n for n in state["nodes"] if n["id"] == "tile")
+    assert sorted(inner) == sorted(tile["inner"])
+    # Inside the frame, and wired: the capture reads the surface inside the box.
+    inside = browser.execute_script("""const r = e => e.getBoundingClientRect();
+        const f = r(document.querySelector('g.node[data-id="tile"] rect.body'));
+        return [...document.querySelectorAll('g.node[data-id^="tile/"] rect.body')].every(e => {
+          const b = r(e); return b.left >= f.left && b.right <= f.right && b.top >= f.top && b.bottom <= f.bottom; });""")
+    assert inside
+    edges = browser.execute_script("return document.querySelectorAll('#viewport path.edge').length")
+    assert edges >= len(state["nodes"]) - 1
+    # An inner node: its status from the report, its panel says where to set it, its preview.
+    assert browser.execute_script(
+        "return document.querySelector('g.node[data-id=\"tile/surface\"]').dataset.status") in ("computed", "disk", "memory")
+    select(browser, "tile/surface", "node")
+    note = wait(browser, "return document.querySelector('#inner-note')?.textContent", 10, "the inner node's note")
+    assert "tile" in note and "surface" in note
+    click(browser, '#tabs button[data-tab="preview"]')
+    wait(browser, "return document.querySelector('#preview-body')?.dataset.view", 60, "the inner node's preview")
+    shot(browser, "studio-subgraph-open.png")
+    click(browser, 'g.node[data-id="tile"] text[data-toggle="tile"]')
+    wait(browser, "return !document.querySelector('g.node[data-id=\"tile/surface\"]')", 10, "the box to close")

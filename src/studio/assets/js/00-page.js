@@ -9,6 +9,6 @@ const S = {
   view: { x: 20, y: 20, k: 1 }, preview: { port: null, exposure: 0, srgb: true, zoom: 0,
   against: "", pair: null, viewDir: null, lightDir: null, mdfView: 0, param: 0, xdim: 0,
   ydim: 1, cdim: -1, yaw: 30 }, draws: 0, errorsByField: {}, sweep: null, tab: "node",
-  finishedRuns: 0,
+  finishedRuns: 0, open: new Set(),
 };
 window.studio = S;

@@ -35,7 +35,12 @@ function fmt(x) {
   const a = Math.abs(x);
   return a !== 0 && (a < 1e-3 || a >= 1e5) ? x.toExponential(3) : +x.toPrecision(5) + "";
 }
-function node(id) { return S.state && S.state.nodes.find(n => n.id === id); }
+// A node of the graph, or one inside a graph node (by its path, `tile/surface`).
+function node(id) {
+  if (!S.state) return undefined;
+  return S.state.nodes.find(n => n.id === id) ||
+    S.state.nodes.flatMap(n => n.inside || []).find(n => n.id === id);
+}
 function reportOf(id) {
   const r = S.state && S.state.report;
   return r ? r.nodes.find(n => n.id === id) : null;

@@ -20,6 +20,17 @@ function renderAll() {
   refreshPreview();
 }
 
+// A box's size: a node's from its ports; an open graph node's holds the nodes inside it.
+const PAD = 16, HEAD = 64;
+function boxSize(n) {
+  const ports = 68 + 15 * Math.max(n.ports.length, n.outputs.length);
+  if (!(n.inside && S.open.has(n.id))) return { w: 210, h: ports };
+  const ps = Object.values(layout(n.inside));
+  const w = Math.max(210, ...ps.map(p => p.x + p.w)) + 2 * PAD;
+  const top = HEAD + 15 * Math.max(n.ports.length, n.outputs.length) + 8;
+  return { w, h: top + Math.max(0, ...ps.map(p => p.y + p.h)) + PAD, top };
+}
+
 // Layers by longest path from the sources, ordered within a layer by their parents' positions.
 function layout(nodes) {
   const depth = {}, byId = Object.fromEntries(nodes.map(n => [n.id, n]));
@@ -38,19 +49,22 @@ function layout(nodes) {
   nodes.forEach(n => visit(n.id));
   const layers = [];
   nodes.forEach(n => (layers[depth[n.id]] = layers[depth[n.id]] || []).push(n));
-  const pos = {}, W = 210, GAP = 70;
-  layers.forEach((layer, li) => {
+  const pos = {}, GAP = 70;
+  let x = 0;
+  layers.forEach(layer => {
     layer.forEach((n, i) => {
       const parents = Object.values(n.inputs).map(s => pos[s.split(".")[0]]).filter(Boolean);
       n._order = parents.length ? parents.reduce((a, p) => a + p.y, 0) / parents.length : i * 100;
     });
     layer.sort((a, b) => a._order - b._order);
-    let y = 0;
+    let y = 0, w = 0;
     for (const n of layer) {
-      const h = 68 + 15 * Math.max(n.ports.length, n.outputs.length);
-      pos[n.id] = { x: li * (W + GAP), y, w: W, h };
-      y += h + 22;
+      const size = boxSize(n);
+      pos[n.id] = { x, y, w: size.w, h: size.h, top: size.top };
+      y += size.h + 22;
+      w = Math.max(w, size.w);
     }
+    x += w + GAP;
   });
   return pos;
 }
@@ -80,58 +94,80 @@ function drawGraph() {
   if (!S.state) return;
   const vp = $("#viewport");
   vp.replaceChildren();
-  const nodes = S.state.nodes;
-  const pos = layout(nodes);
-  S.positions = pos;
+  const pos = layout(S.state.nodes);
+  S.positions = {};
+  drawLevel(vp, S.state.nodes, pos, 0, 0);
+  if (!S.fitted) fitView();
+  applyView();
+}
+
+// One level of boxes at (dx, dy): the edges between them, then the boxes; an open graph node's
+// box holds the level inside it.
+function drawLevel(vp, nodes, pos, dx, dy) {
   const portY = (p, i) => p.y + 64 + 15 * i;
   for (const n of nodes) {
     n.ports.forEach((port, i) => {
       const src = n.inputs[port.name];
       if (!src) return;
       const [sid, sport] = src.split(".");
-      const s = node(sid), sp = pos[sid];
+      const s = nodes.find(m => m.id === sid), sp = pos[sid];
       if (!s || !sp) return;
       const oi = Math.max(0, s.outputs.findIndex(o => o.name === sport));
-      const x1 = sp.x + sp.w, y1 = portY(sp, oi), x2 = pos[n.id].x, y2 = portY(pos[n.id], i);
-      const dx = Math.max(40, (x2 - x1) / 2);
+      const x1 = dx + sp.x + sp.w, y1 = dy + portY(sp, oi), x2 = dx + pos[n.id].x, y2 = dy + portY(pos[n.id], i);
+      const d = Math.max(40, (x2 - x1) / 2);
       vp.append(sv("path", { class: "edge" + (S.selected === n.id || S.selected === sid ? " hot" : ""),
-        d: `M${x1},${y1} C${x1 + dx},${y1} ${x2 - dx},${y2} ${x2},${y2}` }));
+        d: `M${x1},${y1} C${x1 + d},${y1} ${x2 - d},${y2} ${x2},${y2}` }));
     });
   }
   for (const n of nodes) {
-    const p = pos[n.id], status = statusOf(n.id), r = reportOf(n.id);
-    const hasError = S.state.errors.some(e => e.node === n.id);
-    const g = sv("g", { class: `node ${status}${S.selected === n.id ? " selected" : ""}${hasError ? " failed" : ""}`,
-      "data-id": n.id, "data-status": status, transform: `translate(${p.x},${p.y})`,
-      onclick: ev => { ev.stopPropagation(); select(n.id); } });
-    g.append(sv("rect", { class: "body", width: p.w, height: p.h, rx: 6 }));
-    g.append(sv("text", { class: "title", x: 10, y: 18 }, n.id));
-    g.append(sv("text", { class: "kind", x: 10, y: 32 }, n.kind));
-    const inner = innerOf(n.id);
-    const stats = inner ? `graph · ${inner.length} nodes · ${inner.filter(i => statusOf(i) === "computed").length} re-ran` :
-      r ? `${status} · ${secs(r.seconds)} · ${bytes(r.bytes)}` :
-      status === "skipped" ? "not needed: its dependants were cached" : "not run yet";
-    const statsText = sv("text", { class: "stats", x: 10, y: 45 }, stats);
-    // Why it ran, on hover: the first run, --no-cache, evicted, or what changed.
-    if (r && r.reason) statsText.append(sv("title", {}, "why it ran: " + r.reason));
-    g.append(statsText);
-    n.ports.forEach((port, i) => {
-      g.append(sv("circle", { class: "pin", cx: 0, cy: 64 + 15 * i, r: 3.5 }));
-      g.append(sv("text", { class: "port", x: 8, y: 68 + 15 * i }, port.name));
-    });
-    n.outputs.forEach((o, i) => {
-      g.append(sv("circle", { class: "pin", cx: p.w, cy: 64 + 15 * i, r: 3.5 }));
-      g.append(sv("text", { class: "port", x: p.w - 8, y: 68 + 15 * i, "text-anchor": "end" }, o.name));
-    });
-    if (status === "running") {
-      const f = S.progress[n.id] || 0;
-      g.append(sv("rect", { class: "bar-bg", x: 8, y: p.h - 7, width: p.w - 16, height: 3 }));
-      g.append(sv("rect", { class: "bar", x: 8, y: p.h - 7, width: (p.w - 16) * f, height: 3 }));
-    }
-    vp.append(g);
+    const p = { ...pos[n.id], x: dx + pos[n.id].x, y: dy + pos[n.id].y };
+    S.positions[n.id] = p;
+    drawBox(vp, n, p);
+    if (n.inside && S.open.has(n.id)) drawLevel(vp, n.inside, layout(n.inside), p.x + PAD, p.y + p.top);
   }
-  if (!S.fitted) fitView();
-  applyView();
+}
+
+function drawBox(vp, n, p) {
+  const status = statusOf(n.id), r = reportOf(n.id);
+  const hasError = S.state.errors.some(e => e.node === n.id);
+  const open = n.inside && S.open.has(n.id);
+  const g = sv("g", { class: `node ${status}${S.selected === n.id ? " selected" : ""}${hasError ? " failed" : ""}${open ? " open" : ""}`,
+    "data-id": n.id, "data-status": status, transform: `translate(${p.x},${p.y})`,
+    onclick: ev => { ev.stopPropagation(); select(n.id); },
+    ondblclick: ev => { if (n.inside) { ev.stopPropagation(); toggleOpen(n.id); } } });
+  g.append(sv("rect", { class: "body", width: p.w, height: p.h, rx: 6 }));
+  g.append(sv("text", { class: "title", x: 10, y: 18 }, n.id));
+  g.append(sv("text", { class: "kind", x: 10, y: 32 }, n.kind));
+  const inner = innerOf(n.id);
+  const stats = inner ? `graph · ${inner.length} nodes · ${inner.filter(i => statusOf(i) === "computed").length} re-ran` :
+    r ? `${status} · ${secs(r.seconds)} · ${bytes(r.bytes)}` :
+    status === "skipped" ? "not needed: its dependants were cached" : "not run yet";
+  const statsText = sv("text", { class: "stats", x: 10, y: 45 }, stats);
+  // Why it ran, on hover: the first run, --no-cache, evicted, or what changed.
+  if (r && r.reason) statsText.append(sv("title", {}, "why it ran: " + r.reason));
+  g.append(statsText);
+  // A graph node opens in place (a click here or a double click on the box) onto its nodes.
+  if (n.inside) g.append(sv("text", { class: "toggle", x: p.w - 10, y: 18, "text-anchor": "end", "data-toggle": n.id,
+    onclick: ev => { ev.stopPropagation(); toggleOpen(n.id); } }, open ? "▾ close" : "▸ open"));
+  n.ports.forEach((port, i) => {
+    g.append(sv("circle", { class: "pin", cx: 0, cy: 64 + 15 * i, r: 3.5 }));
+    g.append(sv("text", { class: "port", x: 8, y: 68 + 15 * i }, port.name));
+  });
+  n.outputs.forEach((o, i) => {
+    g.append(sv("circle", { class: "pin", cx: p.w, cy: 64 + 15 * i, r: 3.5 }));
+    g.append(sv("text", { class: "port", x: p.w - 8, y: 68 + 15 * i, "text-anchor": "end" }, o.name));
+  });
+  if (status === "running") {
+    const f = S.progress[n.id] || 0;
+    g.append(sv("rect", { class: "bar-bg", x: 8, y: p.h - 7, width: p.w - 16, height: 3 }));
+    g.append(sv("rect", { class: "bar", x: 8, y: p.h - 7, width: (p.w - 16) * f, height: 3 }));
+  }
+  vp.append(g);
+}
+
+function toggleOpen(id) {
+  if (S.open.has(id)) S.open.delete(id); else S.open.add(id);
+  drawGraph();
 }
 // Scales and moves the graph so that all of it is in sight (at most life size).
 function fitView() {

@@ -83,8 +83,17 @@ function renderNode() {
   box.dataset.shown = shown;
   box.replaceChildren();
   if (!n) { box.append(el("p", { class: "muted" }, "Select a node in the graph.")); return; }
-  const sig = S.kinds[n.kind] || (n.schema && { doc: "a graph file used as a node: its exposed inputs, outputs and parameters; the nodes inside it are listed under Preview", params: n.schema });
+  const sig = S.kinds[n.kind] || (n.schema && { doc: "a graph file used as a node: its exposed inputs, outputs and parameters; ▸ open (or a double click) shows the nodes inside it in place, Preview lists them", params: n.schema });
   box.append(el("h2", {}, n.id), el("div", { class: "doc" }, n.kind + (sig ? " — " + sig.doc : " (unknown kind)")));
+  // A node inside a graph node is read here, and set through the graph node.
+  const owner = S.state.nodes.find(m => (m.inside || []).some(i => i.id === n.id));
+  if (owner) {
+    const name = n.id.slice(owner.id.length + 1);
+    box.append(el("div", { class: "hint", id: "inner-note" }, `Inside ${owner.id} (its file's node ${name}): set its parameters on ${owner.id}, as an exposed parameter or in its \`set\` as \`${name}.param\` (--set ${n.id}.param on the command line).`));
+    box.append(el("h3", {}, "Parameters"), el("table", { class: "data", id: "inner-params" },
+      Object.entries(n.params).map(([k, v]) => el("tr", {}, el("td", {}, k), el("td", {}, JSON.stringify(v))))));
+    return;
+  }
   const errs = S.state.errors.filter(e => e.node === n.id);
   if (errs.length) box.append(el("div", { class: "error-box" }, errs.map(e => e.message).join("\n")));
   const r = reportOf(n.id);

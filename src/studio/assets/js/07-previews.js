@@ -39,7 +39,8 @@ function metricsTable(id) {
   // A graph node opens onto the nodes inside it: each one's status and why it ran.
   const inner = innerOf(id);
   if (inner) return el("div", {}, el("h3", {}, "Inside"), el("table", { class: "data", id: "inner-nodes" },
-    inner.map(i => { const r = reportOf(i); return el("tr", { "data-id": i }, el("td", {}, i), el("td", {}, statusOf(i)),
+    inner.map(i => { const r = reportOf(i); return el("tr", { "data-id": i, class: "link", title: "open the box and select it",
+      onclick: () => { S.open.add(id); select(i); } }, el("td", {}, i), el("td", {}, statusOf(i)),
       el("td", { class: "num" }, r ? secs(r.seconds) : ""), el("td", { class: "why" }, (r && r.reason) || "")); })));
   const r = reportOf(id);
   if (!r) return el("p", { class: "muted" }, "not in the last run");
