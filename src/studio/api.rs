@@ -445,7 +445,7 @@ fn state(studio: &Studio) -> Value {
                 let outputs: Vec<Value> = face
                     .outputs
                     .iter()
-                    .map(|(name, r)| json!({ "name": name, "type": type_of(r), "doc": format!("{r} inside") }))
+                    .map(|(name, r)| json!({ "name": name, "type": type_of(r), "doc": format!("{r} inside"), "inside": r }))
                     .collect();
                 let ports: Vec<Value> = face
                     .inputs

@@ -26,7 +26,8 @@ function boxSize(n) {
   const ports = 68 + 15 * Math.max(n.ports.length, n.outputs.length);
   if (!(n.inside && S.open.has(n.id))) return { w: 210, h: ports };
   const ps = Object.values(layout(n.inside));
-  const w = Math.max(210, ...ps.map(p => p.x + p.w)) + 2 * PAD;
+  // Room on the right for the exposed outputs' edges to the box's pins.
+  const w = Math.max(210, ...ps.map(p => p.x + p.w)) + 2 * PAD + 40;
   const top = HEAD + 15 * Math.max(n.ports.length, n.outputs.length) + 8;
   return { w, h: top + Math.max(0, ...ps.map(p => p.y + p.h)) + PAD, top };
 }
@@ -123,7 +124,19 @@ function drawLevel(vp, nodes, pos, dx, dy) {
     const p = { ...pos[n.id], x: dx + pos[n.id].x, y: dy + pos[n.id].y };
     S.positions[n.id] = p;
     drawBox(vp, n, p);
-    if (n.inside && S.open.has(n.id)) drawLevel(vp, n.inside, layout(n.inside), p.x + PAD, p.y + p.top);
+    if (n.inside && S.open.has(n.id)) {
+      const ipos = layout(n.inside), ix = p.x + PAD, iy = p.y + p.top;
+      drawLevel(vp, n.inside, ipos, ix, iy);
+      // Each exposed output from the inner output it names to the box's own pin.
+      n.outputs.forEach((o, i) => {
+        const [sid, sport] = (o.inside || "").split(".");
+        const s = n.inside.find(m => m.id === sid), sp = ipos[sid];
+        if (!s || !sp) return;
+        const oi = Math.max(0, s.outputs.findIndex(x => x.name === sport));
+        const x1 = ix + sp.x + sp.w, y1 = iy + portY(sp, oi), x2 = p.x + p.w, y2 = portY(p, i);
+        vp.append(sv("path", { class: "edge exposed", d: `M${x1},${y1} C${x1 + 30},${y1} ${x2 - 30},${y2} ${x2},${y2}` }));
+      });
+    }
   }
 }
 
