@@ -8,7 +8,9 @@
 //! files are checked against pbrt-v4's scene-file grammar and plugin parameters by
 //! `mesoflow_testkit::pbrt`, and their numbers against the scene's.
 
-use crate::common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
+use crate::common::{
+    compare_to_peer, mesoflow, peer_python, read_npy, run_beside, run_peer, Scratch,
+};
 use mesoflow_testkit::pbrt;
 use serde_json::{json, Value};
 use std::path::{Path, PathBuf};
@@ -153,21 +155,7 @@ fn medium_graph() -> Value {
 }
 
 fn run(s: &Scratch, name: &str, graph: &Value) -> (PathBuf, Value) {
-    let file = s.write(name, &graph.to_string());
-    let out = s.path("out");
-    let r = mesoflow(
-        &[
-            "run",
-            file.to_str().unwrap(),
-            "--quiet",
-            "--out-dir",
-            out.to_str().unwrap(),
-        ],
-        s.dir.path(),
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let rep = report(&out);
-    (out, rep)
+    run_beside(s, &s.write(name, &graph.to_string()))
 }
 
 /// Renders each scene file with Mitsuba at two seeds: per file, the two RGBA images.
@@ -184,28 +172,6 @@ fn mitsuba(python: &Path, s: &Scratch, scenes: &[(String, PathBuf, u32)]) -> Vec
         .iter()
         .map(|(name, ..)| [7, 8].map(|seed| read_npy(&s.path(&format!("{name}_{seed}.npy"))).1))
         .collect()
-}
-
-/// Ours (RGB) against Mitsuba's two seeds (RGBA): relative RMSE against their mean, Mitsuba's
-/// own noise (half the seeds' difference) and the channel sums' ratios, ours over theirs.
-fn compare(ours: &[f32], theirs: &[Vec<f32>; 2]) -> (f64, f64, [f64; 3]) {
-    let n = ours.len() / 3;
-    let (mut diff2, mut ref2, mut half2) = (0.0, 0.0, 0.0);
-    let (mut a_sum, mut b_sum) = ([0.0; 3], [0.0; 3]);
-    for i in 0..n {
-        for k in 0..3 {
-            let (a, b) = (theirs[0][i * 4 + k] as f64, theirs[1][i * 4 + k] as f64);
-            let m = 0.5 * (a + b);
-            let o = ours[i * 3 + k] as f64;
-            diff2 += (o - m) * (o - m);
-            ref2 += m * m;
-            half2 += (a - b) * (a - b) / 4.0;
-            a_sum[k] += o;
-            b_sum[k] += m;
-        }
-    }
-    let ratio = [0, 1, 2].map(|k| a_sum[k] / b_sum[k]);
-    ((diff2 / ref2).sqrt(), (half2 / ref2).sqrt(), ratio)
 }
 
 fn noise(rep: &Value, id: &str) -> f64 {
@@ -240,7 +206,7 @@ fn mitsuba_renders_the_exported_surfaces_as_the_reference_does() {
         let (shape, ours) = read_npy(&out.join(format!("{name}.npy")));
         assert_eq!(shape, [H as usize, W as usize, 3]);
         assert_eq!(theirs[0].len(), (W * H * 4) as usize);
-        let (rel, their_noise, ratio) = compare(&ours, theirs);
+        let (rel, their_noise, ratio) = compare_to_peer(&ours, [&theirs[0], &theirs[1]]);
         let ours_noise = noise(&rep, name);
         let expected = (ours_noise * ours_noise + their_noise * their_noise).sqrt();
         table.push_str(&format!(
@@ -306,7 +272,7 @@ fn mitsuba_renders_the_exported_media_as_the_reference_does() {
     ];
     let theirs = mitsuba(&python, &s, &scenes);
     let (_, ours) = read_npy(&out.join("skin.npy"));
-    let (rel, their_noise, ratio) = compare(&ours, &theirs[0]);
+    let (rel, their_noise, ratio) = compare_to_peer(&ours, [&theirs[0][0], &theirs[0][1]]);
     let ours_noise = noise(&rep, "skin");
     let expected = (ours_noise * ours_noise + their_noise * their_noise).sqrt();
     eprintln!(

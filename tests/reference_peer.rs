@@ -7,9 +7,8 @@
 //! The peer runs from a Python with `mitsuba` and `numpy` (see `common::peer_python`; `.ci/run`
 //! installs it).
 
-use crate::common::{mesoflow, peer_python, read_npy, report, run_peer, Scratch};
+use crate::common::{compare_to_peer, peer_python, read_npy, run_beside, run_peer, Scratch};
 use serde_json::json;
-use std::path::Path;
 
 const SAMPLES: u32 = 1024;
 
@@ -31,24 +30,6 @@ fn graph(camera: &serde_json::Value, light: &serde_json::Value) -> String {
     .to_string()
 }
 
-/// Runs a graph file into `out/` beside it; the folder and its report.
-fn run_graph(s: &Scratch, file: &Path) -> (std::path::PathBuf, serde_json::Value) {
-    let out = s.path("out");
-    let r = mesoflow(
-        &[
-            "run",
-            file.to_str().unwrap(),
-            "--quiet",
-            "--out-dir",
-            out.to_str().unwrap(),
-        ],
-        s.dir.path(),
-    );
-    assert_eq!(r.code, 0, "{}", r.stderr);
-    let rep = report(&out);
-    (out, rep)
-}
-
 #[test]
 fn the_reference_renderer_agrees_with_mitsuba() {
     let Some(python) = peer_python("mitsuba, numpy") else {
@@ -59,7 +40,7 @@ fn the_reference_renderer_agrees_with_mitsuba() {
     // Low and to the side, so that bumps shadow bumps and the ring shadows itself.
     let light = json!({ "direction": [-0.7, 0.45, 0.35], "intensity": 3.0 });
     let file = s.write("truth.json", &graph(&camera, &light));
-    let (out, rep) = run_graph(&s, &file);
+    let (out, rep) = run_beside(&s, &file);
     let n = rep["nodes"]
         .as_array()
         .unwrap()
@@ -232,7 +213,7 @@ fn volumes_against_mitsuba(
         "volume.json",
         &json!({ "mesoflow": 1, "nodes": nodes }).to_string(),
     );
-    let (out, rep) = run_graph(&s, &file);
+    let (out, rep) = run_beside(&s, &file);
     for &(name, g, sigma_s_prime, sigma_a) in cases {
         let node = rep["nodes"]
             .as_array()
@@ -271,24 +252,8 @@ fn volumes_against_mitsuba(
             .collect();
         let (shape, ours) = read_npy(&out.join(format!("{name}.npy")));
         assert_eq!(shape, [36, 48, 3]);
-        let (mut diff2, mut ref2, mut half2) = (0.0, 0.0, 0.0);
-        let (mut our_sum, mut their_sum) = ([0.0; 3], [0.0; 3]);
-        for i in 0..36 * 48 {
-            for k in 0..3 {
-                let (a, b) = (theirs[0][i * 4 + k] as f64, theirs[1][i * 4 + k] as f64);
-                let m = 0.5 * (a + b);
-                let o = ours[i * 3 + k] as f64;
-                diff2 += (o - m) * (o - m);
-                ref2 += m * m;
-                half2 += (a - b) * (a - b) / 4.0;
-                our_sum[k] += o;
-                their_sum[k] += m;
-            }
-        }
-        let rel = (diff2 / ref2).sqrt();
-        let their_noise = (half2 / ref2).sqrt();
+        let (rel, their_noise, ratio) = compare_to_peer(&ours, [&theirs[0], &theirs[1]]);
         let expected = (our_noise * our_noise + their_noise * their_noise).sqrt();
-        let ratio: Vec<f64> = (0..3).map(|k| our_sum[k] / their_sum[k]).collect();
         eprintln!(
             "{name}: relative RMSE {rel:.4} against Mitsuba; noise {our_noise:.4} (ours) and {their_noise:.4} (Mitsuba), together {expected:.4}; sums ours/theirs {ratio:.4?}"
         );

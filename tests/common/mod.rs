@@ -276,3 +276,50 @@ pub fn try_run_graph(
     let r = mesoflow(&args, root);
     (r, report(out))
 }
+
+/// Runs a graph file into `out/` beside it (`--quiet`, the cache beside the file); the folder
+/// and its report.
+pub fn run_beside(s: &Scratch, file: &Path) -> (PathBuf, Value) {
+    let out = s.path("out");
+    let r = mesoflow(
+        &[
+            "run",
+            file.to_str().unwrap(),
+            "--quiet",
+            "--out-dir",
+            out.to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out);
+    (out, rep)
+}
+
+/// Our image (RGB) against a peer's two renders at two seeds (RGBA): the relative RMSE against
+/// their mean, the peer's own noise (half the two renders' difference, relative) and the
+/// channel sums' ratios, ours over theirs.
+pub fn compare_to_peer(ours: &[f32], theirs: [&[f32]; 2]) -> (f64, f64, [f64; 3]) {
+    let n = ours.len() / 3;
+    assert_eq!(
+        theirs[0].len(),
+        n * 4,
+        "the peer's image has the same pixels"
+    );
+    let (mut diff2, mut ref2, mut half2) = (0.0, 0.0, 0.0);
+    let (mut our_sum, mut their_sum) = ([0.0; 3], [0.0; 3]);
+    for i in 0..n {
+        for k in 0..3 {
+            let (a, b) = (theirs[0][i * 4 + k] as f64, theirs[1][i * 4 + k] as f64);
+            let m = 0.5 * (a + b);
+            let o = ours[i * 3 + k] as f64;
+            diff2 += (o - m) * (o - m);
+            ref2 += m * m;
+            half2 += (a - b) * (a - b) / 4.0;
+            our_sum[k] += o;
+            their_sum[k] += m;
+        }
+    }
+    let ratio = [0, 1, 2].map(|k| our_sum[k] / their_sum[k]);
+    ((diff2 / ref2).sqrt(), (half2 / ref2).sqrt(), ratio)
+}

@@ -23,7 +23,7 @@ use super::scene::{self, Diffuse, Look, Scene};
 use crate::reflectance::models::Model;
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{
-    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port,
+    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs,
 };
 use std::fmt::Write as _;
 
@@ -39,11 +39,7 @@ impl Node for ExportMitsuba {
             doc: "Writes the scene render.reference renders from the same parameters as a Mitsuba 3 scene (XML) with its mesh (PLY) and albedo map (EXR): camera, light, Lambert (exact), Ward or GGX (the closest Mitsuba BSDFs, a blend of diffuse and rough conductor), or a homogeneous medium inside an index-matched or rough dielectric boundary.",
             device: DevicePreference::Cpu,
             inputs: scene::inputs(),
-            outputs: vec![Port::output(
-                "files",
-                Artifacts::TYPE,
-                "the scene file, the mesh and any texture, written under the output folder",
-            )],
+            outputs: scene::outputs(),
             disk_cache: true,
         }
     }

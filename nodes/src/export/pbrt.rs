@@ -27,7 +27,7 @@ use crate::reflectance::models::Model;
 use crate::render::reference::Params as RenderParams;
 use mesoflow_graph::DevicePreference;
 use mesoflow_runtime::{
-    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs, Port,
+    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs,
 };
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -71,11 +71,7 @@ impl Node for ExportPbrt {
             doc: "Writes the scene render.reference renders from the same parameters as a pbrt-v4 scene with its mesh (PLY) and albedo map (EXR): camera, light, Lambert, Ward or GGX (a mix of diffuse and a rough conductor), or a homogeneous medium (path traced, or pbrt's subsurface material).",
             device: DevicePreference::Cpu,
             inputs: scene::inputs(),
-            outputs: vec![Port::output(
-                "files",
-                Artifacts::TYPE,
-                "the scene file, the mesh and any texture, written under the output folder",
-            )],
+            outputs: scene::outputs(),
             disk_cache: true,
         }
     }

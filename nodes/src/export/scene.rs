@@ -7,13 +7,13 @@
 
 use crate::mesh::write::ply;
 use crate::reflectance::models::Model;
-use crate::render::reference::{Params as RenderParams, Reference};
+use crate::render::reference::{check_albedo, Params as RenderParams, Reference};
 use crate::render::volume::Medium as CheckedMedium;
 use crate::support::formats::encode_exr;
 use crate::support::raytrace::camera::CameraParams;
 use crate::support::raytrace::light::{Light, LightParams};
 use crate::types::{Image, Mesh, ScatteringMaterial};
-use mesoflow_runtime::{Artifact, Inputs, Node, NodeError, Port};
+use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeError, Port};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -45,6 +45,15 @@ pub fn inputs() -> Vec<Port> {
             "a homogeneous medium filling the closed mesh (sss.material, qh.fit_dipole), instead of the surface reflectance",
         ),
     ]
+}
+
+/// The output both exporters give.
+pub fn outputs() -> Vec<Port> {
+    vec![Port::output(
+        "files",
+        Artifacts::TYPE,
+        "the scene file, the mesh and any texture, written under the output folder",
+    )]
 }
 
 /// A scene as both writers see it.
@@ -208,15 +217,7 @@ fn surface(
 ) -> Result<Look, NodeError> {
     let (max_diffuse, port) = match albedo {
         Some(a) => {
-            if a.channels < 3 || a.width == 0 || a.height == 0 {
-                return Err(NodeError::input("albedo", "expected a non-empty RGB image"));
-            }
-            if a.data.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-                return Err(NodeError::input(
-                    "albedo",
-                    "values must be finite and not negative",
-                ));
-            }
+            check_albedo(a)?;
             let max = a
                 .data
                 .chunks_exact(a.channels)

@@ -157,15 +157,7 @@ impl Node for Reference {
         };
         let albedo = inputs.opt::<Image>("albedo")?;
         if let Some(a) = albedo {
-            if a.channels < 3 || a.width == 0 || a.height == 0 {
-                return Err(NodeError::input("albedo", "expected a non-empty RGB image"));
-            }
-            if a.data.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
-                return Err(NodeError::input(
-                    "albedo",
-                    "values must be finite and not negative",
-                ));
-            }
+            check_albedo(a)?;
         }
         let normals = inputs.opt::<NormalMap>("normals")?;
         if let Some(n) = normals {
@@ -298,6 +290,21 @@ fn camera_ray(camera: &Camera, p: &Params, x: usize, y: usize, s: usize) -> (V3,
         (jx, jy)
     };
     camera.ray_at(x as f64 + sx, y as f64 + sy)
+}
+
+/// The `albedo` input's checks: a non-empty RGB image of finite, non-negative values (the
+/// exports read it the same way).
+pub fn check_albedo(a: &Image) -> Result<(), NodeError> {
+    if a.channels < 3 || a.width == 0 || a.height == 0 {
+        return Err(NodeError::input("albedo", "expected a non-empty RGB image"));
+    }
+    if a.data.iter().any(|v| !(v.is_finite() && *v >= 0.0)) {
+        return Err(NodeError::input(
+            "albedo",
+            "values must be finite and not negative",
+        ));
+    }
+    Ok(())
 }
 
 /// One pixel of a translucent object: a volumetric path per sample.
