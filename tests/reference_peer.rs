@@ -125,8 +125,11 @@ fn the_volumetric_reference_agrees_with_mitsuba() {
 /// the peer's too. Measured: relative RMSE 0.047 against a combined noise of 0.047 (marble),
 /// 0.041 against 0.038 (skin1); channel sums within 0.9% (marble) and 0.9–1.7% above Mitsuba's
 /// (skin1, as much inside the disc as on its silhouette; under the 2% the test allows, and
-/// under half the combined noise of a pixel).
+/// under half the combined noise of a pixel). The default tier holds the same comparison at a
+/// small size through `export.mitsuba` (`tests/export.rs`: skin1 on this sphere, lit from behind,
+/// 256 samples a pixel).
 #[test]
+#[ignore = "slow: two materials at 1024 samples a pixel and Mitsuba at 2 × 2048, 77 s here"]
 fn the_volumetric_reference_agrees_with_mitsuba_on_a_back_lit_sphere() {
     volumes_against_mitsuba(
         &[
