@@ -77,7 +77,15 @@ impl Node for ExportPbrt {
     }
 
     fn check(&self, p: &Params) -> Result<(), NodeError> {
-        scene::check(&p.path, &p.render)
+        scene::check(&p.path, &p.render)?;
+        // The files are named in the scene by their names: pbrt's strings have no escapes.
+        if p.path.contains('"') {
+            return Err(NodeError::param(
+                "path",
+                "cannot hold a double quote: pbrt's scene files name files in quotes, with no escapes",
+            ));
+        }
+        Ok(())
     }
 
     fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
@@ -103,9 +111,9 @@ fn nums(v: &[f64]) -> String {
     parts.join(" ")
 }
 
-/// A quoted pbrt string: its grammar has no escapes, so a quote cannot appear in one.
+/// A quoted pbrt string (its grammar has no escapes; `check` refuses a path with a quote).
 fn quoted(s: &str) -> String {
-    format!("\"{}\"", s.replace('"', "'"))
+    format!("\"{s}\"")
 }
 
 /// The scene file's text; `image` is the film's file name.
@@ -285,4 +293,18 @@ pub fn write(s: &Scene, translucency: Translucency, image: &str) -> String {
         }
     }
     x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_path_pbrt_cannot_name_is_refused_by_name() {
+        let p: Params = serde_json::from_value(serde_json::json!({ "path": "a\"b.pbrt" })).unwrap();
+        let e = ExportPbrt.check(&p).unwrap_err().to_string();
+        assert!(e.contains("path") && e.contains("quote"), "{e}");
+        let p: Params = serde_json::from_value(serde_json::json!({ "path": "ok.pbrt" })).unwrap();
+        assert!(ExportPbrt.check(&p).is_ok());
+    }
 }
