@@ -155,6 +155,11 @@ mod tests {
             ("brdf.edit", "specular_scale", json!(1001.0)),
             ("brdf.edit", "roughness_scale", json!(0.0)),
             ("brdf.fit_ward", "min_roughness", json!(0.001)),
+            // The exports flatten render.reference's parameters: their ranges come with them.
+            ("export.mitsuba", "samples", json!(0)),
+            ("export.mitsuba", "specular", json!(1.5)),
+            ("export.pbrt", "boundary_roughness", json!(0.005)),
+            ("export.pbrt", "translucency", json!("bssrdf")),
         ];
         for (kind, param, value) in cases {
             let sig = r
