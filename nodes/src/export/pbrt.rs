@@ -17,7 +17,8 @@
 //!   whose normal-incidence reflectance is the lobe's scale; pbrt's `diffuse` is two-sided where
 //!   the reference's surfaces are one-sided (it sees no back faces of a closed mesh);
 //! - a medium → `translucency: "volume"` (the default): the mesh bounds a `homogeneous` medium
-//!   through a `MediumInterface`, behind an `interface` (η = 1) or rough `dielectric` material,
+//!   through a `MediumInterface`, behind an `interface` (η = 1) or rough `dielectric` material
+//!   (on the triangles' own normals: the PLY has none there, as the reference refracts),
 //!   rendered by `volpath` (the reference's own light transport); or `"subsurface"`: pbrt's
 //!   `subsurface` material with the same σa, σs, g and η (its BSSRDF: faster, its own
 //!   diffusion approximation).

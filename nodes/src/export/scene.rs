@@ -3,9 +3,10 @@
 //! checks them and turned into the renderer-neutral [`Scene`]: the camera and light as given,
 //! the medium's coefficients in world units, and a surface's reflectance as the mix of two BSDFs
 //! that renderers offer (neither Mitsuba 3 nor pbrt-v4 adds a diffuse and a glossy BSDF, both
-//! blend them), plus the mesh (PLY) and albedo map (EXR) files written beside the scene file.
+//! blend them), plus the mesh (PLY: without vertex normals behind a rough boundary, which the
+//! reference refracts on the triangles' own) and albedo map (EXR) written beside the scene file.
 
-use crate::mesh::write::ply;
+use crate::mesh::write::ply_with;
 use crate::reflectance::models::Model;
 use crate::render::reference::{check_albedo, Params as RenderParams, Reference};
 use crate::render::volume::Medium as CheckedMedium;
@@ -161,10 +162,7 @@ pub fn build(path: &str, r: &RenderParams, inputs: &Inputs) -> Result<Scene, Nod
     mesh.check().map_err(|e| NodeError::input("mesh", e))?;
     let light = Light::new(&r.light)?;
     let (mesh_path, mesh_file) = beside(path, ".ply");
-    let mut files = vec![Artifact {
-        path: mesh_path,
-        bytes: ply(mesh),
-    }];
+    let mut files = Vec::new();
     let albedo = inputs.opt::<Image>("albedo")?;
     let look = match inputs.opt::<ScatteringMaterial>("medium")? {
         Some(m) => {
@@ -196,6 +194,16 @@ pub fn build(path: &str, r: &RenderParams, inputs: &Inputs) -> Result<Scene, Nod
         }
         None => surface(path, r, albedo, &mut files)?,
     };
+    // The reference refracts at a rough boundary on the triangles' own normals: the mesh goes
+    // without its vertex normals there, so both renderers do too.
+    let normals = !matches!(&look, Look::Medium(m) if m.roughness.is_some());
+    files.insert(
+        0,
+        Artifact {
+            path: mesh_path,
+            bytes: ply_with(mesh, normals),
+        },
+    );
     Ok(Scene {
         camera: r.camera.clone(),
         light: r.light.clone(),

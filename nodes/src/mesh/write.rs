@@ -116,18 +116,27 @@ pub fn obj(mesh: &Mesh) -> String {
 /// Binary little-endian PLY: per vertex x y z nx ny nz u v (float), per face a uchar count and
 /// three int indices.
 pub fn ply(mesh: &Mesh) -> Vec<u8> {
+    ply_with(mesh, true)
+}
+
+/// PLY as [`ply`], with the vertex normals or without them (a renderer then shades with the
+/// triangles' own normals).
+pub fn ply_with(mesh: &Mesh, normals: bool) -> Vec<u8> {
+    let normal_props = if normals {
+        "property float nx\nproperty float ny\nproperty float nz\n"
+    } else {
+        ""
+    };
     let header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment mesoflow mesh.write\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty float u\nproperty float v\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
+        "ply\nformat binary_little_endian 1.0\ncomment mesoflow mesh.write\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n{normal_props}property float u\nproperty float v\nelement face {}\nproperty list uchar int vertex_indices\nend_header\n",
         mesh.positions.len(),
         mesh.triangles()
     );
     let mut out = header.into_bytes();
     out.reserve(mesh.positions.len() * 32 + mesh.triangles() * 13);
     for i in 0..mesh.positions.len() {
-        let values = mesh.positions[i]
-            .iter()
-            .chain(&mesh.normals[i])
-            .chain(&mesh.uvs[i]);
+        let n: &[f32] = if normals { &mesh.normals[i] } else { &[] };
+        let values = mesh.positions[i].iter().chain(n).chain(&mesh.uvs[i]);
         for v in values {
             out.extend(v.to_le_bytes());
         }
@@ -181,6 +190,20 @@ mod tests {
             assert_eq!(back.texcoords[2 * j..2 * j + 2], m.uvs[i as usize]);
             assert_eq!(back.normals[3 * j..3 * j + 3], m.normals[i as usize]);
         }
+    }
+
+    #[test]
+    fn ply_without_normals_leaves_them_out_of_header_and_body() {
+        let m = torus();
+        let bytes = ply_with(&m, false);
+        let end = b"end_header\n";
+        let at = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+        let header = std::str::from_utf8(&bytes[..at]).unwrap();
+        assert!(!header.contains("nx") && header.contains("property float u"));
+        assert_eq!(
+            bytes.len() - at,
+            m.positions.len() * 5 * 4 + m.triangles() * 13
+        );
     }
 
     #[test]
