@@ -206,11 +206,13 @@ pub fn parse(text: &str) -> Result<Vec<Statement>, String> {
                         "line {pline}: parameter \"{decl}\" is not \"type name\""
                     ));
                 };
-                let mut values = Vec::new();
+                // Each value, and whether it was quoted (a string) or bare (a number, a bool).
+                let (mut values, mut quoted) = (Vec::new(), Vec::new());
                 let mut push = |t: &Token| -> Result<(), String> {
                     match t {
                         Token::Word(w) | Token::Str(w) => {
                             values.push(w.clone());
+                            quoted.push(matches!(t, Token::Str(_)));
                             Ok(())
                         }
                         _ => Err(format!("line {pline}: \"{decl}\": unexpected {t:?}")),
@@ -241,7 +243,7 @@ pub fn parse(text: &str) -> Result<Vec<Statement>, String> {
                     }
                     None => return Err(format!("line {pline}: \"{decl}\" has no value")),
                 }
-                check_values(*pline, ty, name, &values, text_of(&toks, i, values.len()))?;
+                check_values(*pline, ty, name, &values, &quoted)?;
                 st.params.push(Param {
                     ty: ty.to_string(),
                     name: name.to_string(),
@@ -254,26 +256,12 @@ pub fn parse(text: &str) -> Result<Vec<Statement>, String> {
     Ok(out)
 }
 
-/// Whether each of the `n` values just read was quoted (a string token).
-fn text_of(toks: &[(usize, Token)], end: usize, n: usize) -> Vec<bool> {
-    toks[..end]
-        .iter()
-        .rev()
-        .filter(|(_, t)| matches!(t, Token::Word(_) | Token::Str(_)))
-        .take(n)
-        .map(|(_, t)| matches!(t, Token::Str(_)))
-        .collect::<Vec<_>>()
-        .into_iter()
-        .rev()
-        .collect()
-}
-
 fn check_values(
     line: usize,
     ty: &str,
     name: &str,
     v: &[String],
-    quoted: Vec<bool>,
+    quoted: &[bool],
 ) -> Result<(), String> {
     let bad = |why: &str| Err(format!("line {line}: \"{ty} {name}\": {why} ({v:?})"));
     let numbers = || quoted.iter().all(|q| !q) && v.iter().all(|x| x.parse::<f64>().is_ok());
