@@ -458,11 +458,11 @@ fn state(studio: &Studio) -> Value {
                     props.insert(p.clone(), json!({ "description": "an exposed parameter" }));
                 }
                 // What the box opens onto: each node inside as a node of its own, under its
-                // path, its inputs inside the box by path too.
+                // path (in `inner`'s order, the files'), its inputs inside the box by path too.
                 let inside: Vec<Value> = face
-                    .decls
+                    .inner
                     .iter()
-                    .map(|(inner, d)| declared(inner, d, reg))
+                    .filter_map(|i| face.decls.get(i).map(|d| declared(i, d, reg)))
                     .collect();
                 return json!({ "id": id, "kind": d.kind, "params": d.params, "inputs": d.inputs,
                     "outputs": outputs, "ports": ports, "timings": [], "inner": face.inner,
