@@ -25,11 +25,12 @@ const PAD = 16, HEAD = 64;
 function boxSize(n) {
   const ports = 68 + 15 * Math.max(n.ports.length, n.outputs.length);
   if (!(n.inside && S.open.has(n.id))) return { w: 210, h: ports };
-  const ps = Object.values(layout(n.inside));
+  // The inner layout is kept with the box, so drawing it needs no second layout.
+  const inner = layout(n.inside), ps = Object.values(inner);
   // Room on the right for the exposed outputs' edges to the box's pins.
   const w = Math.max(210, ...ps.map(p => p.x + p.w)) + 2 * PAD + 40;
   const top = HEAD + 15 * Math.max(n.ports.length, n.outputs.length) + 8;
-  return { w, h: top + Math.max(0, ...ps.map(p => p.y + p.h)) + PAD, top };
+  return { w, h: top + Math.max(0, ...ps.map(p => p.y + p.h)) + PAD, top, inner };
 }
 
 // Layers by longest path from the sources, ordered within a layer by their parents' positions.
@@ -61,7 +62,7 @@ function layout(nodes) {
     let y = 0, w = 0;
     for (const n of layer) {
       const size = boxSize(n);
-      pos[n.id] = { x, y, w: size.w, h: size.h, top: size.top };
+      pos[n.id] = { x, y, w: size.w, h: size.h, top: size.top, inner: size.inner };
       y += size.h + 22;
       w = Math.max(w, size.w);
     }
@@ -125,7 +126,7 @@ function drawLevel(vp, nodes, pos, dx, dy) {
     S.positions[n.id] = p;
     drawBox(vp, n, p);
     if (n.inside && S.open.has(n.id)) {
-      const ipos = layout(n.inside), ix = p.x + PAD, iy = p.y + p.top;
+      const ipos = p.inner, ix = p.x + PAD, iy = p.y + p.top;
       drawLevel(vp, n.inside, ipos, ix, iy);
       // Each exposed output from the inner output it names to the box's own pin.
       n.outputs.forEach((o, i) => {
