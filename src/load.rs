@@ -58,10 +58,7 @@ pub fn through_subgraphs(
     }
     let mut file = read(path)?;
     apply_sets(&mut file, sets)?;
-    Ok(ports
-        .into_iter()
-        .map(|p| mesoflow_graph::subgraph::through(&file, p))
-        .collect())
+    Ok(mesoflow_graph::subgraph::through_all(&file, ports))
 }
 
 pub fn checked(path: &Path, file: &GraphFile, registry: &Registry) -> anyhow::Result<CheckedGraph> {

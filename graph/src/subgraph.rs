@@ -485,9 +485,22 @@ pub fn faces(file: &GraphFile) -> BTreeMap<String, Face> {
 /// `id.name`, where `id` is a graph node and `name` one of its exposed outputs, as the inner
 /// output it names (`p.y` is `p/b.y`); any other reference as given.
 pub fn through(file: &GraphFile, r: PortRef) -> PortRef {
-    faces(file)
-        .get(&r.node)
-        .and_then(|f| f.outputs.iter().find(|(name, _)| *name == r.port))
-        .and_then(|(_, inner)| PortRef::parse(inner))
-        .unwrap_or(r)
+    through_all(file, vec![r]).remove(0)
+}
+
+/// [`through`] for several references, the subgraph files read once for all of them.
+pub fn through_all(file: &GraphFile, refs: Vec<PortRef>) -> Vec<PortRef> {
+    if refs.is_empty() {
+        return refs;
+    }
+    let faces = faces(file);
+    refs.into_iter()
+        .map(|r| {
+            faces
+                .get(&r.node)
+                .and_then(|f| f.outputs.iter().find(|(name, _)| *name == r.port))
+                .and_then(|(_, inner)| PortRef::parse(inner))
+                .unwrap_or(r)
+        })
+        .collect()
 }

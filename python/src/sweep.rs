@@ -79,15 +79,16 @@ pub fn sweep(
     let file: GraphFile = parse_with_sets(text, &sets, &base_dir)?;
     let engine = engine(cache_dir.as_deref());
     // A subgraph's exposed output (`p.y`) is measured as the inner output it names.
-    let through = |p: PortRef| mesoflow_graph::subgraph::through(&file, p);
     let measures = measures
         .iter()
-        .map(|m| port(m, "measure").map(through))
+        .map(|m| port(m, "measure"))
         .collect::<PyResult<Vec<_>>>()?;
     let versus = versus
         .iter()
-        .map(|m| port(m, "versus").map(through))
+        .map(|m| port(m, "versus"))
         .collect::<PyResult<Vec<_>>>()?;
+    let measures = mesoflow_graph::subgraph::through_all(&file, measures);
+    let versus = mesoflow_graph::subgraph::through_all(&file, versus);
     let sweep = Sweep::prepare(
         name,
         &file,

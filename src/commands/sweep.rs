@@ -73,13 +73,8 @@ pub fn sweep(args: &SweepArgs) -> anyhow::Result<i32> {
     let mut base_file = load::read(&args.graph.path)?;
     load::apply_sets(&mut base_file, &args.graph.set)?;
     // A subgraph's exposed output (`p.y`) is measured as the inner output it names.
-    let through = |ports: Vec<mesoflow_graph::PortRef>| -> Vec<mesoflow_graph::PortRef> {
-        ports
-            .into_iter()
-            .map(|p| mesoflow_graph::subgraph::through(&base_file, p))
-            .collect()
-    };
-    let (measures, versus) = (through(measures), through(versus));
+    let measures = mesoflow_graph::subgraph::through_all(&base_file, measures);
+    let versus = mesoflow_graph::subgraph::through_all(&base_file, versus);
     // Every combination is checked before any runs, so a bad value fails fast with exit code 2.
     let sweep = Sweep::prepare(
         &args.graph.path.display().to_string(),
