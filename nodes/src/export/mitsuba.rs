@@ -22,9 +22,7 @@
 use super::scene::{self, Diffuse, Look, Scene};
 use crate::reflectance::models::Model;
 use mesoflow_graph::DevicePreference;
-use mesoflow_runtime::{
-    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs,
-};
+use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs};
 use std::fmt::Write as _;
 
 pub struct ExportMitsuba;
@@ -56,12 +54,7 @@ impl Node for ExportMitsuba {
     ) -> Result<Outputs, NodeError> {
         let s = scene::build(&p.path, &p.render, inputs)?;
         let xml = write(&s);
-        let mut files = s.files;
-        files.push(Artifact {
-            path: p.path.clone(),
-            bytes: xml.into_bytes(),
-        });
-        Ok(Outputs::new().with("files", Artifacts { files }))
+        Ok(scene::outputs_with(s, &p.path, xml))
     }
 }
 

@@ -27,9 +27,7 @@ use super::scene::{self, Diffuse, Look, Scene};
 use crate::reflectance::models::Model;
 use crate::render::reference::Params as RenderParams;
 use mesoflow_graph::DevicePreference;
-use mesoflow_runtime::{
-    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs,
-};
+use mesoflow_runtime::{Inputs, Node, NodeContext, NodeError, NodeSpec, Outputs};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
@@ -98,12 +96,7 @@ impl Node for ExportPbrt {
             .unwrap_or("pbrt.exr")
             .to_string();
         let text = write(&s, p.translucency, &image);
-        let mut files = s.files;
-        files.push(Artifact {
-            path: p.path.clone(),
-            bytes: text.into_bytes(),
-        });
-        Ok(Outputs::new().with("files", Artifacts { files }))
+        Ok(scene::outputs_with(s, &p.path, text))
     }
 }
 

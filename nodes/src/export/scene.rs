@@ -14,7 +14,7 @@ use crate::support::formats::encode_exr;
 use crate::support::raytrace::camera::CameraParams;
 use crate::support::raytrace::light::{Light, LightParams};
 use crate::types::{Image, Mesh, ScatteringMaterial};
-use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeError, Port};
+use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeError, Outputs, Port};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -55,6 +55,16 @@ pub fn outputs() -> Vec<Port> {
         Artifacts::TYPE,
         "the scene file, the mesh and any texture, written under the output folder",
     )]
+}
+
+/// The `files` output: the scene's mesh and texture, and the scene file itself at `path`.
+pub fn outputs_with(scene: Scene, path: &str, text: String) -> Outputs {
+    let mut files = scene.files;
+    files.push(Artifact {
+        path: path.to_string(),
+        bytes: text.into_bytes(),
+    });
+    Outputs::new().with("files", Artifacts { files })
 }
 
 /// A scene as both writers see it.
