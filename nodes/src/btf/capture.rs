@@ -161,13 +161,23 @@ impl Node for Capture {
             hf.width as f64 / width as f64,
             hf.height as f64 / height as f64,
         );
-        data.par_chunks_mut(3 * plane)
-            .zip(&pairs)
-            .try_for_each(|(out, pair)| {
+        // View-major pairs: each view's lights are one run of planes, rendered from the view
+        // rays' hits found once for all its lights.
+        data.par_chunks_mut(3 * plane * lights.len().max(1))
+            .zip(&views)
+            .try_for_each(|(out, &view)| {
                 ctx.check_cancel()?;
-                let m = scene.render(pair, (width, height), scale, p.samples as usize, out);
+                let m = scene.render_view(
+                    view,
+                    &lights,
+                    (width, height),
+                    scale,
+                    p.samples as usize,
+                    out,
+                );
                 missed.fetch_add(m, Ordering::Relaxed);
-                ctx.progress(done.fetch_add(1, Ordering::Relaxed) + 1, pairs.len() as u64);
+                let n = lights.len() as u64;
+                ctx.progress(done.fetch_add(n, Ordering::Relaxed) + n, pairs.len() as u64);
                 Ok::<(), NodeError>(())
             })?;
         let missed = missed.into_inner();
@@ -314,11 +324,14 @@ impl<'a> Scene<'a> {
         crate::heightfield::grid::bilerp(self.hf.width, self.hf.height, x, y, at)
     }
 
-    /// Renders one pair into its three planes, each texel the mean of `samples`² view rays on a
-    /// grid over it; returns the number of view rays that missed.
-    fn render(
+    /// Renders one view's pairs (one per light, in order) into `out`, three planes each, each
+    /// texel the mean of `samples`² view rays on a grid over it; returns the number of view
+    /// rays that missed, counted once per light. The view rays are cast once for all lights,
+    /// a block of rows at a time, and the lights shade the block in parallel.
+    fn render_view(
         &self,
-        pair: &DirectionPair,
+        view: Direction,
+        lights: &[Direction],
         (width, height): (usize, usize),
         (sx, sy): (f64, f64),
         samples: usize,
@@ -327,41 +340,55 @@ impl<'a> Scene<'a> {
         let plane = width * height;
         // Tangent frame (x right, y up the image) to grid (u right, v down the image).
         let to_grid = |d: [f64; 3]| [d[0], -d[1], d[2]];
-        let wo = pair.view.vector();
-        let wi = pair.light.vector();
-        let (view_ray, light_ray) = (to_grid([-wo[0], -wo[1], -wo[2]]), to_grid(wi));
+        let wo = view.vector();
+        let view_ray = to_grid([-wo[0], -wo[1], -wo[2]]);
         let n = samples.max(1);
         let share = 1.0 / (n * n) as f64;
+        // Rows per block: the block's hits (n² per texel) stay within about 64 Ki.
+        let rows = (65_536 / (width * n * n).max(1)).clamp(1, height.max(1));
         let mut missed = 0;
-        for y in 0..height {
-            for x in 0..width {
-                let mut sum = [0.0; 3];
-                for (i, j) in (0..n * n).map(|k| (k % n, k / n)) {
-                    let (fx, fy) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-                    let (u0, v0) = ((x as f64 + fx) * sx - 0.5, (y as f64 + fy) * sy - 0.5);
-                    match self.shade([u0, v0], view_ray, light_ray, wi, wo) {
-                        Some(c) => (0..3).for_each(|k| sum[k] += c[k] * share),
-                        None => missed += 1,
+        let mut seen = Vec::with_capacity(rows * width * n * n);
+        for y0 in (0..height).step_by(rows) {
+            let y1 = (y0 + rows).min(height);
+            seen.clear();
+            for y in y0..y1 {
+                for x in 0..width {
+                    for (i, j) in (0..n * n).map(|k| (k % n, k / n)) {
+                        let (fx, fy) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                        let (u0, v0) = ((x as f64 + fx) * sx - 0.5, (y as f64 + fy) * sy - 0.5);
+                        let s = self.see([u0, v0], view_ray);
+                        missed += s.is_none() as u64;
+                        seen.push(s);
                     }
                 }
-                for (c, v) in sum.iter().enumerate() {
-                    out[c * plane + y * width + x] = *v as f32;
-                }
             }
+            out.par_chunks_mut(3 * plane)
+                .zip(lights)
+                .for_each(|(out, light)| {
+                    let wi = light.vector();
+                    let light_ray = to_grid(wi);
+                    for (k, texel) in seen.chunks(n * n).enumerate() {
+                        let (y, x) = (y0 + k / width, k % width);
+                        let mut sum = [0.0; 3];
+                        for c in texel
+                            .iter()
+                            .flatten()
+                            .map(|s| self.shade(s, light_ray, wi, wo))
+                        {
+                            (0..3).for_each(|k| sum[k] += c[k] * share);
+                        }
+                        for (c, v) in sum.iter().enumerate() {
+                            out[c * plane + y * width + x] = *v as f32;
+                        }
+                    }
+                });
         }
-        missed
+        missed * lights.len() as u64
     }
 
-    /// Radiance of the mesostructure a view ray entering the top at grid point `at` meets;
-    /// `None` if it meets none.
-    fn shade(
-        &self,
-        at: [f64; 2],
-        view_ray: [f64; 3],
-        light_ray: [f64; 3],
-        wi: [f64; 3],
-        wo: [f64; 3],
-    ) -> Option<[f64; 3]> {
+    /// What a view ray entering the top at grid point `at` meets: the hit, its shading normal
+    /// and tangent, albedo and lobe; `None` if it meets nothing.
+    fn see(&self, at: [f64; 2], view_ray: [f64; 3]) -> Option<Seen> {
         let hit = self
             .caster
             .cast([at[0], at[1], self.top], view_ray, 0.0)
@@ -370,17 +397,6 @@ impl<'a> Scene<'a> {
         // Normal in the tangent frame: ∂h/∂x = gu, ∂h/∂y = −gv.
         let len = (gu * gu + gv * gv + 1.0).sqrt();
         let n = [-gu / len, gv / len, 1.0 / len];
-        let cos_i = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2];
-        if cos_i <= 0.0 {
-            return Some([0.0; 3]);
-        }
-        let lit = matches!(
-            self.caster.cast([hit.u, hit.v, hit.z], light_ray, 1e-4),
-            Err(Miss::Escaped)
-        );
-        if !lit {
-            return Some([0.0; 3]);
-        }
         let rho = self.lerp(hit.u, hit.v, |i| {
             [self.albedo[0][i], self.albedo[1][i], self.albedo[2][i]]
         });
@@ -396,9 +412,41 @@ impl<'a> Scene<'a> {
                 }
             }
         };
-        let t = brdf::tangent(n);
-        Some(rho.map(|r| brdf::eval_lobe(&lobe, r, n, t, wi, wo) * cos_i))
+        Some(Seen {
+            at: [hit.u, hit.v, hit.z],
+            n,
+            t: brdf::tangent(n),
+            rho,
+            lobe,
+        })
     }
+
+    /// Radiance of the seen point under the light along `wi` (grid direction `light_ray`),
+    /// seen from `wo`: zero where the light is behind the normal or blocked.
+    fn shade(&self, s: &Seen, light_ray: [f64; 3], wi: [f64; 3], wo: [f64; 3]) -> [f64; 3] {
+        let n = s.n;
+        let cos_i = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2];
+        if cos_i <= 0.0 {
+            return [0.0; 3];
+        }
+        let lit = matches!(self.caster.cast(s.at, light_ray, 1e-4), Err(Miss::Escaped));
+        if !lit {
+            return [0.0; 3];
+        }
+        s.rho
+            .map(|r| brdf::eval_lobe(&s.lobe, r, n, s.t, wi, wo) * cos_i)
+    }
+}
+
+/// A view ray's hit, as every light shades it.
+struct Seen {
+    /// Grid coordinates and height of the hit.
+    at: [f64; 3],
+    /// Shading normal and tangent (tangent frame).
+    n: [f64; 3],
+    t: [f64; 3],
+    rho: [f64; 3],
+    lobe: Lobe,
 }
 
 #[cfg(test)]

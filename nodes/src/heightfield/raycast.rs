@@ -31,6 +31,10 @@ pub struct Caster<'a> {
     hf: &'a HeightField,
     min: f64,
     max: f64,
+    /// Per cell (row-major, cell (i, j) between samples i..i+1 and j..j+1, wrapped): its four
+    /// corner heights h00, h10, h01, h11 and their maximum, which bounds the bilinear patch, so
+    /// a ray segment above it is passed without solving for a crossing.
+    cells: Vec<[f32; 5]>,
     /// Limit on the horizontal distance walked, in texels.
     pub max_distance: f64,
 }
@@ -39,10 +43,23 @@ impl<'a> Caster<'a> {
     pub fn new(hf: &'a HeightField) -> Self {
         let (lo, hi) = hf.min_max();
         let tiles = 64.0 * hf.width.max(hf.height) as f64;
+        let cells = (0..hf.height as isize)
+            .flat_map(|j| (0..hf.width as isize).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let h = [
+                    hf.at_wrapped(i, j),
+                    hf.at_wrapped(i + 1, j),
+                    hf.at_wrapped(i, j + 1),
+                    hf.at_wrapped(i + 1, j + 1),
+                ];
+                [h[0], h[1], h[2], h[3], h[0].max(h[1]).max(h[2]).max(h[3])]
+            })
+            .collect();
         Caster {
             hf,
             min: lo as f64,
             max: hi as f64,
+            cells,
             max_distance: tiles,
         }
     }
@@ -100,6 +117,9 @@ impl<'a> Caster<'a> {
                 (boundary - o) / d
             }
         };
+        // Cell (i, j) wrapped into the tile, stepped with it.
+        let (w, h) = (self.hf.width as i64, self.hf.height as i64);
+        let (mut ci, mut cj) = (i.rem_euclid(w), j.rem_euclid(h));
         let mut t_u = next(i, step_i, o[0], d[0]);
         let mut t_v = next(j, step_j, o[1], d[1]);
         let dt_u = if d[0] == 0.0 {
@@ -114,8 +134,16 @@ impl<'a> Caster<'a> {
         };
         loop {
             let t_exit = t_u.min(t_v);
-            if let Some(hit) = self.in_cell(i, j, o, d, t, t_exit.min(t_end)) {
-                return Ok(hit);
+            let tb = t_exit.min(t_end);
+            let cell = &self.cells[(cj * w + ci) as usize];
+            // The patch lies at or under its highest corner: a segment above that (by more
+            // than rounding) cannot cross it.
+            let lowest = (o[2] + d[2] * t).min(o[2] + d[2] * tb);
+            let top = cell[4] as f64;
+            if lowest <= top + 1e-9 * (1.0 + top.abs()) {
+                if let Some(hit) = self.in_cell(cell, i, j, o, d, t, tb) {
+                    return Ok(hit);
+                }
             }
             let z_exit = o[2] + d[2] * t_exit;
             if d[2] >= 0.0 && z_exit > self.max {
@@ -128,25 +156,32 @@ impl<'a> Caster<'a> {
             t = t_exit;
             if t_u < t_v {
                 i += step_i;
+                ci = (ci + step_i).rem_euclid(w);
                 t_u += dt_u;
             } else {
                 j += step_j;
+                cj = (cj + step_j).rem_euclid(h);
                 t_v += dt_v;
             }
         }
     }
 
-    /// The first crossing inside cell (i, j) for t in [ta, tb].
-    fn in_cell(&self, i: i64, j: i64, o: [f64; 3], d: [f64; 3], ta: f64, tb: f64) -> Option<Hit> {
+    /// The first crossing inside cell (i, j) (its entry `cell`) for t in [ta, tb].
+    #[allow(clippy::too_many_arguments)]
+    fn in_cell(
+        &self,
+        cell: &[f32; 5],
+        i: i64,
+        j: i64,
+        o: [f64; 3],
+        d: [f64; 3],
+        ta: f64,
+        tb: f64,
+    ) -> Option<Hit> {
         if tb < ta {
             return None;
         }
-        let (h00, h10, h01, h11) = (
-            self.sample(i, j),
-            self.sample(i + 1, j),
-            self.sample(i, j + 1),
-            self.sample(i + 1, j + 1),
-        );
+        let [h00, h10, h01, h11] = [cell[0], cell[1], cell[2], cell[3]].map(f64::from);
         let (c0, c1, c2, c3) = (h00, h10 - h00, h01 - h00, h11 - h10 - h01 + h00);
         // Local coordinates at the segment start, then linear in s = t − ta.
         let (ax, ay, az) = (
