@@ -5,7 +5,9 @@
 //!
 //! - `sss.render` whose mesh and medium are in the graph: the truth is volumetric path tracing
 //!   of the same mesh filled with the same medium (`render.reference`). Candidates: the render as
-//!   given (its `sss.lighting`'s parameters, where it has one, inlined); the model switches that
+//!   given (reading its `sss.lighting` where it has one, as the graph does: the lighting is a
+//!   node of the probe's graph, a cache hit where the graph has run, and its time is charged
+//!   to the candidate); the model switches (that `sss.lighting`'s parameters inlined) that
 //!   exist: `energy: half_space`, `geometry: exit_normal`, Jensen & Buhler's classic
 //!   configuration, `mode: brdf`.
 //! - `render.mesh` whose BTF is captured in the graph (`btf.capture` of a height field, through
@@ -402,6 +404,11 @@ struct Setting {
     /// The render's parameters (an `sss.lighting`'s inlined) and inputs.
     params: Map<String, Value>,
     inputs: BTreeMap<String, String>,
+    /// Where the render reads an `sss.lighting` node: that node's id, and the render's own
+    /// parameters and inputs (the lighting connected). The render as given is measured so,
+    /// its lighting a node of the probe's graph (a cache hit where the graph has run), and
+    /// charged that node's time; the other switches have it inlined.
+    lighting: Option<(String, Map<String, Value>, BTreeMap<String, String>)>,
     /// Nodes the truth adds before its `render.reference` (the displaced surface), which a
     /// brute-force plan keeps.
     extra: Vec<(String, NodeDecl)>,
@@ -431,8 +438,15 @@ fn sss_setting(file: &GraphFile, decl: &NodeDecl, render: &str) -> Result<Settin
         )));
     };
     let (params, inputs) = inlined(file, decl);
+    let lighting = decl
+        .inputs
+        .get("lighting")
+        .and_then(|from| from.split_once('.'))
+        .filter(|(id, _)| file.node(id).is_some_and(|n| n.kind == "sss.lighting"))
+        .map(|(id, _)| (id.to_string(), decl.params.clone(), decl.inputs.clone()));
     let one = |k: &str, v: &str| vec![(k.to_string(), json!(v))];
     Ok(Setting {
+        lighting,
         extra: Vec::new(),
         reference_params: Map::new(),
         reference_inputs: BTreeMap::from([
@@ -609,6 +623,7 @@ fn mesh_setting(
         ),
         params,
         inputs: decl.inputs.clone(),
+        lighting: None,
     })
 }
 
@@ -646,6 +661,7 @@ pub fn arbitrate(
     let Setting {
         params,
         inputs,
+        lighting,
         extra,
         reference_params,
         reference_inputs,
@@ -667,6 +683,7 @@ pub fn arbitrate(
     // The scene's nodes: the candidates' inputs and the truth's.
     let base: Vec<&str> = inputs
         .values()
+        .chain(lighting.iter().flat_map(|(_, _, i)| i.values()))
         .chain(extra.iter().flat_map(|(_, d)| d.inputs.values()))
         .chain(reference_inputs.values())
         .filter_map(|f| f.split_once('.').map(|(n, _)| n))
@@ -895,7 +912,13 @@ pub fn arbitrate(
     // (`energy`, `geometry`), unless the given render's camera-independent time already shows
     // they cannot beat a candidate within the budget.
     let model = |overrides: &[(String, Value)], camera: &Map<String, Value>| -> NodeDecl {
-        let mut p = params.clone();
+        // The render as given reads its lighting node, as the graph does.
+        let (mut p, inputs) = match &lighting {
+            Some((_, own, own_inputs)) if overrides.is_empty() => {
+                (own.clone(), own_inputs.clone())
+            }
+            _ => (params.clone(), inputs.clone()),
+        };
         for (k, v) in overrides {
             p.insert(k.clone(), v.clone());
         }
@@ -903,7 +926,7 @@ pub fn arbitrate(
         NodeDecl {
             kind: decl.kind.clone(),
             params: p,
-            inputs: inputs.clone(),
+            inputs,
         }
     };
     let measure_model = |v: &Variant| -> (Candidate, f64) {
@@ -912,7 +935,14 @@ pub fn arbitrate(
         let full = model(&v.overrides, &full_camera);
         let (error, probe_s, note, full_s, warned, fixed) = match measure(&measured_probe) {
             Ok((error, r)) => {
-                let probe_s = seconds(&r, CANDIDATE);
+                // A lighting node the candidate reads is its camera-independent work: its
+                // time (measured when it was computed, where it came from the cache) counts.
+                let lit = lighting
+                    .as_ref()
+                    .filter(|_| v.overrides.is_empty())
+                    .and_then(|(id, _, _)| seconds(&r, id))
+                    .unwrap_or(0.0);
+                let probe_s = seconds(&r, CANDIDATE).map(|s| s + lit);
                 // The camera-independent part once, the per-pixel stages in proportion.
                 let per_pixel: f64 = per_pixel
                     .iter()
@@ -939,9 +969,12 @@ pub fn arbitrate(
         (c, fixed)
     };
     let mut unique: Vec<&Variant> = Vec::new();
+    // Compared with the lighting's parameters inlined: a switch that sets what the given
+    // lighting already has is the render as given.
     let mut seen: Vec<Map<String, Value>> = Vec::new();
     for v in &variants {
-        let p = model(&v.overrides, &camera).params;
+        let mut p = params.clone();
+        p.extend(v.overrides.iter().cloned());
         if !seen.contains(&p) {
             seen.push(p);
             unique.push(v);
