@@ -2,7 +2,8 @@
 //! source. For every (view, light) pair and output texel, an orthographic view ray enters the
 //! reference plane (the top of the mesostructure shell) at the texel and is cast down through the
 //! periodic height field to its first hit (masking and parallax); the hit is shaded with the BRDF
-//! and a shadow ray is cast to the directional light (self-shadowing).
+//! and a shadow ray is cast to the directional light (self-shadowing). A view ray's hit does not
+//! depend on the light, so each is cast once for all the lights of its view.
 //!
 //! Radiometry: the light has unit irradiance on a plane facing it, so a value is
 //! f(ωi, ωo) · max(0, n·ωi) · visibility — for a flat Lambertian tile, ρ/π · cos θi.
@@ -433,8 +434,7 @@ impl<'a> Scene<'a> {
         if !lit {
             return [0.0; 3];
         }
-        s.rho
-            .map(|r| brdf::eval_lobe(&s.lobe, r, n, s.t, wi, wo) * cos_i)
+        brdf::eval_lobe_rgb(&s.lobe, s.rho, n, s.t, wi, wo).map(|f| f * cos_i)
     }
 }
 

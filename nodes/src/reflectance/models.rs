@@ -52,9 +52,33 @@ pub fn eval_lobe(
     wo: [f64; 3],
 ) -> f64 {
     let diffuse = rho_d / PI;
+    match specular(lobe, n, t, wi, wo) {
+        Some(specular) => diffuse + lobe.rho_s * specular,
+        None => diffuse,
+    }
+}
+
+/// [`eval_lobe`] for three channels' diffuse albedos at once, the specular lobe (the same in
+/// every channel) evaluated once: the same values, channel by channel.
+pub fn eval_lobe_rgb(
+    lobe: &Lobe,
+    rho_d: [f64; 3],
+    n: [f64; 3],
+    t: [f64; 3],
+    wi: [f64; 3],
+    wo: [f64; 3],
+) -> [f64; 3] {
+    match specular(lobe, n, t, wi, wo) {
+        Some(specular) => rho_d.map(|r| r / PI + lobe.rho_s * specular),
+        None => rho_d.map(|r| r / PI),
+    }
+}
+
+/// The specular lobe before its weight ρs; `None` for Lambert and where either cosine is ≤ 0.
+fn specular(lobe: &Lobe, n: [f64; 3], t: [f64; 3], wi: [f64; 3], wo: [f64; 3]) -> Option<f64> {
     let (ci, co) = (dot(n, wi), dot(n, wo));
     if lobe.model == Model::Lambert || ci <= 0.0 || co <= 0.0 {
-        return diffuse;
+        return None;
     }
     let h = [wi[0] + wo[0], wi[1] + wo[1], wi[2] + wo[2]];
     let len = dot(h, h).sqrt();
@@ -83,7 +107,7 @@ pub fn eval_lobe(
             d * g * f / (4.0 * ci * co)
         }
     };
-    diffuse + lobe.rho_s * specular
+    Some(specular)
 }
 
 /// The isotropic models with the default index (1.5): `eval_lobe` with any tangent.
