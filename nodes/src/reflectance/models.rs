@@ -130,6 +130,26 @@ pub fn eval(
     eval_lobe(&lobe, rho_d, n, tangent(n), wi, wo)
 }
 
+/// [`eval`] for three channels' diffuse albedos at once (the specular lobe evaluated once).
+pub fn eval_rgb(
+    model: Model,
+    rho_d: [f64; 3],
+    rho_s: f64,
+    alpha: f64,
+    n: [f64; 3],
+    wi: [f64; 3],
+    wo: [f64; 3],
+) -> [f64; 3] {
+    let lobe = Lobe {
+        model,
+        rho_s,
+        alpha,
+        alpha_v: alpha,
+        ior: 1.5,
+    };
+    eval_lobe_rgb(&lobe, rho_d, n, tangent(n), wi, wo)
+}
+
 /// The image's x axis projected onto the plane ⊥ n, unit (y's when n is along x).
 pub fn tangent(n: [f64; 3]) -> [f64; 3] {
     let axis = if n[0].abs() < 0.999 {

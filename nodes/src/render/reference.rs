@@ -396,9 +396,9 @@ fn pixel(
             }
             None => p.albedo,
         };
+        let f = brdf::eval_rgb(p.brdf, rho, p.specular, p.roughness, ns, wi, wo);
         for k in 0..3 {
-            let f = brdf::eval(p.brdf, rho[k], p.specular, p.roughness, ns, wi, wo);
-            halves[s % 2][k] += irradiance * f * cos_i;
+            halves[s % 2][k] += irradiance * f[k] * cos_i;
         }
     }
     Pixel {
