@@ -408,7 +408,7 @@ struct Setting {
     /// parameters and inputs (the lighting connected). The render as given is measured so,
     /// its lighting a node of the probe's graph (a cache hit where the graph has run), and
     /// charged that node's time; the other switches have it inlined.
-    lighting: Option<(String, Map<String, Value>, BTreeMap<String, String>)>,
+    lighting: Option<GivenLighting>,
     /// Nodes the truth adds before its `render.reference` (the displaced surface), which a
     /// brute-force plan keeps.
     extra: Vec<(String, NodeDecl)>,
@@ -429,6 +429,14 @@ struct Setting {
     judge_why: String,
 }
 
+/// An `sss.render` that reads an `sss.lighting` node: that node's id, and the render's own
+/// parameters and inputs (the lighting connected).
+struct GivenLighting {
+    node: String,
+    params: Map<String, Value>,
+    inputs: BTreeMap<String, String>,
+}
+
 /// `sss.render`: the mesh filled with the medium.
 fn sss_setting(file: &GraphFile, decl: &NodeDecl, render: &str) -> Result<Setting, PlanError> {
     let (Some(mesh), Some(material)) = (decl.inputs.get("mesh"), decl.inputs.get("material"))
@@ -443,7 +451,11 @@ fn sss_setting(file: &GraphFile, decl: &NodeDecl, render: &str) -> Result<Settin
         .get("lighting")
         .and_then(|from| from.split_once('.'))
         .filter(|(id, _)| file.node(id).is_some_and(|n| n.kind == "sss.lighting"))
-        .map(|(id, _)| (id.to_string(), decl.params.clone(), decl.inputs.clone()));
+        .map(|(id, _)| GivenLighting {
+            node: id.to_string(),
+            params: decl.params.clone(),
+            inputs: decl.inputs.clone(),
+        });
     let one = |k: &str, v: &str| vec![(k.to_string(), json!(v))];
     Ok(Setting {
         lighting,
@@ -683,7 +695,7 @@ pub fn arbitrate(
     // The scene's nodes: the candidates' inputs and the truth's.
     let base: Vec<&str> = inputs
         .values()
-        .chain(lighting.iter().flat_map(|(_, _, i)| i.values()))
+        .chain(lighting.iter().flat_map(|l| l.inputs.values()))
         .chain(extra.iter().flat_map(|(_, d)| d.inputs.values()))
         .chain(reference_inputs.values())
         .filter_map(|f| f.split_once('.').map(|(n, _)| n))
@@ -914,9 +926,7 @@ pub fn arbitrate(
     let model = |overrides: &[(String, Value)], camera: &Map<String, Value>| -> NodeDecl {
         // The render as given reads its lighting node, as the graph does.
         let (mut p, inputs) = match &lighting {
-            Some((_, own, own_inputs)) if overrides.is_empty() => {
-                (own.clone(), own_inputs.clone())
-            }
+            Some(l) if overrides.is_empty() => (l.params.clone(), l.inputs.clone()),
             _ => (params.clone(), inputs.clone()),
         };
         for (k, v) in overrides {
@@ -940,7 +950,7 @@ pub fn arbitrate(
                 let lit = lighting
                     .as_ref()
                     .filter(|_| v.overrides.is_empty())
-                    .and_then(|(id, _, _)| seconds(&r, id))
+                    .and_then(|l| seconds(&r, &l.node))
                     .unwrap_or(0.0);
                 let probe_s = seconds(&r, CANDIDATE).map(|s| s + lit);
                 // The camera-independent part once, the per-pixel stages in proportion.
