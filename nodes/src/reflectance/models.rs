@@ -39,6 +39,19 @@ pub struct Lobe {
     pub ior: f64,
 }
 
+impl Lobe {
+    /// An isotropic lobe with the default index (1.5).
+    pub fn isotropic(model: Model, rho_s: f64, alpha: f64) -> Lobe {
+        Lobe {
+            model,
+            rho_s,
+            alpha,
+            alpha_v: alpha,
+            ior: 1.5,
+        }
+    }
+}
+
 /// The BRDF for unit vectors `wi` (to the light), `wo` (to the viewer), normal `n` and tangent
 /// `t` (unit, ⊥ n; only the anisotropic model uses it), given the diffuse albedo `rho_d` of one
 /// channel. Specular lobes are 0 where either cosine is ≤ 0 (a back-facing point reflects
@@ -120,13 +133,7 @@ pub fn eval(
     wi: [f64; 3],
     wo: [f64; 3],
 ) -> f64 {
-    let lobe = Lobe {
-        model,
-        rho_s,
-        alpha,
-        alpha_v: alpha,
-        ior: 1.5,
-    };
+    let lobe = Lobe::isotropic(model, rho_s, alpha);
     eval_lobe(&lobe, rho_d, n, tangent(n), wi, wo)
 }
 
@@ -140,13 +147,7 @@ pub fn eval_rgb(
     wi: [f64; 3],
     wo: [f64; 3],
 ) -> [f64; 3] {
-    let lobe = Lobe {
-        model,
-        rho_s,
-        alpha,
-        alpha_v: alpha,
-        ior: 1.5,
-    };
+    let lobe = Lobe::isotropic(model, rho_s, alpha);
     eval_lobe_rgb(&lobe, rho_d, n, tangent(n), wi, wo)
 }
 
