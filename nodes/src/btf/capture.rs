@@ -167,15 +167,15 @@ impl Node for Capture {
         data.par_chunks_mut(3 * plane * lights.len().max(1))
             .zip(&views)
             .try_for_each(|(out, &view)| {
-                ctx.check_cancel()?;
                 let m = scene.render_view(
+                    ctx,
                     view,
                     &lights,
                     (width, height),
                     scale,
                     p.samples as usize,
                     out,
-                );
+                )?;
                 missed.fetch_add(m, Ordering::Relaxed);
                 let n = lights.len() as u64;
                 ctx.progress(done.fetch_add(n, Ordering::Relaxed) + n, pairs.len() as u64);
@@ -328,16 +328,19 @@ impl<'a> Scene<'a> {
     /// Renders one view's pairs (one per light, in order) into `out`, three planes each, each
     /// texel the mean of `samples`² view rays on a grid over it; returns the number of view
     /// rays that missed, counted once per light. The view rays are cast once for all lights,
-    /// a block of rows at a time, and the lights shade the block in parallel.
+    /// a block of rows at a time, and the lights shade the block in parallel; a cancelled run
+    /// stops between blocks.
+    #[allow(clippy::too_many_arguments)]
     fn render_view(
         &self,
+        ctx: &NodeContext,
         view: Direction,
         lights: &[Direction],
         (width, height): (usize, usize),
         (sx, sy): (f64, f64),
         samples: usize,
         out: &mut [f32],
-    ) -> u64 {
+    ) -> Result<u64, NodeError> {
         let plane = width * height;
         // Tangent frame (x right, y up the image) to grid (u right, v down the image).
         let to_grid = |d: [f64; 3]| [d[0], -d[1], d[2]];
@@ -350,6 +353,7 @@ impl<'a> Scene<'a> {
         let mut missed = 0;
         let mut seen = Vec::with_capacity(rows * width * n * n);
         for y0 in (0..height).step_by(rows) {
+            ctx.check_cancel()?;
             let y1 = (y0 + rows).min(height);
             seen.clear();
             for y in y0..y1 {
@@ -384,7 +388,7 @@ impl<'a> Scene<'a> {
                     }
                 });
         }
-        missed * lights.len() as u64
+        Ok(missed * lights.len() as u64)
     }
 
     /// What a view ray entering the top at grid point `at` meets: the hit, its shading normal
