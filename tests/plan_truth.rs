@@ -238,6 +238,46 @@ fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
     assert_eq!(planned["nodes"]["ours"]["kind"], "render.reference");
     // The lighting and the profile fed only the render: pruned.
     assert!(planned["nodes"].get("lighting").is_none(), "{planned}");
+    // The render as given reads the graph's lighting node, as the graph does (the planner
+    // computed it as that node: the graph's own run finds it in the cache), and is charged
+    // its time.
+    let given = &all[0];
+    assert_eq!(given["candidate"], "the render as given", "{doc}");
+    assert_eq!(given["inputs"]["lighting"], "lighting.lighting", "{doc}");
+    let out = s.path("lighting-run");
+    let graph = graph();
+    let cache = s.path("cache");
+    let mut args = vec![
+        "run",
+        graph.to_str().unwrap(),
+        "--quiet",
+        "--output",
+        "lighting.lighting",
+        "--cache-dir",
+        cache.to_str().unwrap(),
+        "--out-dir",
+        out.to_str().unwrap(),
+    ];
+    for set in SETS {
+        args.extend(["--set", set]);
+    }
+    let r = mesoflow(&args, s.dir.path());
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let lighting = report["nodes"]
+        .as_array()
+        .and_then(|n| n.iter().find(|n| n["id"] == "lighting"))
+        .expect("the lighting node in the report");
+    assert_ne!(lighting["status"], "computed", "{lighting}");
+    let lit = lighting["timings"]["seconds"].as_f64().expect("its time");
+    let probe = given["probe_seconds"]
+        .as_f64()
+        .expect("the candidate's time");
+    assert!(
+        probe >= lit,
+        "{probe} s, under the lighting's {lit} s: {doc}"
+    );
 
     // Lax: several candidates fit; the plan is the fastest of them, not the graph by default
     // and not the cheapest whatever its error.
