@@ -8,7 +8,7 @@
 //! height field displaced and path traced; brute force is planned with the displaced surface.
 //! A render the truth cannot be made for is a clear error.
 
-use crate::common::{mesoflow, Scratch};
+use crate::common::{mesoflow, run, Scratch};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -244,31 +244,19 @@ fn the_truth_judges_every_family_and_the_fastest_within_budget_is_planned() {
     let given = &all[0];
     assert_eq!(given["candidate"], "the render as given", "{doc}");
     assert_eq!(given["inputs"]["lighting"], "lighting.lighting", "{doc}");
-    let out = s.path("lighting-run");
-    let graph = graph();
     let cache = s.path("cache");
-    let mut args = vec![
-        "run",
-        graph.to_str().unwrap(),
-        "--quiet",
+    let mut extra = vec![
         "--output",
         "lighting.lighting",
         "--cache-dir",
         cache.to_str().unwrap(),
-        "--out-dir",
-        out.to_str().unwrap(),
     ];
     for set in SETS {
-        args.extend(["--set", set]);
+        extra.extend(["--set", set]);
     }
-    let r = mesoflow(&args, s.dir.path());
+    let (r, report) = run(&s, &graph(), "lighting-run", &extra);
     assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
-    let report: Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
-    let lighting = report["nodes"]
-        .as_array()
-        .and_then(|n| n.iter().find(|n| n["id"] == "lighting"))
-        .expect("the lighting node in the report");
+    let lighting = mesoflow_testkit::cli::node(&report, "lighting");
     assert_ne!(lighting["status"], "computed", "{lighting}");
     let lit = lighting["timings"]["seconds"].as_f64().expect("its time");
     let probe = given["probe_seconds"]
