@@ -385,3 +385,102 @@ fn outputs_are_bit_identical_whatever_the_thread_count() {
     };
     assert_eq!(m(&outs[0]), m(&outs[1]));
 }
+
+#[test]
+fn a_large_meshs_bvh_is_kept_for_the_next_process_and_gives_the_same_image() {
+    // 160 000 triangles: above the size whose BVH is kept (`tracer::KEEP_FROM`, 100 000).
+    let s = Scratch::new();
+    let g = s.write(
+        "bvh.json",
+        r#"{"mesoflow": 1, "nodes": {
+            "mesh": {"kind": "mesh.primitive", "params": {"shape": "sphere", "size": 1.0, "segments": [400, 200]}},
+            "truth": {"kind": "render.reference", "inputs": {"mesh": "mesh.mesh"},
+                      "params": {"camera": {"eye": [0, 0, 4], "target": [0, 0, 0], "fov": 40, "resolution": [32, 24]},
+                                 "samples": 1, "seed": 1}}}}"#,
+    );
+    let cache = s.path("cache");
+    let cache_arg = cache.to_str().unwrap();
+    let truth = |rep: &serde_json::Value| {
+        rep["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|n| n["id"] == "truth")
+            .unwrap()
+            .clone()
+    };
+    let stored = |rep: &serde_json::Value| truth(rep)["timings"]["bvh_stored"].as_f64().unwrap();
+    let bvh_entries = || {
+        let r = mesoflow(&["cache", "stats", "--cache-dir", cache_arg], s.dir.path());
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        let line = r.stdout.lines().find(|l| l.contains("raytrace.bvh"));
+        line.map(|l| l.split_whitespace().nth(1).unwrap().to_string())
+    };
+
+    // The first process builds it and keeps it in the cache, counted under its own kind.
+    let (r, rep) = run(&s, &g, "o1", &["--cache-dir", cache_arg]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(stored(&rep), 0.0);
+    assert_eq!(bvh_entries().as_deref(), Some("1"));
+
+    // A second process verifying the cached frame renders it again through the stored BVH,
+    // and gets the same bits as the frame rendered through a built one.
+    let (r, rep) = run(&s, &g, "o2", &["--cache-dir", cache_arg, "--verify-cache"]);
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(truth(&rep)["verified"], true);
+    assert_eq!(stored(&rep), 1.0, "{}", truth(&rep));
+
+    // Another frame of the same surface in a new process reads it too.
+    let (r, rep) = run(
+        &s,
+        &g,
+        "o3",
+        &["--cache-dir", cache_arg, "--set", "truth.seed=2"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(stored(&rep), 1.0);
+
+    // A damaged entry is rebuilt, not traversed, and replaced.
+    let entry = walk(&cache)
+        .into_iter()
+        .find(|p| {
+            let head = std::fs::read(p).unwrap_or_default();
+            head.len() > 512 && head[..512].windows(12).any(|w| w == b"raytrace.bvh")
+        })
+        .expect("the stored BVH's entry");
+    let mut bytes = std::fs::read(&entry).unwrap();
+    let middle = bytes.len() / 2;
+    bytes[middle] ^= 0xff;
+    std::fs::write(&entry, bytes).unwrap();
+    let (r, rep) = run(
+        &s,
+        &g,
+        "o4",
+        &["--cache-dir", cache_arg, "--set", "truth.seed=3"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(stored(&rep), 0.0);
+    assert_eq!(bvh_entries().as_deref(), Some("1"));
+    let (r, rep) = run(
+        &s,
+        &g,
+        "o5",
+        &["--cache-dir", cache_arg, "--set", "truth.seed=4"],
+    );
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    assert_eq!(stored(&rep), 1.0);
+}
+
+/// Every file under `dir`.
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut files = Vec::new();
+    for e in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            files.extend(walk(&p));
+        } else {
+            files.push(p);
+        }
+    }
+    files
+}

@@ -172,6 +172,9 @@ pub struct NodeContext {
     pub(crate) warnings: std::sync::Mutex<Vec<String>>,
     /// The run's confinement, checked when an input path is resolved.
     pub(crate) confine: Option<crate::confine::Confinement>,
+    /// The run's disk cache, for what a node derives from its inputs ([`NodeContext::load_derived`]);
+    /// `None` without one (`--no-cache`, a detached context).
+    pub(crate) derived: Option<crate::cache::DiskCache>,
 }
 
 impl NodeContext {
@@ -191,6 +194,7 @@ impl NodeContext {
             timings: Default::default(),
             warnings: Default::default(),
             confine: None,
+            derived: None,
         }
     }
 
@@ -200,6 +204,12 @@ impl NodeContext {
         self
     }
 
+    /// The same context keeping derived data ([`NodeContext::load_derived`]) in `cache`
+    /// (for calling a node directly).
+    pub fn with_derived(mut self, cache: crate::cache::DiskCache) -> NodeContext {
+        self.derived = Some(cache);
+        self
+    }
     pub fn node_id(&self) -> &str {
         &self.node
     }
@@ -256,6 +266,38 @@ impl NodeContext {
     pub fn gpu(&self) -> Option<&Gpu> {
         self.gpu.as_deref()
     }
+    /// Bytes this node derived from its inputs on an earlier run, in this process or another:
+    /// data that is costly to make and not a value of the graph (a large mesh's BVH), stored
+    /// by [`NodeContext::store_derived`] under `kind` (what it is, with its format's version)
+    /// and `key` (the hash of what it was made from). `None` without a disk cache, on a miss,
+    /// or for an entry that fails its checksum (removed, so the next store replaces it).
+    pub fn load_derived(&self, kind: &str, key: &[u8; 32]) -> Option<Vec<u8>> {
+        let cache = self.derived.as_ref()?;
+        let key = derived_key(kind, key);
+        match cache.get_bytes(&key, kind) {
+            Ok(found) => found,
+            Err(crate::cache::DiskError::Corrupt { .. }) => {
+                cache.remove(&key);
+                None
+            }
+            Err(_) => None,
+        }
+    }
+
+    /// Keeps `bytes` for [`NodeContext::load_derived`] in the run's disk cache, an entry like a
+    /// value's (counted by `cache stats` under `kind`, collected by `cache gc`); `seconds` is
+    /// what making them cost. Best effort: without a disk cache, or where it cannot be
+    /// written, nothing is kept and the next run derives them again.
+    pub fn store_derived(&self, kind: &str, key: &[u8; 32], bytes: &[u8], seconds: f64) {
+        if let Some(cache) = &self.derived {
+            let record = crate::cache::Record {
+                seconds,
+                ..Default::default()
+            };
+            let _ = cache.put_bytes(&derived_key(kind, key), kind, bytes, &record);
+        }
+    }
+
     /// Resolves parameter `param`'s input path `p` against the graph's folder, as the node is
     /// about to open it. A path that does not exist is an error naming the parameter and the
     /// folder it was resolved against; in a confined run (the studio) so is one that resolves
@@ -273,6 +315,16 @@ impl NodeContext {
         }
         crate::confine::admit(self.confine.as_ref(), &path).map_err(|m| NodeError::file(&path, m))
     }
+}
+
+/// A derived entry's cache key: its kind and its own key hashed apart from every value's key.
+fn derived_key(kind: &str, key: &[u8; 32]) -> crate::key::Key {
+    let mut h = blake3::Hasher::new();
+    h.update(b"mesoflow derived\0");
+    h.update(kind.as_bytes());
+    h.update(b"\0");
+    h.update(key);
+    crate::key::Key(*h.finalize().as_bytes())
 }
 
 /// A node's inputs by port name.

@@ -103,7 +103,11 @@ impl Node for Reference {
         &[
             (
                 "bvh_seconds",
-                "building the mesh's BVH, s (0 where the process kept it from a render of the same mesh)",
+                "building the mesh's BVH, s (near 0 where the process kept it from a render of the same mesh; reading it where an earlier process stored it, `bvh_stored`)",
+            ),
+            (
+                "bvh_stored",
+                "1 where the BVH (a mesh of 100 000 triangles or more) was read from the disk cache, where an earlier process stored it; else 0",
             ),
             ("trace_seconds", "tracing the pixels, s (grows with pixels × samples)"),
             ("rays_per_second", "camera and shadow rays per second"),
@@ -171,8 +175,11 @@ impl Node for Reference {
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let light = Light::new(&p.light)?;
         let built = Instant::now();
-        let scene = Tracer::new(mesh);
+        let scene = Tracer::in_context(mesh, ctx);
         ctx.timing("bvh_seconds", built.elapsed().as_secs_f64());
+        // 1 where the BVH was read from the disk cache an earlier process stored it in.
+        let stored = scene.from == crate::support::raytrace::tracer::BvhFrom::Stored;
+        ctx.timing("bvh_stored", f64::from(u8::from(stored)));
         let start = Instant::now();
         let (w, h) = (camera.width as usize, camera.height as usize);
         let done = std::sync::atomic::AtomicU64::new(0);

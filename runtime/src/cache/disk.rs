@@ -29,6 +29,9 @@ use thiserror::Error;
 const MAGIC: &[u8; 16] = b"MESOFLOW-CACHE\x02\n";
 const MAGIC_PREFIX: &[u8] = b"MESOFLOW-CACHE";
 
+/// The type of a derived entry's one output: bytes its node encodes and decodes itself.
+const BYTES: &str = "bytes";
+
 /// A temporary file older than this is an orphan: no write takes anywhere near as long.
 pub const ORPHAN_AGE: std::time::Duration = std::time::Duration::from_secs(3600);
 
@@ -126,6 +129,28 @@ impl DiskCache {
         kind: &str,
         registry: &Registry,
     ) -> Result<Option<(Outputs, Record)>, DiskError> {
+        self.read(key, |bytes| decode_entry(bytes, key, kind, registry))
+    }
+
+    /// A derived entry's bytes ([`DiskCache::put_bytes`]): `Ok(None)` on a miss, `Err(Corrupt)`
+    /// as for [`DiskCache::get`].
+    pub fn get_bytes(&self, key: &Key, kind: &str) -> Result<Option<Vec<u8>>, DiskError> {
+        self.read(key, |bytes| {
+            let (header, payload) = open_entry(bytes, key, kind)?;
+            match header.outputs.as_slice() {
+                [o] if o.ty == BYTES && o.len == payload.len() as u64 => Ok(payload.to_vec()),
+                _ => Err("not a derived entry of bytes".into()),
+            }
+        })
+    }
+
+    /// Reads the entry of `key` and decodes it with `decode`; a hit renews its modification
+    /// time.
+    fn read<T>(
+        &self,
+        key: &Key,
+        decode: impl FnOnce(&[u8]) -> Result<T, String>,
+    ) -> Result<Option<T>, DiskError> {
         let path = self.entry_path(key);
         let bytes = match std::fs::read(&path) {
             Ok(b) => b,
@@ -140,7 +165,7 @@ impl DiskCache {
         if bytes.starts_with(MAGIC_PREFIX) && !bytes.starts_with(MAGIC) {
             return Ok(None); // an older format: recomputed and overwritten
         }
-        let entry = decode_entry(&bytes, key, kind, registry);
+        let entry = decode(&bytes);
         if entry.is_ok() {
             // A hit renews the entry's modification time: `gc` removes the least recently used
             // first. A cache on a read-only filesystem still serves, unrenewed.
@@ -167,10 +192,6 @@ impl DiskCache {
         outputs: &Outputs,
         record: &Record,
     ) -> Result<(), DiskError> {
-        let io = |path: &Path| {
-            let path = path.display().to_string();
-            move |source| DiskError::Io { path, source }
-        };
         let mut payload = Encoder::default();
         let mut headers = Vec::new();
         for (port, value) in &outputs.values {
@@ -182,18 +203,51 @@ impl DiskCache {
                 len: (payload.bytes.len() - start) as u64,
             });
         }
+        self.write(key, kind, record, headers, &payload.bytes)
+    }
+
+    /// Stores bytes a node derived from its inputs and encodes itself (a mesh's BVH), not a
+    /// value of the graph: an entry like any other (checksummed, counted by `cache stats`
+    /// under `kind`, collected by `gc`, removed by `clear`) with one output of type `bytes`.
+    pub fn put_bytes(
+        &self,
+        key: &Key,
+        kind: &str,
+        bytes: &[u8],
+        record: &Record,
+    ) -> Result<(), DiskError> {
+        let header = OutputHeader {
+            port: "data".into(),
+            ty: BYTES.into(),
+            len: bytes.len() as u64,
+        };
+        self.write(key, kind, record, vec![header], bytes)
+    }
+
+    fn write(
+        &self,
+        key: &Key,
+        kind: &str,
+        record: &Record,
+        outputs: Vec<OutputHeader>,
+        payload: &[u8],
+    ) -> Result<(), DiskError> {
+        let io = |path: &Path| {
+            let path = path.display().to_string();
+            move |source| DiskError::Io { path, source }
+        };
         let header = serde_json::to_vec(&Header {
             key: key.hex(),
             kind: kind.into(),
             record: record.clone(),
-            outputs: headers,
+            outputs,
             producer: Some(crate::producer::producer().clone()),
         })
         .map_err(|e| DiskError::Corrupt {
             path: String::new(),
             message: e.to_string(),
         })?;
-        let sum = checksum(&[&header, &payload.bytes]);
+        let sum = checksum(&[&header, payload]);
 
         let final_path = self.entry_path(key);
         let tmp_dir = self.dir.join("tmp");
@@ -213,7 +267,7 @@ impl DiskCache {
             f.write_all(MAGIC)?;
             f.write_all(&(header.len() as u64).to_le_bytes())?;
             f.write_all(&header)?;
-            f.write_all(&payload.bytes)?;
+            f.write_all(payload)?;
             f.write_all(sum.as_bytes())?;
             f.into_inner().map_err(|e| e.into_error())?.sync_data()?;
             std::fs::rename(&tmp, &final_path)
@@ -375,12 +429,8 @@ fn read_header(path: &Path) -> Option<Header> {
     serde_json::from_slice::<Header>(&header).ok()
 }
 
-fn decode_entry(
-    bytes: &[u8],
-    key: &Key,
-    kind: &str,
-    registry: &Registry,
-) -> Result<(Outputs, Record), String> {
+/// An entry's header and its outputs' payload, once its checksum, key and kind are checked.
+fn open_entry<'a>(bytes: &'a [u8], key: &Key, kind: &str) -> Result<(Header, &'a [u8]), String> {
     if bytes.len() < MAGIC.len() + 8 + 32 || &bytes[..16] != MAGIC {
         return Err("not a mesoflow cache entry or truncated".into());
     }
@@ -409,7 +459,16 @@ fn decode_entry(
             header.kind
         ));
     }
-    let mut rest = &content[len..];
+    Ok((header, &content[len..]))
+}
+
+fn decode_entry(
+    bytes: &[u8],
+    key: &Key,
+    kind: &str,
+    registry: &Registry,
+) -> Result<(Outputs, Record), String> {
+    let (header, mut rest) = open_entry(bytes, key, kind)?;
     let mut outputs = Outputs::new();
     for o in header.outputs {
         let n = usize::try_from(o.len)
@@ -441,6 +500,40 @@ mod tests {
                 bytes: (0..=255).collect(),
             },
         )
+    }
+
+    #[test]
+    fn derived_bytes_round_trip_are_counted_and_refused_when_damaged_or_of_another_kind() {
+        let dir = tempfile::tempdir().unwrap();
+        let cache = DiskCache::new(dir.path());
+        let key = Key([9; 32]);
+        assert!(cache.get_bytes(&key, "raytrace.bvh").unwrap().is_none());
+        let bytes: Vec<u8> = (0..100_000u32).map(|i| (i * 7) as u8).collect();
+        let record = Record {
+            seconds: 2.0,
+            ..Default::default()
+        };
+        cache
+            .put_bytes(&key, "raytrace.bvh", &bytes, &record)
+            .unwrap();
+        assert_eq!(cache.get_bytes(&key, "raytrace.bvh").unwrap(), Some(bytes));
+        let stats = cache.stats();
+        assert_eq!(stats.by_kind["raytrace.bvh"].entries, 1);
+        assert!(matches!(
+            cache.get_bytes(&key, "other.kind"),
+            Err(DiskError::Corrupt { .. })
+        ));
+        // A value's reader refuses it too (its one output is of no registered type).
+        assert!(cache.get(&key, "raytrace.bvh", &Registry::new()).is_err());
+        let path = cache.entry_path(&key);
+        let mut damaged = std::fs::read(&path).unwrap();
+        let middle = damaged.len() / 2;
+        damaged[middle] ^= 1;
+        std::fs::write(&path, damaged).unwrap();
+        assert!(matches!(
+            cache.get_bytes(&key, "raytrace.bvh"),
+            Err(DiskError::Corrupt { .. })
+        ));
     }
 
     #[test]

@@ -139,6 +139,7 @@ pub(crate) fn run_all(
                     timings: Default::default(),
                     warnings: Default::default(),
                     confine: opts.policy.confine.clone(),
+                    derived: opts.policy.use_cache.then(|| shared.disk.clone()).flatten(),
                 },
                 expected: slot.expected.as_ref().map(|(o, _)| o.clone()),
                 memory: opts.policy.use_cache.then(|| shared.memory.clone()),

@@ -2,6 +2,7 @@
 //! peeling on the CPU), rays against a mesh (`tracer`), shadow maps and the pixel footprint's
 //! metrics. `render/` and `sss/` both build on these and import nothing from each other.
 
+pub mod bvh_store;
 pub mod camera;
 pub mod footprint;
 pub mod layers;

@@ -7,9 +7,13 @@
 //! of the same triangles (by their hash), so a second frame of one surface in a process (a
 //! camera move in the studio, a sweep's frames, the planner's probes) does not build it again.
 //! The build is deterministic, so the kept BVH is the one a new build would make: same bits.
+//! A tracer made [`Tracer::in_context`] also keeps it in the run's disk cache for the next
+//! process (`bvh_store`).
 
+use super::bvh_store;
 use crate::support::geometry::{add, cross, mul, normalize, sub, V3};
 use crate::types::Mesh;
+use mesoflow_runtime::NodeContext;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
 use obvhs::triangle::Triangle;
@@ -23,6 +27,14 @@ pub const KEEP_FROM: usize = 100_000;
 /// The last kept BVH: its mesh's hash and the BVH (one entry, so at most one BVH a process
 /// outlives its render).
 static KEPT: Mutex<Option<([u8; 32], Arc<CwBvh>)>> = Mutex::new(None);
+
+/// Forgets the kept BVH, as a new process starts without one (tests).
+#[cfg(test)]
+pub(crate) fn forget_kept() {
+    if let Ok(mut k) = KEPT.lock() {
+        *k = None;
+    }
+}
 
 /// The hash of what the BVH is built from: the positions and the indices.
 fn mesh_hash(mesh: &Mesh) -> [u8; 32] {
@@ -45,40 +57,94 @@ pub struct Hit {
 /// hits count is decided in f64 from the true origin (`intersect`: t > 0).
 const BACK_OFF: f64 = 1e-3;
 
+/// Where a tracer's BVH came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BvhFrom {
+    /// Built for this tracer.
+    Built,
+    /// Kept from this process's last tracer of the same triangles.
+    Kept,
+    /// Read from the run's disk cache, where an earlier process stored it.
+    Stored,
+}
+
 /// The mesh and its BVH.
 pub struct Tracer<'a> {
     pub mesh: &'a Mesh,
     bvh: Arc<CwBvh>,
+    /// Where the BVH came from.
+    pub from: BvhFrom,
     /// Shadow-ray offset along the geometric normal: a millionth of the scene's size.
     pub epsilon: f64,
 }
 
 impl<'a> Tracer<'a> {
+    /// The tracer of `mesh`, its BVH built here or kept from this process's last large mesh.
     pub fn new(mesh: &'a Mesh) -> Self {
-        let bvh = if mesh.triangles() >= KEEP_FROM {
+        Self::with_bvh(mesh, None)
+    }
+
+    /// The same, where a large mesh's BVH is also looked for in, and kept in, the run's disk
+    /// cache ([`bvh_store`](super::bvh_store)), for the next process that renders it.
+    pub fn in_context(mesh: &'a Mesh, ctx: &NodeContext) -> Self {
+        Self::with_bvh(mesh, Some(ctx))
+    }
+
+    fn with_bvh(mesh: &'a Mesh, ctx: Option<&NodeContext>) -> Self {
+        let (bvh, from) = if mesh.triangles() >= KEEP_FROM {
             let key = mesh_hash(mesh);
             let kept = KEPT.lock().ok().and_then(|k| {
                 k.as_ref()
                     .filter(|(h, _)| *h == key)
                     .map(|(_, b)| b.clone())
             });
-            kept.unwrap_or_else(|| {
-                let built = Arc::new(Self::build(mesh));
-                if let Ok(mut k) = KEPT.lock() {
-                    *k = Some((key, built.clone()));
+            match kept {
+                Some(bvh) => (bvh, BvhFrom::Kept),
+                None => {
+                    let (bvh, from) = Self::stored_or_built(mesh, &key, ctx);
+                    let bvh = Arc::new(bvh);
+                    if let Ok(mut k) = KEPT.lock() {
+                        *k = Some((key, bvh.clone()));
+                    }
+                    (bvh, from)
                 }
-                built
-            })
+            }
         } else {
-            Arc::new(Self::build(mesh))
+            (Arc::new(Self::build(mesh)), BvhFrom::Built)
         };
         let (lo, hi) = mesh.bounds();
         let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
         Tracer {
             mesh,
             bvh,
+            from,
             epsilon: 1e-6 * size.max(1e-30),
         }
+    }
+
+    /// The BVH of the mesh of hash `hash` from the run's disk cache, else built (and stored).
+    fn stored_or_built(
+        mesh: &Mesh,
+        hash: &[u8; 32],
+        ctx: Option<&NodeContext>,
+    ) -> (CwBvh, BvhFrom) {
+        let Some(ctx) = ctx else {
+            return (Self::build(mesh), BvhFrom::Built);
+        };
+        let key = bvh_store::key(hash);
+        let stored = ctx
+            .load_derived(bvh_store::KIND, &key)
+            .and_then(|bytes| bvh_store::decode(&bytes, mesh.triangles()));
+        if let Some(bvh) = stored {
+            return (bvh, BvhFrom::Stored);
+        }
+        let start = std::time::Instant::now();
+        let built = Self::build(mesh);
+        if let Some(bytes) = bvh_store::encode(&built) {
+            let seconds = start.elapsed().as_secs_f64();
+            ctx.store_derived(bvh_store::KIND, &key, &bytes, seconds);
+        }
+        (built, BvhFrom::Built)
     }
 
     fn build(mesh: &Mesh) -> CwBvh {

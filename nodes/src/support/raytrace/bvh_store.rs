@@ -1,0 +1,214 @@
+//! A large mesh's BVH kept across processes, in the run's disk cache
+//! (`NodeContext::store_derived`): a second process rendering the same surface (a camera move
+//! from the command line, the planner's candidates, a cluster's units) reads it instead of
+//! building it again (seconds for a displaced surface of millions of triangles).
+//!
+//! The entry is keyed by the mesh's hash and the executable's build (the BVH builder and the
+//! layout of its nodes are the build's), and decoded with every index checked against the node
+//! and triangle counts, so an entry that does not fit is rebuilt rather than traversed. The
+//! builder is deterministic, so a stored BVH is the one a build would make: the same bits.
+
+use obvhs::aabb::Aabb;
+use obvhs::cwbvh::node::CwBvhNode;
+use obvhs::cwbvh::CwBvh;
+
+/// What the disk cache counts these entries as (`mesoflow cache stats`).
+pub const KIND: &str = "raytrace.bvh";
+
+/// The encoding's version, part of the key.
+const FORMAT: u32 = 1;
+
+/// The stored BVH's key: its mesh's hash, this encoding and the build that made it.
+pub fn key(mesh_hash: &[u8; 32]) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    h.update(&FORMAT.to_le_bytes());
+    h.update(env!("CARGO_PKG_VERSION").as_bytes());
+    h.update(mesoflow_runtime::producer::build_id().as_bytes());
+    h.update(&(std::mem::size_of::<CwBvhNode>() as u64).to_le_bytes());
+    h.update(mesh_hash);
+    *h.finalize().as_bytes()
+}
+
+/// The header's words: the flags, then the three counts.
+const HEAD: usize = 4 * 8;
+
+/// `bvh` as bytes: the flags (spatial splits, exact boxes), the counts of nodes, primitive
+/// indices and exact boxes, the whole box, then the three arrays as they lie in memory
+/// (little-endian machines only: `None` elsewhere, and nothing is stored).
+pub fn encode(bvh: &CwBvh) -> Option<Vec<u8>> {
+    if cfg!(target_endian = "big") {
+        return None;
+    }
+    let exact: &[Aabb] = bvh.exact_node_aabbs.as_deref().unwrap_or(&[]);
+    let mut out = Vec::new();
+    for word in [
+        u64::from(bvh.uses_spatial_splits) | (u64::from(bvh.exact_node_aabbs.is_some()) << 1),
+        bvh.nodes.len() as u64,
+        bvh.primitive_indices.len() as u64,
+        exact.len() as u64,
+    ] {
+        out.extend_from_slice(&word.to_le_bytes());
+    }
+    out.extend_from_slice(bytemuck::bytes_of(&bvh.total_aabb));
+    out.extend_from_slice(bytemuck::cast_slice(&bvh.nodes));
+    out.extend_from_slice(bytemuck::cast_slice(&bvh.primitive_indices));
+    out.extend_from_slice(bytemuck::cast_slice(exact));
+    Some(out)
+}
+
+/// The BVH `encode` wrote, for a mesh of `triangles` triangles; `None` for bytes of another
+/// length or any index out of range (a node's children, a leaf's primitives, a primitive's
+/// triangle).
+pub fn decode(bytes: &[u8], triangles: usize) -> Option<CwBvh> {
+    if cfg!(target_endian = "big") || bytes.len() < HEAD {
+        return None;
+    }
+    let word = |i: usize| {
+        let w = u64::from_le_bytes(bytes[8 * i..8 * i + 8].try_into().ok()?);
+        usize::try_from(w).ok()
+    };
+    let (flags, nodes, prims, exact) = (word(0)?, word(1)?, word(2)?, word(3)?);
+    let box_len = std::mem::size_of::<Aabb>();
+    let node_len = std::mem::size_of::<CwBvhNode>();
+    let want = HEAD
+        .checked_add(box_len)?
+        .checked_add(nodes.checked_mul(node_len)?)?
+        .checked_add(prims.checked_mul(4)?)?
+        .checked_add(exact.checked_mul(box_len)?)?;
+    if bytes.len() != want || flags > 3 {
+        return None;
+    }
+    let mut at = HEAD;
+    let mut take = |len: usize| {
+        let part = &bytes[at..at + len];
+        at += len;
+        part
+    };
+    let mut total_aabb = Aabb::default();
+    bytemuck::bytes_of_mut(&mut total_aabb).copy_from_slice(take(box_len));
+    let mut node_list = vec![CwBvhNode::default(); nodes];
+    bytemuck::cast_slice_mut(&mut node_list).copy_from_slice(take(nodes * node_len));
+    let mut primitive_indices = vec![0u32; prims];
+    bytemuck::cast_slice_mut(&mut primitive_indices).copy_from_slice(take(prims * 4));
+    let mut exact_boxes = vec![Aabb::default(); exact];
+    bytemuck::cast_slice_mut(&mut exact_boxes).copy_from_slice(take(exact * box_len));
+    let fits = node_list.iter().all(|n| {
+        let children = n.imask.count_ones() as usize;
+        let internal_fits = n.imask == 0 || (n.child_base_idx as usize) + children <= nodes;
+        // A leaf slot: the low five bits are its first primitive's offset (under 24), the high
+        // three its count in unary; an internal slot is 001 and its slot index plus 24.
+        let leaves_fit = n.child_meta.iter().all(|&m| {
+            if m == 0 || (m >> 5 == 1 && m & 31 >= 24) {
+                return true;
+            }
+            let count = (m >> 5).count_ones() as usize;
+            n.primitive_base_idx as usize + (m & 31) as usize + count <= prims
+        });
+        internal_fits && leaves_fit
+    });
+    let triangles_fit = primitive_indices.iter().all(|&p| (p as usize) < triangles);
+    if !(fits && triangles_fit) || nodes == 0 {
+        return None;
+    }
+    Some(CwBvh {
+        nodes: node_list,
+        primitive_indices,
+        total_aabb,
+        exact_node_aabbs: (flags & 2 != 0).then_some(exact_boxes),
+        uses_spatial_splits: flags & 1 != 0,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::support::raytrace::tracer::{BvhFrom, Tracer};
+
+    fn sphere(segments: [u32; 2]) -> crate::types::Mesh {
+        crate::mesh::primitive::build(&crate::mesh::primitive::Params {
+            shape: crate::mesh::primitive::Shape::Sphere,
+            size: 1.0,
+            minor: 0.0,
+            segments,
+        })
+        .expect("a sphere")
+    }
+
+    fn same(a: &CwBvh, b: &CwBvh) -> bool {
+        a.nodes == b.nodes
+            && a.primitive_indices == b.primitive_indices
+            && a.total_aabb == b.total_aabb
+            && a.exact_node_aabbs == b.exact_node_aabbs
+            && a.uses_spatial_splits == b.uses_spatial_splits
+    }
+
+    #[test]
+    fn a_bvh_decodes_to_itself_and_bytes_that_do_not_fit_are_refused() {
+        let mesh = sphere([64, 32]);
+        let built = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+            &(0..mesh.triangles())
+                .map(|t| {
+                    let [a, b, c] = mesh.corners(t).map(|i| {
+                        let q = mesh.positions[i];
+                        glam::Vec3A::new(q[0], q[1], q[2])
+                    });
+                    obvhs::triangle::Triangle {
+                        v0: a,
+                        v1: b,
+                        v2: c,
+                    }
+                })
+                .collect::<Vec<_>>(),
+            obvhs::BvhBuildParams::medium_build(),
+            &mut std::time::Duration::default(),
+        );
+        let bytes = encode(&built).expect("a little-endian machine");
+        let back = decode(&bytes, mesh.triangles()).expect("decodes");
+        assert!(same(&built, &back));
+        // Cut short, one byte too many, or for a mesh with fewer triangles than it indexes.
+        assert!(decode(&bytes[..bytes.len() - 1], mesh.triangles()).is_none());
+        assert!(decode(&[bytes.as_slice(), &[0]].concat(), mesh.triangles()).is_none());
+        assert!(decode(&bytes, mesh.triangles() / 2).is_none());
+        // A node whose children lie past the end.
+        let mut bad = built.clone();
+        bad.nodes[0].child_base_idx = bad.nodes.len() as u32;
+        assert!(decode(&encode(&bad).unwrap(), mesh.triangles()).is_none());
+        // A leaf whose primitives lie past the end.
+        let mut bad = built.clone();
+        let leaf = bad
+            .nodes
+            .iter()
+            .position(|n| {
+                n.child_meta
+                    .iter()
+                    .any(|&m| m != 0 && !(m >> 5 == 1 && m & 31 >= 24))
+            })
+            .expect("a node with a leaf");
+        bad.nodes[leaf].primitive_base_idx = bad.primitive_indices.len() as u32;
+        assert!(decode(&encode(&bad).unwrap(), mesh.triangles()).is_none());
+    }
+
+    #[test]
+    fn a_tracer_in_a_run_with_a_disk_cache_stores_its_bvh_and_the_next_reads_it() {
+        // 131 072 triangles: above `tracer::KEEP_FROM`, and no other test's mesh.
+        let mesh = sphere([256, 257]);
+        assert!(mesh.triangles() >= crate::support::raytrace::tracer::KEEP_FROM);
+        let dir = tempfile::tempdir().unwrap();
+        let cache = mesoflow_runtime::cache::DiskCache::new(dir.path());
+        let ctx = mesoflow_runtime::NodeContext::detached(None).with_derived(cache.clone());
+        let first = Tracer::in_context(&mesh, &ctx);
+        assert_ne!(first.from, BvhFrom::Stored);
+        assert_eq!(cache.stats().by_kind[KIND].entries, 1);
+        // This process keeps it too: forget that, as a new process would not have it.
+        crate::support::raytrace::tracer::forget_kept();
+        let second = Tracer::in_context(&mesh, &ctx);
+        assert_eq!(second.from, BvhFrom::Stored);
+        for (o, d) in [
+            ([0.0, 0.0, 3.0], [0.0, 0.0, -1.0]),
+            ([0.3, 2.0, 0.1], [0.0, -1.0, 0.0]),
+        ] {
+            let (a, b) = (first.closest(o, d).unwrap(), second.closest(o, d).unwrap());
+            assert_eq!((a.tri, a.t.to_bits()), (b.tri, b.t.to_bits()));
+        }
+    }
+}
