@@ -130,7 +130,7 @@ impl Node for Lighting {
         let material = inputs.get::<ScatteringMaterial>("material")?;
         let profile = inputs.get::<DiffusionProfile>("profile")?;
         let p = lp.render_params()?;
-        let (value, warnings, timings) = light(mesh, material, profile, &p)?;
+        let (value, warnings, timings) = light(mesh, material, profile, &p, Some(ctx))?;
         for w in warnings {
             ctx.warn(w);
         }
@@ -145,17 +145,19 @@ impl Node for Lighting {
     }
 }
 
-/// The lighting of `p`'s camera-independent part, its warnings and timings.
+/// The lighting of `p`'s camera-independent part, its warnings and timings. With the run's
+/// `ctx`, a large mesh's BVH comes from and goes to its disk cache (`Tracer::in_context`).
 #[allow(clippy::type_complexity)]
 fn light(
     mesh: &Mesh,
     material: &ScatteringMaterial,
     profile: &DiffusionProfile,
     p: &Params,
+    ctx: Option<&NodeContext>,
 ) -> Result<(SssLighting, Vec<String>, Vec<(&'static str, f64)>), NodeError> {
     super::check_inputs(mesh, profile, p)?;
     let light = Light::new(&p.light)?;
-    let tracer = Tracer::new(mesh);
+    let tracer = ctx.map_or_else(|| Tracer::new(mesh), |ctx| Tracer::in_context(mesh, ctx));
     let mut warnings = Vec::new();
     let prepared = prepare(
         &tracer,
@@ -414,7 +416,7 @@ mod tests {
             shadow_resolution: 128,
             ..Default::default()
         };
-        let (lit, _, _) = light(&mesh, &m, &profile, &lp.render_params().unwrap()).unwrap();
+        let (lit, _, _) = light(&mesh, &m, &profile, &lp.render_params().unwrap(), None).unwrap();
         assert!(lit.bounced.is_some() && lit.body.is_some());
         let lit = through_the_cache(&lit);
         for eye in [[0.0, 1.0, 3.0], [2.5, -1.0, 1.0]] {
@@ -440,6 +442,7 @@ mod tests {
                 &Homogeneous,
                 &Counter::none(),
                 Some(&lit),
+                None,
             )
             .unwrap();
             assert!(one.image.data.iter().any(|&v| v > 0.0));
@@ -457,7 +460,7 @@ mod tests {
             shadows: false,
             ..Default::default()
         };
-        let (lit, _, _) = light(&mesh, &m, &profile, &lp.render_params().unwrap()).unwrap();
+        let (lit, _, _) = light(&mesh, &m, &profile, &lp.render_params().unwrap(), None).unwrap();
         // The render's default gives way; the same value agrees; another is refused by name.
         assert_eq!(merged(&Params::default(), &lit).unwrap().bounces, 1);
         let same = Params {
@@ -494,6 +497,7 @@ mod tests {
             &Homogeneous,
             &Counter::none(),
             Some(&lit),
+            None,
         )
         .err()
         .expect("refused")

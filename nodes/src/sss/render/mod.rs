@@ -291,6 +291,7 @@ impl Node for Render {
             &Homogeneous,
             &watch,
             lit,
+            Some(ctx),
         )?;
         for w in r.warnings {
             ctx.warn(w);
@@ -406,12 +407,13 @@ pub fn render_with(
     weights: &dyn Weights,
     watch: &Counter,
 ) -> Result<Rendered, NodeError> {
-    render_lit(gpu, mesh, material, profile, p, weights, watch, None)
+    render_lit(gpu, mesh, material, profile, p, weights, watch, None, None)
 }
 
 /// [`render_with`], the camera-independent part taken from `lighting` when given (made by
 /// `sss.lighting` for this mesh, material, profile and `p`'s lighting parameters; `p` already
-/// holds them, `lighting::merged`).
+/// holds them, `lighting::merged`). With the run's `ctx`, a large mesh's BVH comes from and goes
+/// to its disk cache (`Tracer::in_context`).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn render_lit(
     gpu: Option<&mesoflow_runtime::Gpu>,
@@ -422,6 +424,7 @@ pub(super) fn render_lit(
     weights: &dyn Weights,
     watch: &Counter,
     lighting: Option<&SssLighting>,
+    ctx: Option<&NodeContext>,
 ) -> Result<Rendered, NodeError> {
     check_inputs(mesh, profile, p)?;
     let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
@@ -439,7 +442,7 @@ pub(super) fn render_lit(
     // One BVH for the bounces, the thickness, the body's inside test, the view and single
     // scattering.
     let setup_start = Instant::now();
-    let tracer = Tracer::new(mesh);
+    let tracer = ctx.map_or_else(|| Tracer::new(mesh), |ctx| Tracer::in_context(mesh, ctx));
     let prepared = match lighting {
         Some(lit) => lighting::rebuild(&tracer, material, profile, p, &light, lit)?,
         None => prepare(
