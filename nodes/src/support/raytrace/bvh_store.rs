@@ -122,7 +122,6 @@ pub fn decode(bytes: &[u8], triangles: usize) -> Option<CwBvh> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::support::raytrace::tracer::{BvhFrom, Tracer};
 
     fn sphere(segments: [u32; 2]) -> crate::types::Mesh {
         crate::mesh::primitive::build(&crate::mesh::primitive::Params {
@@ -186,29 +185,5 @@ mod tests {
             .expect("a node with a leaf");
         bad.nodes[leaf].primitive_base_idx = bad.primitive_indices.len() as u32;
         assert!(decode(&encode(&bad).unwrap(), mesh.triangles()).is_none());
-    }
-
-    #[test]
-    fn a_tracer_in_a_run_with_a_disk_cache_stores_its_bvh_and_the_next_reads_it() {
-        // 131 072 triangles: above `tracer::KEEP_FROM`, and no other test's mesh.
-        let mesh = sphere([256, 257]);
-        assert!(mesh.triangles() >= crate::support::raytrace::tracer::KEEP_FROM);
-        let dir = tempfile::tempdir().unwrap();
-        let cache = mesoflow_runtime::cache::DiskCache::new(dir.path());
-        let ctx = mesoflow_runtime::NodeContext::detached(None).with_derived(cache.clone());
-        let first = Tracer::in_context(&mesh, &ctx);
-        assert_ne!(first.from, BvhFrom::Stored);
-        assert_eq!(cache.stats().by_kind[KIND].entries, 1);
-        // This process keeps it too: forget that, as a new process would not have it.
-        crate::support::raytrace::tracer::forget_kept();
-        let second = Tracer::in_context(&mesh, &ctx);
-        assert_eq!(second.from, BvhFrom::Stored);
-        for (o, d) in [
-            ([0.0, 0.0, 3.0], [0.0, 0.0, -1.0]),
-            ([0.3, 2.0, 0.1], [0.0, -1.0, 0.0]),
-        ] {
-            let (a, b) = (first.closest(o, d).unwrap(), second.closest(o, d).unwrap());
-            assert_eq!((a.tri, a.t.to_bits()), (b.tri, b.t.to_bits()));
-        }
     }
 }

@@ -245,3 +245,38 @@ impl<'a> Tracer<'a> {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tracer_in_a_run_with_a_disk_cache_stores_its_bvh_and_the_next_reads_it() {
+        // 131 072 triangles: above `tracer::KEEP_FROM`, and no other test's mesh.
+        let mesh = crate::mesh::primitive::build(&crate::mesh::primitive::Params {
+            shape: crate::mesh::primitive::Shape::Sphere,
+            size: 1.0,
+            minor: 0.0,
+            segments: [256, 257],
+        })
+        .expect("a sphere");
+        assert!(mesh.triangles() >= KEEP_FROM);
+        let dir = tempfile::tempdir().unwrap();
+        let cache = mesoflow_runtime::cache::DiskCache::new(dir.path());
+        let ctx = mesoflow_runtime::NodeContext::detached(None).with_derived(cache.clone());
+        let first = Tracer::in_context(&mesh, &ctx);
+        assert_ne!(first.from, BvhFrom::Stored);
+        assert_eq!(cache.stats().by_kind[bvh_store::KIND].entries, 1);
+        // This process keeps it too: forget that, as a new process would not have it.
+        forget_kept();
+        let second = Tracer::in_context(&mesh, &ctx);
+        assert_eq!(second.from, BvhFrom::Stored);
+        for (o, d) in [
+            ([0.0, 0.0, 3.0], [0.0, 0.0, -1.0]),
+            ([0.3, 2.0, 0.1], [0.0, -1.0, 0.0]),
+        ] {
+            let (a, b) = (first.closest(o, d).unwrap(), second.closest(o, d).unwrap());
+            assert_eq!((a.tri, a.t.to_bits()), (b.tri, b.t.to_bits()));
+        }
+    }
+}
