@@ -239,15 +239,17 @@ impl Beam {
     fn factor_entered(&self, xo: V3, no: V3, e: &Entered) -> [f64; 3] {
         let v = sub(xo, e.at.xi);
         let r = dot(v, v).sqrt();
-        [0, 1, 2].map(|c| {
+        // The distance's logarithm once for the three channels' tables.
+        let ln_r = r.max(1e-300).ln();
+        let mut out = [1.0; 3];
+        for (c, out) in out.iter_mut().enumerate() {
             let actual = self.flux(c, xo, no, &e.at, &e.points[c], e.total[c]) * e.reaching[c];
-            let flat = self.flat[c].at(r, self, c);
+            let flat = self.flat[c].at(r, ln_r, self, c);
             if flat > 0.0 && flat.is_finite() && actual.is_finite() {
-                (actual / flat).max(0.0)
-            } else {
-                1.0
+                *out = (actual / flat).max(0.0);
             }
-        })
+        }
+        out
     }
 
     /// The beam's fluence at `x` (mm) in channel `c` per unit power entering at the source
@@ -483,8 +485,9 @@ impl Flat {
         beam.flux(c, [r, 0.0, 0.0], up, &Entry::STRAIGHT_DOWN, &points, total)
     }
 
-    fn at(&self, r: f64, beam: &Beam, c: usize) -> f64 {
-        let f = (r.max(1e-300).ln() - self.ln_first) * self.per_ln;
+    /// At distance `r`, whose logarithm (of `r.max(1e-300)`) is `ln_r`.
+    fn at(&self, r: f64, ln_r: f64, beam: &Beam, c: usize) -> f64 {
+        let f = (ln_r - self.ln_first) * self.per_ln;
         let n = self.ln_values.len();
         if !(f >= 0.0 && f < (n - 1) as f64 && n >= 2) {
             return Flat::direct(beam, c, r);
