@@ -144,7 +144,12 @@ fn the_plan_meets_its_budget_on_held_out_mesostructure_scenes() {
     // The bench's mesostructure run (seeds from 1 000 072, 320 × 240) measured on these six:
     // 6 and 3 of 6 within 0.10 and 0.20 (the misses are the mesh without its MDF, judged on the
     // view's centre where the silhouette is not), the planned time at most 1.41× the fastest
-    // fitting candidate's, planning at most 6.1× the longer full render.
+    // fitting candidate's, planning at most 6.1× the longer full render. That last ratio's
+    // denominator was then mostly the displaced surface's BVH, built again by every process;
+    // since the BVH is kept in the disk cache (2026-12-07) a brute-force frame there costs
+    // 0.1–1 s where it cost 1–6 s, while planning fell less (1 000 073: 2.5 → 1.6 s; its
+    // full-view pilot at 16 samples a pixel is several frames at 2–9): the same bench measured
+    // 6.0–14.5× (14.97× once beside the other tests), so the bound is 30×, twice that.
     family(
         Kind::Mesostructure,
         HELD_OUT + 72,
@@ -153,7 +158,7 @@ fn the_plan_meets_its_budget_on_held_out_mesostructure_scenes() {
         Bounds {
             within: [5, 2],
             over_fastest: 3.0,
-            plan_ratio: 12.0,
+            plan_ratio: 30.0,
         },
     );
 }
