@@ -400,15 +400,7 @@ fn a_large_meshs_bvh_is_kept_for_the_next_process_and_gives_the_same_image() {
     );
     let cache = s.path("cache");
     let cache_arg = cache.to_str().unwrap();
-    let truth = |rep: &serde_json::Value| {
-        rep["nodes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|n| n["id"] == "truth")
-            .unwrap()
-            .clone()
-    };
+    let truth = |rep: &serde_json::Value| mesoflow_testkit::cli::node(rep, "truth").clone();
     let stored = |rep: &serde_json::Value| truth(rep)["timings"]["bvh_stored"].as_f64().unwrap();
     let bvh_entries = || {
         let r = mesoflow(&["cache", "stats", "--cache-dir", cache_arg], s.dir.path());

@@ -11,6 +11,7 @@
 use obvhs::aabb::Aabb;
 use obvhs::cwbvh::node::CwBvhNode;
 use obvhs::cwbvh::CwBvh;
+use obvhs::triangle::Triangle;
 
 /// What the disk cache counts these entries as (`mesoflow cache stats`).
 pub const KIND: &str = "raytrace.bvh";
@@ -18,15 +19,45 @@ pub const KIND: &str = "raytrace.bvh";
 /// The encoding's version, part of the key.
 const FORMAT: u32 = 1;
 
-/// The stored BVH's key: its mesh's hash, this encoding and the build that made it.
+/// The stored BVH's key: its mesh's hash, this encoding and the build that made it (the
+/// executable's hash, and the bytes of a small BVH built here: where the executable is
+/// another's, as Python's, a builder or layout that changed still changes the key).
 pub fn key(mesh_hash: &[u8; 32]) -> [u8; 32] {
     let mut h = blake3::Hasher::new();
     h.update(&FORMAT.to_le_bytes());
     h.update(env!("CARGO_PKG_VERSION").as_bytes());
     h.update(mesoflow_runtime::producer::build_id().as_bytes());
-    h.update(&(std::mem::size_of::<CwBvhNode>() as u64).to_le_bytes());
+    h.update(builder_fingerprint());
     h.update(mesh_hash);
     *h.finalize().as_bytes()
+}
+
+/// The encoding of the BVH of a fixed fan of 64 triangles, made once a process.
+fn builder_fingerprint() -> &'static [u8] {
+    static PRINT: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+    PRINT.get_or_init(|| {
+        let tris: Vec<Triangle> = (0..64)
+            .map(|i| {
+                let a = i as f32 * 0.1;
+                Triangle {
+                    v0: glam::Vec3A::ZERO,
+                    v1: glam::Vec3A::new(a.cos(), a.sin(), 0.01 * i as f32),
+                    v2: glam::Vec3A::new((a + 0.1).cos(), (a + 0.1).sin(), 0.5),
+                }
+            })
+            .collect();
+        encode(&build(&tris)).unwrap_or_default()
+    })
+}
+
+/// The BVH of `tris`, as every tracer builds it (the parameters are part of what
+/// [`key`] fingerprints).
+pub fn build(tris: &[Triangle]) -> CwBvh {
+    obvhs::cwbvh::builder::build_cwbvh_from_tris(
+        tris,
+        obvhs::BvhBuildParams::medium_build(),
+        &mut std::time::Duration::default(),
+    )
 }
 
 /// The header's words: the flags, then the three counts.
@@ -144,22 +175,20 @@ mod tests {
     #[test]
     fn a_bvh_decodes_to_itself_and_bytes_that_do_not_fit_are_refused() {
         let mesh = sphere([64, 32]);
-        let built = obvhs::cwbvh::builder::build_cwbvh_from_tris(
+        let built = build(
             &(0..mesh.triangles())
                 .map(|t| {
                     let [a, b, c] = mesh.corners(t).map(|i| {
                         let q = mesh.positions[i];
                         glam::Vec3A::new(q[0], q[1], q[2])
                     });
-                    obvhs::triangle::Triangle {
+                    Triangle {
                         v0: a,
                         v1: b,
                         v2: c,
                     }
                 })
                 .collect::<Vec<_>>(),
-            obvhs::BvhBuildParams::medium_build(),
-            &mut std::time::Duration::default(),
         );
         let bytes = encode(&built).expect("a little-endian machine");
         let back = decode(&bytes, mesh.triangles()).expect("decodes");

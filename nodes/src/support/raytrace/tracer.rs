@@ -162,11 +162,7 @@ impl<'a> Tracer<'a> {
                 }
             })
             .collect();
-        obvhs::cwbvh::builder::build_cwbvh_from_tris(
-            &tris,
-            obvhs::BvhBuildParams::medium_build(),
-            &mut std::time::Duration::default(),
-        )
+        bvh_store::build(&tris)
     }
 
     /// Triangle `t`'s corners' positions' plane: a point and the unit geometric normal (the
