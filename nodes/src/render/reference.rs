@@ -175,7 +175,7 @@ impl Node for Reference {
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let light = Light::new(&p.light)?;
         let built = Instant::now();
-        let scene = Tracer::in_context(mesh, ctx);
+        let scene = Tracer::in_context(mesh, Some(ctx));
         ctx.timing("bvh_seconds", built.elapsed().as_secs_f64());
         // 1 where the BVH was read from the disk cache an earlier process stored it in.
         let stored = scene.from == crate::support::raytrace::tracer::BvhFrom::Stored;

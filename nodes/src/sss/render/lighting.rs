@@ -157,7 +157,7 @@ fn light(
 ) -> Result<(SssLighting, Vec<String>, Vec<(&'static str, f64)>), NodeError> {
     super::check_inputs(mesh, profile, p)?;
     let light = Light::new(&p.light)?;
-    let tracer = ctx.map_or_else(|| Tracer::new(mesh), |ctx| Tracer::in_context(mesh, ctx));
+    let tracer = Tracer::in_context(mesh, ctx);
     let mut warnings = Vec::new();
     let prepared = prepare(
         &tracer,

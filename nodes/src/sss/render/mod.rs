@@ -442,7 +442,7 @@ pub(super) fn render_lit(
     // One BVH for the bounces, the thickness, the body's inside test, the view and single
     // scattering.
     let setup_start = Instant::now();
-    let tracer = ctx.map_or_else(|| Tracer::new(mesh), |ctx| Tracer::in_context(mesh, ctx));
+    let tracer = Tracer::in_context(mesh, ctx);
     let prepared = match lighting {
         Some(lit) => lighting::rebuild(&tracer, material, profile, p, &light, lit)?,
         None => prepare(

@@ -8,6 +8,7 @@
 //! and triangle counts, so an entry that does not fit is rebuilt rather than traversed. The
 //! builder is deterministic, so a stored BVH is the one a build would make: the same bits.
 
+use crate::types::Mesh;
 use obvhs::aabb::Aabb;
 use obvhs::cwbvh::node::CwBvhNode;
 use obvhs::cwbvh::CwBvh;
@@ -46,18 +47,43 @@ fn builder_fingerprint() -> &'static [u8] {
                 }
             })
             .collect();
-        encode(&build(&tris)).unwrap_or_default()
+        encode(&build_triangles(&tris)).unwrap_or_default()
     })
 }
 
-/// The BVH of `tris`, as every tracer builds it (the parameters are part of what
-/// [`key`] fingerprints).
-pub fn build(tris: &[Triangle]) -> CwBvh {
+/// The BVH of `mesh`'s triangles, as every tracer builds it.
+pub fn build(mesh: &Mesh) -> CwBvh {
+    let v = |i: usize| {
+        let q = mesh.positions[i];
+        glam::Vec3A::new(q[0], q[1], q[2])
+    };
+    let tris: Vec<Triangle> = (0..mesh.triangles())
+        .map(|t| {
+            let [a, b, c] = mesh.corners(t);
+            Triangle {
+                v0: v(a),
+                v1: v(b),
+                v2: v(c),
+            }
+        })
+        .collect();
+    build_triangles(&tris)
+}
+
+/// The BVH of `tris` (its parameters are part of what [`key`] fingerprints).
+fn build_triangles(tris: &[Triangle]) -> CwBvh {
     obvhs::cwbvh::builder::build_cwbvh_from_tris(
         tris,
         obvhs::BvhBuildParams::medium_build(),
         &mut std::time::Duration::default(),
     )
+}
+
+/// Whether a node's child slot `meta` is an internal node: 001 in the high bits and its slot
+/// index plus 24 in the low five (a leaf's low five bits are its first primitive's offset,
+/// under 24, and its high three its count in unary).
+fn internal_slot(meta: u8) -> bool {
+    meta >> 5 == 1 && meta & 31 >= 24
 }
 
 /// The header's words: the flags, then the three counts.
@@ -126,10 +152,8 @@ pub fn decode(bytes: &[u8], triangles: usize) -> Option<CwBvh> {
     let fits = node_list.iter().all(|n| {
         let children = n.imask.count_ones() as usize;
         let internal_fits = n.imask == 0 || (n.child_base_idx as usize) + children <= nodes;
-        // A leaf slot: the low five bits are its first primitive's offset (under 24), the high
-        // three its count in unary; an internal slot is 001 and its slot index plus 24.
         let leaves_fit = n.child_meta.iter().all(|&m| {
-            if m == 0 || (m >> 5 == 1 && m & 31 >= 24) {
+            if m == 0 || internal_slot(m) {
                 return true;
             }
             let count = (m >> 5).count_ones() as usize;
@@ -175,21 +199,7 @@ mod tests {
     #[test]
     fn a_bvh_decodes_to_itself_and_bytes_that_do_not_fit_are_refused() {
         let mesh = sphere([64, 32]);
-        let built = build(
-            &(0..mesh.triangles())
-                .map(|t| {
-                    let [a, b, c] = mesh.corners(t).map(|i| {
-                        let q = mesh.positions[i];
-                        glam::Vec3A::new(q[0], q[1], q[2])
-                    });
-                    Triangle {
-                        v0: a,
-                        v1: b,
-                        v2: c,
-                    }
-                })
-                .collect::<Vec<_>>(),
-        );
+        let built = build(&mesh);
         let bytes = encode(&built).expect("a little-endian machine");
         let back = decode(&bytes, mesh.triangles()).expect("decodes");
         assert!(same(&built, &back));
@@ -206,11 +216,7 @@ mod tests {
         let leaf = bad
             .nodes
             .iter()
-            .position(|n| {
-                n.child_meta
-                    .iter()
-                    .any(|&m| m != 0 && !(m >> 5 == 1 && m & 31 >= 24))
-            })
+            .position(|n| n.child_meta.iter().any(|&m| m != 0 && !internal_slot(m)))
             .expect("a node with a leaf");
         bad.nodes[leaf].primitive_base_idx = bad.primitive_indices.len() as u32;
         assert!(decode(&encode(&bad).unwrap(), mesh.triangles()).is_none());

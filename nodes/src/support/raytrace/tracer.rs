@@ -16,7 +16,6 @@ use crate::types::Mesh;
 use mesoflow_runtime::NodeContext;
 use obvhs::cwbvh::CwBvh;
 use obvhs::ray::{Ray, RayHit};
-use obvhs::triangle::Triangle;
 use std::sync::{Arc, Mutex};
 
 /// Meshes with at least this many triangles keep their BVH for the next tracer (a build of
@@ -84,10 +83,11 @@ impl<'a> Tracer<'a> {
         Self::with_bvh(mesh, None)
     }
 
-    /// The same, where a large mesh's BVH is also looked for in, and kept in, the run's disk
-    /// cache ([`bvh_store`](super::bvh_store)), for the next process that renders it.
-    pub fn in_context(mesh: &'a Mesh, ctx: &NodeContext) -> Self {
-        Self::with_bvh(mesh, Some(ctx))
+    /// The same, where with the run's `ctx` a large mesh's BVH is also looked for in, and kept
+    /// in, the run's disk cache ([`bvh_store`](super::bvh_store)), for the next process that
+    /// renders it.
+    pub fn in_context(mesh: &'a Mesh, ctx: Option<&NodeContext>) -> Self {
+        Self::with_bvh(mesh, ctx)
     }
 
     fn with_bvh(mesh: &'a Mesh, ctx: Option<&NodeContext>) -> Self {
@@ -110,7 +110,7 @@ impl<'a> Tracer<'a> {
                 }
             }
         } else {
-            (Arc::new(Self::build(mesh)), BvhFrom::Built)
+            (Arc::new(bvh_store::build(mesh)), BvhFrom::Built)
         };
         let (lo, hi) = mesh.bounds();
         let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
@@ -129,7 +129,7 @@ impl<'a> Tracer<'a> {
         ctx: Option<&NodeContext>,
     ) -> (CwBvh, BvhFrom) {
         let Some(ctx) = ctx else {
-            return (Self::build(mesh), BvhFrom::Built);
+            return (bvh_store::build(mesh), BvhFrom::Built);
         };
         let key = bvh_store::key(hash);
         let stored = ctx
@@ -139,30 +139,12 @@ impl<'a> Tracer<'a> {
             return (bvh, BvhFrom::Stored);
         }
         let start = std::time::Instant::now();
-        let built = Self::build(mesh);
+        let built = bvh_store::build(mesh);
         if let Some(bytes) = bvh_store::encode(&built) {
             let seconds = start.elapsed().as_secs_f64();
             ctx.store_derived(bvh_store::KIND, &key, &bytes, seconds);
         }
         (built, BvhFrom::Built)
-    }
-
-    fn build(mesh: &Mesh) -> CwBvh {
-        let v = |i: usize| {
-            let q = mesh.positions[i];
-            glam::Vec3A::new(q[0], q[1], q[2])
-        };
-        let tris: Vec<Triangle> = (0..mesh.triangles())
-            .map(|t| {
-                let [a, b, c] = mesh.corners(t);
-                Triangle {
-                    v0: v(a),
-                    v1: v(b),
-                    v2: v(c),
-                }
-            })
-            .collect();
-        bvh_store::build(&tris)
     }
 
     /// Triangle `t`'s corners' positions' plane: a point and the unit geometric normal (the
@@ -260,12 +242,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let cache = mesoflow_runtime::cache::DiskCache::new(dir.path());
         let ctx = mesoflow_runtime::NodeContext::detached(None).with_derived(cache.clone());
-        let first = Tracer::in_context(&mesh, &ctx);
+        let first = Tracer::in_context(&mesh, Some(&ctx));
         assert_ne!(first.from, BvhFrom::Stored);
         assert_eq!(cache.stats().by_kind[bvh_store::KIND].entries, 1);
         // This process keeps it too: forget that, as a new process would not have it.
         forget_kept();
-        let second = Tracer::in_context(&mesh, &ctx);
+        let second = Tracer::in_context(&mesh, Some(&ctx));
         assert_eq!(second.from, BvhFrom::Stored);
         for (o, d) in [
             ([0.0, 0.0, 3.0], [0.0, 0.0, -1.0]),
