@@ -13,6 +13,16 @@ use serde_json::json;
 const SAMPLES: u32 = 1024;
 
 fn graph(camera: &serde_json::Value, light: &serde_json::Value) -> String {
+    graph_with(camera, light, 0, SAMPLES)
+}
+
+/// The torus graph, its truth rendered with `bounces` at `samples` a pixel.
+fn graph_with(
+    camera: &serde_json::Value,
+    light: &serde_json::Value,
+    bounces: u32,
+    samples: u32,
+) -> String {
     json!({
         "mesoflow": 1,
         "nodes": {
@@ -22,7 +32,7 @@ fn graph(camera: &serde_json::Value, light: &serde_json::Value) -> String {
                        "params": { "tiling": [6, 3], "shell": 0.06 } },
             "ply": { "kind": "mesh.write", "inputs": { "mesh": "truth.mesh" }, "params": { "path": "truth.ply" } },
             "render": { "kind": "render.reference", "inputs": { "mesh": "truth.mesh" },
-                        "params": { "camera": camera, "light": light, "albedo": [0.7, 0.5, 0.3], "samples": SAMPLES } },
+                        "params": { "camera": camera, "light": light, "albedo": [0.7, 0.5, 0.3], "samples": samples, "bounces": bounces } },
             "image_npy": { "kind": "npy.write", "inputs": { "value": "render.image" }, "params": { "path": "ours.npy" } },
             "coverage_npy": { "kind": "npy.write", "inputs": { "value": "render.coverage" }, "params": { "path": "coverage.npy" } }
         }
@@ -95,6 +105,65 @@ fn the_reference_renderer_agrees_with_mitsuba() {
         "{ours_cov} vs {their_cov}"
     );
     assert!(cov_diff / (pixels as f64) < 0.01);
+}
+
+/// Interreflections: the same torus, its bumps lighting each other, path-traced with three
+/// bounces after the direct one by `render.reference` and by Mitsuba 3's `path` integrator at
+/// `max_depth` 5 (Mitsuba counts the camera segment and the direct bounce), no Russian roulette.
+/// Both are unbiased estimates of the same image, so their difference must be their noise: ours
+/// from the report's two-halves estimate, Mitsuba's from two seeds. The bounces must matter:
+/// they add at least 4% to the image (measured 6.4%: the bumps are 5 texels deep on a tile of
+/// 32). Measured: relative RMSE 0.0181 against a combined noise of 0.0212, channel sums within
+/// 0.05%; 5 s here.
+#[test]
+fn the_reference_s_bounces_agree_with_mitsuba_s_path_tracer() {
+    let Some(python) = peer_python("mitsuba, numpy") else {
+        return;
+    };
+    let s = Scratch::new();
+    let camera = json!({ "eye": [0.0, 1.6, 2.9], "target": [0.0, -0.1, 0.0], "up": [0.0, 1.0, 0.0], "fov": 40.0, "resolution": [96, 72] });
+    let light = json!({ "direction": [-0.7, 0.45, 0.35], "intensity": 3.0 });
+    let samples = 256;
+    let mut images = Vec::new();
+    for bounces in [0, 3] {
+        let file = s.write(
+            &format!("truth{bounces}.json"),
+            &graph_with(&camera, &light, bounces, samples),
+        );
+        let (out, rep) = run_beside(&s, &file);
+        let noise = mesoflow_testkit::cli::node(&rep, "render")["metrics"]["noise"]
+            .as_f64()
+            .expect("the render's noise estimate");
+        // Both runs write into one folder: read each image before the next run.
+        images.push((out.clone(), read_npy(&out.join("ours.npy")).1, noise));
+    }
+    let (out, ours, ours_noise) = &images[1];
+    let mut theirs = Vec::new();
+    for seed in [7, 8] {
+        let scene = s.write(
+            &format!("mitsuba{seed}.json"),
+            &json!({ "mesh": out.join("truth.ply"), "camera": camera, "light": light,
+                     "albedo": [0.7, 0.5, 0.3], "samples": samples, "seed": seed, "max_depth": 5 })
+            .to_string(),
+        );
+        let npy = s.path(&format!("mitsuba{seed}.npy"));
+        run_peer(&python, "mitsuba_reference.py", &[&scene, &npy]);
+        theirs.push(read_npy(&npy).1);
+    }
+    let direct = &images[0].1;
+    let (rel, their_noise, ratio) = compare_to_peer(ours, [&theirs[0], &theirs[1]]);
+    let gain = ours.iter().map(|&v| v as f64).sum::<f64>()
+        / direct.iter().map(|&v| v as f64).sum::<f64>();
+    let combined = (ours_noise * ours_noise + their_noise * their_noise).sqrt();
+    eprintln!(
+        "relative RMSE {rel:.4} against a combined noise of {combined:.4} (ours {ours_noise:.4}, Mitsuba {their_noise:.4}); channel sums {ratio:?}; the bounces add {:.1}%",
+        (gain - 1.0) * 100.0
+    );
+    assert!(gain > 1.04, "the bounces add only {gain}");
+    // The difference is noise: within 1.25× the combined estimate (the estimates are themselves
+    // noisy at this size), and no channel's sum off by more than 2%.
+    assert!(rel < 1.25 * combined, "{rel} against noise {combined}");
+    assert!(ratio.iter().all(|r| (r - 1.0).abs() < 0.02), "{ratio:?}");
 }
 
 /// A translucent torus (20 mm per unit, the acceptance scene of `graphs/sss_render.json` at a

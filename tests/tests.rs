@@ -15,6 +15,7 @@ mod export;
 mod families;
 mod flip_peer;
 mod hostile;
+mod interreflection;
 mod plan;
 mod plan_families;
 mod plan_probe;

@@ -14,7 +14,9 @@ normals (`face_normals`), as mesoflow's reference refracts.
     python mitsuba_reference.py SCENE.json OUT.npy
 
 SCENE.json: {"mesh": PLY path, "camera": {eye, target, up, fov, resolution: [w, h]}, "seed" (7),
-"light": {direction (towards the light), intensity}, "albedo": [r, g, b], "samples": N}.
+"light": {direction (towards the light), intensity}, "albedo": [r, g, b], "samples": N}, and
+optionally "max_depth" (path tracing with interreflections instead of direct light) and
+"orthographic" in the camera (half the view's height; a square image).
 """
 import json
 import sys
@@ -34,7 +36,7 @@ def direct_scene(mi, cfg, pixel_format="rgba"):
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 0},
         "sensor": {
             "type": "perspective",
-            "fov": cam["fov"],
+            "fov": cam.get("fov", 40.0),
             "fov_axis": "y",
             "to_world": mi.ScalarTransform4f().look_at(
                 origin=cam["eye"], target=cam["target"], up=cam.get("up", [0, 1, 0])),
@@ -61,6 +63,22 @@ def scene_of(mi, cfg, pixel_format="rgba"):
     """The scene dict of `cfg`: `direct_scene`, or with a "medium" the volumetric one.
     `benches/sss_peer.py` times the same scene."""
     scene_dict = direct_scene(mi, cfg, pixel_format)
+    if "max_depth" in cfg:
+        # Interreflections: path tracing to that depth (Mitsuba counts the camera segment and
+        # the direct bounce: N bounces after the direct one are max_depth N + 2), no Russian
+        # roulette, so each path runs to its depth as mesoflow's do.
+        scene_dict["integrator"] = {"type": "path", "max_depth": cfg["max_depth"],
+                                    "rr_depth": 1 << 30}
+    if cam_ortho := cfg["camera"].get("orthographic"):
+        # Mitsuba's orthographic view spans [-1, 1] on both axes of a square image before its
+        # to_world: scaled to mesoflow's half-height.
+        cam = cfg["camera"]
+        sensor = scene_dict["sensor"]
+        sensor["type"] = "orthographic"
+        del sensor["fov"], sensor["fov_axis"]
+        sensor["to_world"] = mi.ScalarTransform4f().look_at(
+            origin=cam["eye"], target=cam["target"], up=cam.get("up", [0, 1, 0])) \
+            @ mi.ScalarTransform4f().scale([cam_ortho, cam_ortho, 1.0])
     medium = cfg.get("medium")
     if medium is not None:
         # Russian roulette past the fifth event, volpath's default, stops a path with

@@ -7,8 +7,13 @@
 //!
 //! Radiometry: the light has unit irradiance on a plane facing it, so a value is
 //! f(ωi, ωo) · max(0, n·ωi) · visibility — for a flat Lambertian tile, ρ/π · cos θi.
+//!
+//! With `bounces` = N > 0 the capture also holds the light that reflects between the tile's
+//! walls up to N more times before it leaves towards the viewer (`interreflect.rs`): a final
+//! gather of `bounce_rays` seeded rays per height-field sample, cast once for all lights.
 
 use super::directions::{DirectionSet, Named};
+use super::interreflect::{self, Transport};
 use crate::heightfield::raycast::{Caster, Miss};
 use crate::reflectance::models::{self as brdf, Lobe, Model};
 use crate::types::{BrdfMap, Btf, Direction, DirectionPair, HeightField, Image, WARD_PARAMS};
@@ -57,6 +62,21 @@ pub struct Params {
     /// (the default) samples the texel's centre only.
     #[schemars(range(min = 1, max = 16))]
     pub samples: u32,
+    /// Diffuse interreflections inside the tile: how many more times light may reflect between
+    /// its walls after the direct bounce. 0 (the default) holds the direct bounce only.
+    #[schemars(range(min = 0, max = 32))]
+    pub bounces: u32,
+    /// With `bounces` > 0: gather rays per height-field sample (cosine-distributed, seeded);
+    /// the indirect light's noise falls as 1/√rays.
+    #[schemars(range(min = 1, max = 4096))]
+    pub bounce_rays: u32,
+    /// With `bounces` > 0: samples of the interreflections' grid per height-field sample along
+    /// each axis (1 to 8); default: the steepest rise between neighbouring samples, in texels,
+    /// rounded up, at most 4 (a wall several texels high within one cell needs a finer grid).
+    #[schemars(range(min = 1, max = 8))]
+    pub bounce_grid: Option<u32>,
+    /// Seed of the gather rays.
+    pub seed: u64,
 }
 
 impl Default for Params {
@@ -75,6 +95,10 @@ impl Default for Params {
             preview_light: [45.0, 0.0],
             memory_budget_gb: None,
             samples: 1,
+            bounces: 0,
+            bounce_rays: 64,
+            bounce_grid: None,
+            seed: 1,
         }
     }
 }
@@ -88,9 +112,9 @@ impl Node for Capture {
         NodeSpec {
             kind: "btf.capture",
             // 2: GGX and anisotropic Ward, per-texel `maps`; Ward's half vector normalised first
-            // (the same value, other rounding).
+            // (the same value, other rounding). (`bounces` 0, the default, is version 2's BTF.)
             version: 2,
-            doc: "Synthetic BTF of a periodic height field: view rays with masking and parallax, shadow rays; Lambert, Ward, anisotropic Ward or GGX with Fresnel, constant or per texel.",
+            doc: "Synthetic BTF of a periodic height field: view rays with masking and parallax, shadow rays, and optionally diffuse interreflections between the tile's walls; Lambert, Ward, anisotropic Ward or GGX with Fresnel, constant or per texel.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("height", HeightField::TYPE, "mesostructure tile, heights in texels"),
@@ -100,6 +124,7 @@ impl Node for Capture {
             outputs: vec![
                 Port::output("btf", Btf::TYPE, "the captured BTF"),
                 Port::output("preview", Image::TYPE, "the pair nearest (preview_view, preview_light)"),
+                Port::optional_output("trapped", "Scalar", "share of the interreflection gather's rays that met the tile again: how much the mesostructure sees of itself (absent without bounces)"),
             ],
             disk_cache: true,
         }
@@ -149,13 +174,35 @@ impl Node for Capture {
                 format!("the BTF would need {bytes} bytes"),
             ));
         }
-        let scene = Scene::new(hf, albedo, lobe_maps, p);
+        let mut scene = Scene::new(hf, albedo, lobe_maps, p);
         let plane = width * height;
+        // With bounces: the lights' light over the transport grid, and the gather's rays.
+        let grid = p.bounce_grid.unwrap_or_else(|| interreflect::default_grid(hf)) as u64;
+        let samples = (hf.width * hf.height) as u64 * grid * grid;
+        let transport = if p.bounces > 0 {
+            // three arrays of lights × RGB f32 per transport sample, and 12 bytes a gather ray
+            lights.len() as u64 * samples * 36 + samples * p.bounce_rays as u64 * 12
+        } else {
+            0
+        };
         crate::support::memory::check(
-            (pairs.len() * 3 * plane * 4) as u64,
+            (pairs.len() * 3 * plane * 4) as u64 + transport,
             &format!("a BTF of {} pairs × {plane} texels × RGB f32", pairs.len()),
             p.memory_budget_gb,
         )?;
+        if p.bounces > 0 {
+            scene.indirect = Some(Transport::solve(
+                ctx,
+                hf,
+                &scene.albedo,
+                &lights,
+                p.bounces as usize,
+                p.bounce_rays as usize,
+                grid as usize,
+                p.seed,
+            )?);
+        }
+        let trapped = scene.indirect.as_ref().map(|t| t.trapped);
         let mut data = vec![0f32; pairs.len() * 3 * plane];
         let (done, missed) = (AtomicU64::new(0), AtomicU64::new(0));
         let scale = (
@@ -167,6 +214,7 @@ impl Node for Capture {
         data.par_chunks_mut(3 * plane * lights.len().max(1))
             .zip(&views)
             .try_for_each(|(out, &view)| {
+                ctx.check_cancel()?;
                 let m = scene.render_view(
                     ctx,
                     view,
@@ -197,7 +245,11 @@ impl Node for Capture {
         let want_view = Direction::degrees(p.preview_view[0], p.preview_view[1]);
         let want_light = Direction::degrees(p.preview_light[0], p.preview_light[1]);
         let preview = btf.preview(btf.nearest_pair(&want_view, &want_light).unwrap_or(0));
-        Ok(Outputs::new().with("btf", btf).with("preview", preview))
+        let mut out = Outputs::new().with("btf", btf).with("preview", preview);
+        if let Some(t) = trapped {
+            out = out.with("trapped", mesoflow_runtime::Scalar(t));
+        }
+        Ok(out)
     }
 }
 
@@ -285,6 +337,8 @@ struct Scene<'a> {
     lobe: Lobe,
     /// Per-sample (ρs, α) from `maps`; αv keeps the lobe's αv/α ratio.
     lobe_maps: Option<Vec<[f32; 2]>>,
+    /// With `bounces`: every light's indirect irradiance over the tile.
+    indirect: Option<Transport>,
 }
 
 impl<'a> Scene<'a> {
@@ -317,6 +371,7 @@ impl<'a> Scene<'a> {
                 ior: p.ior,
             },
             lobe_maps,
+            indirect: None,
         }
     }
 
@@ -369,16 +424,18 @@ impl<'a> Scene<'a> {
             }
             out.par_chunks_mut(3 * plane)
                 .zip(lights)
-                .for_each(|(out, light)| {
+                .enumerate()
+                .for_each(|(l, (out, light))| {
                     let wi = light.vector();
                     let light_ray = to_grid(wi);
+                    let indirect = self.indirect.as_ref().map(|t| (t, l));
                     for (k, texel) in seen.chunks(n * n).enumerate() {
                         let (y, x) = (y0 + k / width, k % width);
                         let mut sum = [0.0; 3];
                         for c in texel
                             .iter()
                             .flatten()
-                            .map(|s| self.shade(s, light_ray, wi, wo))
+                            .map(|s| self.shade(s, light_ray, wi, wo, indirect))
                         {
                             (0..3).for_each(|k| sum[k] += c[k] * share);
                         }
@@ -427,8 +484,27 @@ impl<'a> Scene<'a> {
     }
 
     /// Radiance of the seen point under the light along `wi` (grid direction `light_ray`),
-    /// seen from `wo`: zero where the light is behind the normal or blocked.
-    fn shade(&self, s: &Seen, light_ray: [f64; 3], wi: [f64; 3], wo: [f64; 3]) -> [f64; 3] {
+    /// seen from `wo`: the direct light (zero where the light is behind the normal or blocked),
+    /// plus, with `indirect` (the transport and this light's index in it: its irradiance from
+    /// the tile's other walls), its diffuse reflection.
+    fn shade(
+        &self,
+        s: &Seen,
+        light_ray: [f64; 3],
+        wi: [f64; 3],
+        wo: [f64; 3],
+        indirect: Option<(&Transport, usize)>,
+    ) -> [f64; 3] {
+        let mut out = self.direct(s, light_ray, wi, wo);
+        if let Some((t, light)) = indirect {
+            let e = t.at(light, s.at[0], s.at[1]);
+            (0..3).for_each(|c| out[c] += s.rho[c] / std::f64::consts::PI * e[c]);
+        }
+        out
+    }
+
+    /// The direct light's part of [`Scene::shade`].
+    fn direct(&self, s: &Seen, light_ray: [f64; 3], wi: [f64; 3], wo: [f64; 3]) -> [f64; 3] {
         let n = s.n;
         let cos_i = n[0] * wi[0] + n[1] * wi[1] + n[2] * wi[2];
         if cos_i <= 0.0 {
@@ -741,6 +817,133 @@ mod tests {
                 "x {x}: {tilted} vs {expected_tilted}"
             );
         }
+    }
+
+    /// Periodic grooves along the image's y axis: a cosine `depth` texels deep over a period
+    /// of `n` samples (smooth, so the shading normals are the surface's own).
+    fn grooves(n: usize, depth: f32) -> HeightField {
+        field(n, |i, _| {
+            let x = i as f32 / n as f32;
+            0.5 * depth * (1.0 + (2.0 * std::f32::consts::PI * x).cos())
+        })
+    }
+
+    /// Reflected flux per unit area of the reference plane for each light of `b`, from its
+    /// views: the midpoint rule in (cos θo, φo) over `m` × `m` views, which `quadrature` lists.
+    fn flux(b: &Btf, m: usize) -> Vec<f64> {
+        let lights = b.pairs.len() / (m * m);
+        let plane = (b.width * b.height) as f64;
+        (0..lights)
+            .map(|l| {
+                (0..m * m)
+                    .map(|v| {
+                        let k = v * lights + l;
+                        let mean = (0..b.width * b.height)
+                            .map(|t| b.data[k * 3 * b.width * b.height + t] as f64)
+                            .sum::<f64>()
+                            / plane;
+                        mean * b.pairs[k].view.theta.cos() * (2.0 * PI / (m * m) as f64)
+                    })
+                    .sum()
+            })
+            .collect()
+    }
+
+    fn quadrature(m: usize) -> DirectionSet {
+        DirectionSet::List(
+            (0..m * m)
+                .map(|k| {
+                    let mu = ((k / m) as f64 + 0.5) / m as f64;
+                    [mu.acos().to_degrees(), ((k % m) as f64 + 0.5) * 360.0 / m as f64]
+                })
+                .collect(),
+        )
+    }
+
+    #[test]
+    fn a_flat_tile_gains_nothing_from_bounces() {
+        // Every gather ray from a flat tile leaves it: the BTF is the direct one, bit for bit.
+        let p = Params {
+            views: DirectionSet::List(vec![[0.0, 0.0], [50.0, 120.0]]),
+            lights: DirectionSet::List(vec![[30.0, 10.0], [70.0, 250.0]]),
+            ..Params::default()
+        };
+        let direct = capture(field(8, |_, _| 2.0), None, &p).unwrap();
+        let bounced = capture(
+            field(8, |_, _| 2.0),
+            None,
+            &Params {
+                bounces: 4,
+                ..p.clone()
+            },
+        )
+        .unwrap();
+        assert_eq!(direct.data, bounced.data);
+    }
+
+    #[test]
+    fn interreflections_add_light_but_never_make_energy() {
+        // White (ρ = 1) Lambertian grooves lose no light: all that arrives leaves again, after
+        // enough bounces. So the reflected flux over the hemisphere of views is at most the
+        // irradiance cos θi of the reference plane, reaches it as bounces grow, and with one
+        // bounce lies between the direct light's and that. The flux comes from the BTF itself by
+        // a 16 × 16 midpoint rule, exact on the flat tile (checked to 2e-3). On the grooves
+        // (a period of 24 samples, 12 deep, a transport grid of 2 per sample) what remains is
+        // the grid's interpolation (shadow edges included), the rule on a view-dependent
+        // radiance and the gather's noise: measured 0.12% over, 1.7% short (the grazing light
+        // across the grooves, whose shadow edges the grid smears) and 0.13% over cos θi; the
+        // bound allows 4% short and 1% over.
+        let m = 16;
+        let p = Params {
+            views: quadrature(m),
+            lights: DirectionSet::List(vec![[20.0, 0.0], [60.0, 0.0], [60.0, 90.0]]),
+            albedo: [1.0; 3],
+            bounce_rays: 256,
+            ..Params::default()
+        };
+        let cos_i = [20f64, 60.0, 60.0].map(|t| t.to_radians().cos());
+        let flat = flux(&capture(field(4, |_, _| 0.0), None, &p).unwrap(), m);
+        for (f, c) in flat.iter().zip(cos_i) {
+            assert!((f / c - 1.0).abs() < 2e-3, "flat: {f} vs {c}");
+        }
+        let at = |bounces| {
+            flux(
+                &capture(grooves(24, 12.0), None, &Params { bounces, ..p.clone() }).unwrap(),
+                m,
+            )
+        };
+        let (direct, one, many) = (at(0), at(1), at(12));
+        for l in 0..3 {
+            let c = cos_i[l];
+            eprintln!(
+                "light {l}: direct {:.4} one {:.4} many {:.4} of {c:.4}",
+                direct[l], one[l], many[l]
+            );
+            assert!(direct[l] < 0.9 * c, "the grooves trap light: {}", direct[l]);
+            assert!(one[l] > direct[l] * 1.05 && one[l] < many[l], "{one:?}");
+            assert!(many[l] <= c * 1.01, "energy made: {} of {c}", many[l]);
+            assert!(many[l] >= c * 0.96, "energy lost: {} of {c}", many[l]);
+        }
+    }
+
+    #[test]
+    fn bounces_give_the_same_bits_at_any_thread_count() {
+        let p = Params {
+            views: DirectionSet::List(vec![[0.0, 0.0], [45.0, 30.0], [70.0, 200.0]]),
+            lights: DirectionSet::List(vec![[30.0, 0.0], [60.0, 90.0]]),
+            bounces: 3,
+            bounce_rays: 16,
+            samples: 2,
+            ..Params::default()
+        };
+        let run = |threads| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| capture(grooves(16, 6.0), None, &p).unwrap())
+        };
+        assert_eq!(run(1).data, run(3).data);
     }
 
     #[test]

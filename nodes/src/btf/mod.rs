@@ -6,6 +6,7 @@ pub mod capture;
 pub mod compare;
 pub mod directions;
 pub mod factor;
+pub mod interreflect;
 pub mod lod;
 pub mod pca;
 pub mod read_ubo2003;

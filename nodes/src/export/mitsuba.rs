@@ -8,6 +8,8 @@
 //! - the directional light → `directional` (its travel direction, the same irradiance); a point
 //!   light → `point` (the same intensity and 1/r²);
 //! - direct light only → `direct` (one emitter sample, no BSDF samples: the light is a delta);
+//!   with `bounces` N → `path` at `max_depth` N + 2 (Mitsuba counts the camera segment and the
+//!   direct bounce), no Russian roulette;
 //! - Lambert → `diffuse` (exact; a texture is a bilinear, repeating `bitmap` of linear values,
 //!   its v turned over: Mitsuba's v = 0 is an image's top row, mesoflow's its bottom row);
 //!   Ward → `blendbsdf` of `diffuse` and `roughconductor` (Beckmann α, Fresnel 1: Ward's lobe
@@ -89,6 +91,20 @@ pub fn write(s: &Scene) -> String {
     let _ = writeln!(x, r#"    <default name="spp" value="{}"/>"#, s.samples);
     let _ = writeln!(x, r#"    <default name="seed" value="{}"/>"#, s.seed);
     match &s.look {
+        Look::Surface { .. } if s.bounces > 0 => {
+            // Mitsuba counts the camera segment and the direct bounce; no Russian roulette,
+            // so every path runs to its depth as the reference's do.
+            let _ = writeln!(x, r#"    <integrator type="path">"#);
+            let _ = writeln!(
+                x,
+                r#"        <integer name="max_depth" value="{}"/>"#,
+                s.bounces + 2
+            );
+            let _ = writeln!(
+                x,
+                r#"        <integer name="rr_depth" value="1073741824"/>"#
+            );
+        }
         Look::Surface { .. } => {
             let _ = writeln!(x, r#"    <integrator type="direct">"#);
             let _ = writeln!(x, r#"        <integer name="emitter_samples" value="1"/>"#);

@@ -11,7 +11,7 @@
 //! - the lights → `distant` (from 0 towards the light's travel direction, `L` the irradiance) or
 //!   `point` (`I`); pbrt-v4 normalises an RGB light's illuminant to 1 nit, which is what its
 //!   sRGB film reads back as 1;
-//! - direct light only → `path` with `maxdepth` 1;
+//! - direct light only → `path` with `maxdepth` 1; with `bounces` N, `maxdepth` N + 1;
 //! - Lambert → `diffuse`; Ward and GGX → `mix` of `diffuse` and a `conductor` of GGX roughness α
 //!   (pbrt-v4's only microfacet distribution, so Ward's Beckmann lobe becomes GGX of the same α)
 //!   whose normal-incidence reflectance is the lobe's scale; pbrt's `diffuse` is two-sided where
@@ -168,7 +168,12 @@ pub fn write(s: &Scene, translucency: Translucency, image: &str) -> String {
     );
     match &s.look {
         Look::Surface { .. } => {
-            let _ = writeln!(x, "Integrator \"path\" \"integer maxdepth\" [ 1 ]");
+            // pbrt's depth counts reflections: 1 is direct light, N + 1 adds N bounces.
+            let _ = writeln!(
+                x,
+                "Integrator \"path\" \"integer maxdepth\" [ {} ]",
+                s.bounces + 1
+            );
         }
         Look::Medium(_) => {
             // No depth limit in the reference: paths end when they leave or are absorbed.

@@ -75,6 +75,8 @@ pub struct Scene {
     pub direction: [f64; 3],
     pub samples: u32,
     pub seed: u64,
+    /// Reflections after the direct one a surface path follows (`render.reference`'s `bounces`).
+    pub bounces: u32,
     /// The mesh's file name, relative to the scene file.
     pub mesh_file: String,
     pub look: Look,
@@ -220,6 +222,7 @@ pub fn build(path: &str, r: &RenderParams, inputs: &Inputs) -> Result<Scene, Nod
         direction: light.direction,
         samples: r.samples,
         seed: r.seed,
+        bounces: r.bounces,
         mesh_file,
         look,
         files,

@@ -1,5 +1,6 @@
 //! `render.reference`: the ground truth's renderer. Direct illumination of a mesh (typically the
-//! true mesostructure from `mesh.displace`) by `render.mesh`'s one light, with exact hard shadows
+//! true mesostructure from `mesh.displace`) by `render.mesh`'s one light, and with `bounces` the
+//! light reflected between its surfaces (path tracing, a shadow ray at every vertex), with exact hard shadows
 //! (a shadow ray per sample) and the capture's reflectance models (`btf.capture`'s Lambert and
 //! Ward, the same parameters), seen by `render.mesh`'s camera: N samples per pixel, stratified
 //! where N is a square, averaged (a box filter). No BTF, no MDF, no shadow map: nothing that the
@@ -53,8 +54,12 @@ crate::view_params! {
         /// Samples per pixel (1 to 65536); a square number is stratified.
         #[schemars(range(min = 1, max = 65536))]
         pub samples: u32 = 16,
-        /// Seed of the sub-pixel positions (and of the paths, with a medium).
+        /// Seed of the sub-pixel positions (and of the paths, with a medium or bounces).
         pub seed: u64 = 1,
+        /// Reflections off the mesh after the direct one that a surface path follows (0, the
+        /// default: direct light only). A path ends where it leaves the mesh.
+        #[schemars(range(min = 0, max = 64))]
+        pub bounces: u32 = 0,
         /// GGX roughness α (0.01 to 1) of the `medium`'s boundary where its η ≠ 1 (required there,
         /// ignored at η = 1): a rough dielectric, because light through a smooth one from a
         /// directional light cannot be sampled, and a lobe narrower than 0.01 makes next-event
@@ -79,8 +84,9 @@ impl Node for Reference {
             // 2: Ward's half vector is normalised before its cosine (btf::brdf; other rounding).
             // 3: a `medium` input (volumetric path tracing) and the `noise` estimate.
             // 4: a rough dielectric boundary for media at η ≠ 1 (the same image at η = 1).
+            // (`bounces` 0, the default, renders version 4's image.)
             version: 4,
-            doc: "Ground truth (or, with a normal map, normal mapping): direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance; or, with a medium, volumetric path tracing of a translucent object (index-matched boundary at η = 1, rough dielectric otherwise). N samples per pixel, box filter, on the CPU, with its own noise estimate.",
+            doc: "Ground truth (or, with a normal map, normal mapping): direct light on a mesh (e.g. mesh.displace's true mesostructure) with exact hard shadows and the capture's Lambert or Ward reflectance, and with `bounces` the light reflected between its surfaces (path tracing); or, with a medium, volumetric path tracing of a translucent object (index-matched boundary at η = 1, rough dielectric otherwise). N samples per pixel, box filter, on the CPU, with its own noise estimate.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("mesh", Mesh::TYPE, "the geometry, its normals the shading normals"),
@@ -143,6 +149,12 @@ impl Node for Reference {
         let mesh = inputs.get::<Mesh>("mesh")?;
         mesh.check().map_err(|e| NodeError::input("mesh", e))?;
         let medium = match inputs.opt::<ScatteringMaterial>("medium")? {
+            Some(_) if p.bounces > 0 => {
+                return Err(NodeError::param(
+                    "bounces",
+                    "is for a surface: with a `medium` every path already follows each scattering event to its end",
+                ));
+            }
             Some(m) => {
                 if inputs.opt::<Image>("albedo")?.is_some()
                     || inputs.opt::<NormalMap>("normals")?.is_some()
@@ -354,13 +366,15 @@ fn translucent(
     }
 }
 
-/// One pixel of a surface: direct light, hard shadows, the capture's reflectance.
+/// One pixel of a surface: direct light, hard shadows, the capture's reflectance; with
+/// `bounces`, the light that reached each seen point after up to that many reflections off the
+/// mesh (a path per sample, cosine-sampled, the light's visibility tested at every vertex).
 fn pixel(
     scene: &Tracer,
     camera: &Camera,
     light: &Light,
     p: &Params,
-    (albedo, normals): (Option<&Image>, Option<&NormalMap>),
+    maps: (Option<&Image>, Option<&NormalMap>),
     x: usize,
     y: usize,
 ) -> Pixel {
@@ -368,6 +382,7 @@ fn pixel(
     let mut halves = [[0.0; 3]; 2];
     let mut hits = 0usize;
     let mut rays = 0u64;
+    let pixel_id = (y * camera.width as usize + x) as u64;
     for s in 0..n {
         let (origin, dir) = camera_ray(camera, p, x, y, s);
         rays += 1;
@@ -376,37 +391,40 @@ fn pixel(
             continue;
         };
         hits += 1;
-        let (_, ng) = scene.triangle(hit.tri);
-        let wo = mul(dir, -1.0);
-        if dot(ng, wo) <= 0.0 {
+        let Some(mut at) = Vertex::of(scene, &hit, dir, p, maps) else {
             continue; // one-sided: seen from behind
-        }
-        let (pos, ns) = scene.mesh.interpolate(hit.tri, hit.b1, hit.b2);
-        let mut ns = normalize(ns).unwrap_or(ng);
-        if let Some(map) = normals {
-            ns = mapped_normal(scene.mesh, &hit, ns, map, p.tiling);
-        }
-        let (wi, irradiance) = light.at(pos);
-        let cos_i = dot(ns, wi);
-        if cos_i <= 0.0 || dot(ns, wo) <= 0.0 {
-            continue;
-        }
-        rays += 1;
-        let reach = light.reach(pos, wi);
-        if scene.occluded(add(pos, mul(ng, scene.epsilon)), wi, reach) {
-            continue;
-        }
-        let rho = match albedo {
-            Some(img) => {
-                let uv = uv_at(scene.mesh, hit.tri, hit.b1, hit.b2);
-                sample(img, uv[0] * p.tiling[0], uv[1] * p.tiling[1])
-            }
-            None => p.albedo,
         };
-        let f = brdf::eval_rgb(p.brdf, rho, p.specular, p.roughness, ns, wi, wo);
-        for k in 0..3 {
-            halves[s % 2][k] += irradiance * f[k] * cos_i;
+        let mut l = at.direct(scene, light, p, &mut rays);
+        let mut throughput = [1.0; 3];
+        for bounce in 0..p.bounces as u64 {
+            // The path's own stream, apart from the sub-pixel position's hash.
+            let h = crate::support::rng::hash(p.seed ^ 0xb0_07ce, &[pixel_id, s as u64, bounce]);
+            let (u1, u2) = (
+                crate::support::rng::unit(h),
+                crate::support::rng::unit(crate::support::rng::mix(h)),
+            );
+            // Cosine-weighted about the shading normal: f · cos / pdf = π f.
+            let (t, b) = crate::support::geometry::frame(at.ns);
+            let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
+            let local = [r * phi.cos(), r * phi.sin(), (1.0 - u1).sqrt()];
+            let d = add(add(mul(t, local[0]), mul(b, local[1])), mul(at.ns, local[2]));
+            if dot(d, at.ng) <= 0.0 {
+                break; // into the surface the shading normal leans over
+            }
+            let f = brdf::eval_rgb(p.brdf, at.rho, p.specular, p.roughness, at.ns, d, at.wo);
+            throughput = [0, 1, 2].map(|k| throughput[k] * f[k] * std::f64::consts::PI);
+            rays += 1;
+            let Some(next) = scene.closest(add(at.pos, mul(at.ng, scene.epsilon)), d) else {
+                break; // left the mesh: a directional or point light sends nothing back
+            };
+            let Some(next) = Vertex::of(scene, &next, d, p, maps) else {
+                break;
+            };
+            at = next;
+            let direct = at.direct(scene, light, p, &mut rays);
+            l = [0, 1, 2].map(|k| l[k] + throughput[k] * direct[k]);
         }
+        halves[s % 2] = add(halves[s % 2], l);
     }
     Pixel {
         halves,
@@ -415,6 +433,70 @@ fn pixel(
             rays,
             ..Default::default()
         },
+    }
+}
+
+/// A point a ray met on the front of the mesh, as the shading sees it.
+struct Vertex {
+    pos: V3,
+    /// Geometric and shading normals.
+    ng: V3,
+    ns: V3,
+    /// Towards where the ray came from.
+    wo: V3,
+    rho: [f64; 3],
+}
+
+impl Vertex {
+    /// The point `hit` of a ray along `dir`; `None` where the ray met the triangle's back.
+    fn of(
+        scene: &Tracer,
+        hit: &Hit,
+        dir: V3,
+        p: &Params,
+        (albedo, normals): (Option<&Image>, Option<&NormalMap>),
+    ) -> Option<Vertex> {
+        let (_, ng) = scene.triangle(hit.tri);
+        let wo = mul(dir, -1.0);
+        if dot(ng, wo) <= 0.0 {
+            return None;
+        }
+        let (pos, ns) = scene.mesh.interpolate(hit.tri, hit.b1, hit.b2);
+        let mut ns = normalize(ns).unwrap_or(ng);
+        if let Some(map) = normals {
+            ns = mapped_normal(scene.mesh, hit, ns, map, p.tiling);
+        }
+        let rho = match albedo {
+            Some(img) => {
+                let uv = uv_at(scene.mesh, hit.tri, hit.b1, hit.b2);
+                sample(img, uv[0] * p.tiling[0], uv[1] * p.tiling[1])
+            }
+            None => p.albedo,
+        };
+        Some(Vertex {
+            pos,
+            ng,
+            ns,
+            wo,
+            rho,
+        })
+    }
+
+    /// The light's reflection towards `wo`: E · f · cos θi where the light is in front of both
+    /// normals' sides and a shadow ray reaches it; one shadow ray counted in `rays`.
+    fn direct(&self, scene: &Tracer, light: &Light, p: &Params, rays: &mut u64) -> [f64; 3] {
+        let (wi, irradiance) = light.at(self.pos);
+        let cos_i = dot(self.ns, wi);
+        if cos_i <= 0.0 || dot(self.ns, self.wo) <= 0.0 {
+            return [0.0; 3];
+        }
+        *rays += 1;
+        let reach = light.reach(self.pos, wi);
+        if scene.occluded(add(self.pos, mul(self.ng, scene.epsilon)), wi, reach) {
+            return [0.0; 3];
+        }
+        let f = brdf::eval_rgb(p.brdf, self.rho, p.specular, p.roughness, self.ns, wi, self.wo);
+        f.map(|f| irradiance * f * cos_i)
     }
 }
 

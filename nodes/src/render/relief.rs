@@ -11,7 +11,9 @@
 //! field's range (max − min texels) is `shell` world units deep. Directions are mapped into the
 //! tile's own proportions (the texel aspect) before the search, so a stretched mapping has flatter
 //! or steeper bumps as the geometry says. Values are radiance for the light's irradiance:
-//! E·f(ωi, ωo)·max(0, n·ωi)·visibility, as `btf.capture` measures.
+//! E·f(ωi, ωo)·max(0, n·ωi)·visibility, as `btf.capture` measures with `bounces` 0: the relief
+//! reflects the light once; light reflected between its walls is not modelled (a capture with
+//! `bounces`, or `render.reference` with `bounces` on the true surface, holds it).
 
 use super::relief_gpu;
 pub use super::relief_scene::Relief;
@@ -61,7 +63,7 @@ impl Node for RenderRelief {
         NodeSpec {
             kind: "render.relief",
             version: 1,
-            doc: "Relief mapping (Policarpo et al. 2005) of a mesh with a height map and Ward maps: linear then binary search in tangent space, self-occlusion and self-shadowing; GPU render pass with a CPU path.",
+            doc: "Relief mapping (Policarpo et al. 2005) of a mesh with a height map and Ward maps: linear then binary search in tangent space, self-occlusion and self-shadowing (the light's direct reflection: light reflected between the relief's walls is not modelled); GPU render pass with a CPU path.",
             device: DevicePreference::Gpu,
             inputs: vec![
                 Port::input("mesh", Mesh::TYPE, "the surface, with UVs and tangents"),
