@@ -141,8 +141,11 @@ pub enum SplitArg {
 
 #[derive(Clone, Copy, ValueEnum, PartialEq, Eq)]
 pub enum DeviceArg {
+    /// GPU nodes on a hardware GPU where there is one, else on their CPU path (with a warning).
     Auto,
+    /// Every node on the CPU.
     Cpu,
+    /// GPU nodes on a GPU adapter, software ones included; an error where there is none.
     Gpu,
 }
 
@@ -168,6 +171,7 @@ pub struct RunArgs {
     /// Output folder (default: out/<graph name>/).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    /// Where GPU nodes run.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
     /// No progress bars or summary table.
@@ -254,8 +258,10 @@ pub struct SweepArgs {
     /// Output folder (default: out/<graph name>/sweep/, where the studio writes its sweeps).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    /// Where GPU nodes run.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
+    /// No progress bars; only the result.
     #[arg(long, short)]
     pub quiet: bool,
     #[command(flatten)]
@@ -316,8 +322,10 @@ pub struct PlanArgs {
     /// the budget's noise, costs about 7.3 × this share frames of brute force at the budget).
     #[arg(long, value_name = "FRACTION")]
     pub probe_share: Option<f64>,
+    /// Where GPU nodes run.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
+    /// No progress bars; only the result.
     #[arg(long, short)]
     pub quiet: bool,
     #[command(flatten)]
@@ -340,6 +348,7 @@ pub struct ServeArgs {
     /// Output folder (default out/<graph name>).
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
+    /// Where GPU nodes run.
     #[arg(long, value_enum, default_value_t = DeviceArg::Auto)]
     pub device: DeviceArg,
     #[command(flatten)]

@@ -74,6 +74,78 @@ fn the_readme_is_a_newcomer_s_page() {
     assert!(first_block[1].starts_with("scripts/test"));
 }
 
+/// Words that speak of how mesoflow was made rather than of what it does: an issue's number, a
+/// working session, a landing, the source texts' numbering, a machine lent.
+fn speaks_of_its_making(line: &str) -> Option<&'static str> {
+    let lower = line.to_lowercase();
+    let words: Vec<&str> = lower
+        .split(|c: char| !c.is_alphanumeric() && c != '\'')
+        .filter(|w| !w.is_empty())
+        .collect();
+    for (k, w) in words.iter().enumerate() {
+        let next = words.get(k + 1).map_or("", |w| w.trim_end_matches("'s"));
+        let before = if k > 0 { words[k - 1] } else { "" };
+        match *w {
+            "issue" | "issue's" | "issues" => return Some("an issue"),
+            // A Python session is the user's; any other is ours.
+            "session" | "session's" | "sessions" if before != "python" => return Some("a session"),
+            "landing" | "landings" => return Some("a landing"),
+            "seed"
+                if next.len() == 3
+                    && next.starts_with('0')
+                    && next.chars().all(|c| c.is_ascii_digit()) =>
+            {
+                return Some("a source text")
+            }
+            "lent" => return Some("a machine lent"),
+            _ => {}
+        }
+    }
+    None
+}
+
+#[test]
+fn user_text_speaks_of_mesoflow_not_of_how_it_was_made() {
+    let mut texts: Vec<(String, String)> = vec![(
+        "README.md".into(),
+        std::fs::read_to_string(root().join("README.md")).unwrap(),
+    )];
+    for (name, text) in md_files(&root().join("docs/guide")) {
+        texts.push((format!("docs/guide/{name}"), text));
+    }
+    let graphs = root().join("graphs");
+    for entry in std::fs::read_dir(&graphs).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "json") {
+            let g: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+            if let Some(d) = g["description"].as_str() {
+                texts.push((path.display().to_string(), d.to_string()));
+            }
+        }
+    }
+    let mut found = Vec::new();
+    for (name, text) in &texts {
+        for (n, line) in text.lines().enumerate() {
+            if let Some(what) = speaks_of_its_making(line) {
+                found.push(format!("{name}:{}: {what}: {line}", n + 1));
+            }
+        }
+    }
+    assert!(found.is_empty(), "{}", found.join("\n"));
+    // The check itself finds what it is for.
+    assert_eq!(speaks_of_its_making("bounds (issue 57)"), Some("an issue"));
+    assert_eq!(
+        speaks_of_its_making("Seed 003's second half"),
+        Some("a source text")
+    );
+    assert_eq!(
+        speaks_of_its_making("for the Python session that made it"),
+        None
+    );
+    assert_eq!(speaks_of_its_making("seed 0's torus"), None);
+}
+
 /// The targets of `](…)` links that are neither web addresses nor anchors.
 fn relative_links(text: &str) -> Vec<String> {
     let mut out = Vec::new();
@@ -253,6 +325,10 @@ enum How {
 /// A command missing here fails the test, and so does an entry the pages no longer show.
 const GUIDE_COMMANDS: &[(&str, How)] = &[
     ("run graphs/btf_compress.json", How::AsWritten),
+    (
+        "run graphs/btf_compress.json --set capture.bounces=4",
+        How::AsWritten,
+    ),
     (
         "explain graphs/btf_compress.json --set pca.rank=8",
         How::AsWritten,

@@ -44,7 +44,12 @@ fn captured(bounces: u32) -> Btf {
         "albedo": [0.8, 0.8, 0.8], "samples": 8, "bounces": bounces, "bounce_rays": 1024
     }))
     .unwrap();
-    let out = run(&Capture, &p, &Inputs::new().with("height", Arc::new(pits()))).unwrap();
+    let out = run(
+        &Capture,
+        &p,
+        &Inputs::new().with("height", Arc::new(pits())),
+    )
+    .unwrap();
     out.take::<Btf>("btf")
 }
 
@@ -133,7 +138,10 @@ fn the_captures_interreflections_match_path_tracing_of_the_true_surface() {
     for (v, view) in VIEWS.iter().enumerate() {
         for (l, light) in LIGHTS.iter().enumerate() {
             let pair = v * LIGHTS.len() + l;
-            let (t0, t3) = (truth(&mesh, *view, *light, 0), truth(&mesh, *view, *light, 3));
+            let (t0, t3) = (
+                truth(&mesh, *view, *light, 0),
+                truth(&mesh, *view, *light, 3),
+            );
             let (c0, c3) = (btf_mean(&direct, pair), btf_mean(&bounced, pair));
             eprintln!(
                 "view {view:?} light {light:?}: direct {c0:.5} vs {t0:.5}, 3 bounces {c3:.5} vs {t3:.5} (gain {:.3} vs {:.3})",
@@ -208,7 +216,11 @@ fn the_captures_interreflections_match_mitsuba_s_path_tracer() {
                 theirs[1] / theirs[0]
             );
             assert!(gain < 0.02, "{at}: the bounces' gain {gain}");
-            assert!((c3 / theirs[1] - 1.0).abs() < 0.05, "{at}: {c3} against {}", theirs[1]);
+            assert!(
+                (c3 / theirs[1] - 1.0).abs() < 0.05,
+                "{at}: {c3} against {}",
+                theirs[1]
+            );
         }
     }
 }

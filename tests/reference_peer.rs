@@ -152,8 +152,8 @@ fn the_reference_s_bounces_agree_with_mitsuba_s_path_tracer() {
     }
     let direct = &images[0].1;
     let (rel, their_noise, ratio) = compare_to_peer(ours, [&theirs[0], &theirs[1]]);
-    let gain = ours.iter().map(|&v| v as f64).sum::<f64>()
-        / direct.iter().map(|&v| v as f64).sum::<f64>();
+    let gain =
+        ours.iter().map(|&v| v as f64).sum::<f64>() / direct.iter().map(|&v| v as f64).sum::<f64>();
     let combined = (ours_noise * ours_noise + their_noise * their_noise).sqrt();
     eprintln!(
         "relative RMSE {rel:.4} against a combined noise of {combined:.4} (ours {ours_noise:.4}, Mitsuba {their_noise:.4}); channel sums {ratio:?}; the bounces add {:.1}%",

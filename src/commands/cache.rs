@@ -2,6 +2,7 @@
 
 use crate::args::{CacheArgs, GcArgs};
 use crate::exit::invalid;
+use crate::progress::human_bytes;
 use mesoflow_runtime::cache::DiskCache;
 use std::path::PathBuf;
 
@@ -39,16 +40,18 @@ pub fn stats(a: &CacheArgs) -> anyhow::Result<i32> {
             all.push(serde_json::json!({"dir": dir.display().to_string(), "stats": s}));
             continue;
         }
+        // Sizes in readable units (`--json` gives the bytes).
         println!(
-            "{}: {} entries, {} bytes",
+            "{}: {} entries, {}",
             cache.dir().display(),
             s.entries,
-            s.bytes
+            human_bytes(s.bytes)
         );
         for (kind, k) in &s.by_kind {
             println!(
-                "  {kind:<28} {:>6} entries {:>14} bytes",
-                k.entries, k.bytes
+                "  {kind:<28} {:>6} entries {:>11}",
+                k.entries,
+                human_bytes(k.bytes)
             );
         }
         if s.unreadable > 0 {
@@ -148,12 +151,12 @@ pub fn gc(a: &GcArgs) -> anyhow::Result<i32> {
             all.push(serde_json::json!({"dir": dir.display().to_string(), "gc": s}));
         } else {
             println!(
-                "{}: removed {} entries ({} bytes); kept {} ({} bytes){}",
+                "{}: removed {} entries ({}); kept {} ({}){}",
                 cache.dir().display(),
                 s.removed,
-                s.freed_bytes,
+                human_bytes(s.freed_bytes),
                 s.kept,
-                s.kept_bytes,
+                human_bytes(s.kept_bytes),
                 if s.reclaimed > 0 {
                     format!("; {} orphaned temporary files", s.reclaimed)
                 } else {

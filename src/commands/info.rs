@@ -69,18 +69,24 @@ const COLUMNS: usize = 100;
 fn wrap(text: &str, first: usize, indent: usize) -> String {
     let mut out = String::new();
     let mut col = first;
+    // Whether the current line holds a word yet: a word after another is preceded by a space,
+    // whichever column the line started at.
+    let mut words = false;
     for word in text.split_whitespace() {
         let w = word.chars().count();
-        if col > indent && col + 1 + w > COLUMNS {
+        if words && col + 1 + w > COLUMNS {
             out.push('\n');
             out.push_str(&" ".repeat(indent));
             col = indent;
-        } else if col > first || (col == first && !out.is_empty()) {
+            words = false;
+        }
+        if words {
             out.push(' ');
             col += 1;
         }
         out.push_str(word);
         col += w;
+        words = true;
     }
     out
 }
@@ -319,5 +325,30 @@ fn emit_cluster(
         ));
         emit_cluster(&child, by_parent, depth + 1, out);
         out.push_str(&format!("{pad}}}\n"));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrapping_keeps_every_space_between_words() {
+        // A line that starts left of where the first one did (a parameter's doc continued
+        // under its name) still separates its words.
+        let text = "one two three four five six seven eight nine ten eleven twelve thirteen \
+                    fourteen fifteen sixteen seventeen eighteen nineteen twenty surface reflectance";
+        for (first, indent) in [(2, 2), (40, 8), (60, 30)] {
+            let wrapped = wrap(text, first, indent);
+            assert_eq!(
+                wrapped.split_whitespace().collect::<Vec<_>>(),
+                text.split_whitespace().collect::<Vec<_>>(),
+                "{wrapped}"
+            );
+            for (k, line) in wrapped.lines().enumerate() {
+                let start = if k == 0 { first } else { 0 };
+                assert!(start + line.chars().count() <= COLUMNS, "{line}");
+            }
+        }
     }
 }

@@ -177,7 +177,9 @@ impl Node for Capture {
         let mut scene = Scene::new(hf, albedo, lobe_maps, p);
         let plane = width * height;
         // With bounces: the lights' light over the transport grid, and the gather's rays.
-        let grid = p.bounce_grid.unwrap_or_else(|| interreflect::default_grid(hf)) as u64;
+        let grid = p
+            .bounce_grid
+            .unwrap_or_else(|| interreflect::default_grid(hf)) as u64;
         let samples = (hf.width * hf.height) as u64 * grid * grid;
         let transport = if p.bounces > 0 {
             // three arrays of lights × RGB f32 per transport sample, and 12 bytes a gather ray
@@ -854,7 +856,10 @@ mod tests {
             (0..m * m)
                 .map(|k| {
                     let mu = ((k / m) as f64 + 0.5) / m as f64;
-                    [mu.acos().to_degrees(), ((k % m) as f64 + 0.5) * 360.0 / m as f64]
+                    [
+                        mu.acos().to_degrees(),
+                        ((k % m) as f64 + 0.5) * 360.0 / m as f64,
+                    ]
                 })
                 .collect(),
         )
@@ -908,7 +913,15 @@ mod tests {
         }
         let at = |bounces| {
             flux(
-                &capture(grooves(24, 12.0), None, &Params { bounces, ..p.clone() }).unwrap(),
+                &capture(
+                    grooves(24, 12.0),
+                    None,
+                    &Params {
+                        bounces,
+                        ..p.clone()
+                    },
+                )
+                .unwrap(),
                 m,
             )
         };

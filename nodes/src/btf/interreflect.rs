@@ -93,7 +93,11 @@ impl Gather {
                     let idx = j * width + i;
                     let n = normals[idx];
                     let (t, b) = frame(n);
-                    let origin = [i as f64, j as f64, hf.at_wrapped(i as isize, j as isize) as f64];
+                    let origin = [
+                        i as f64,
+                        j as f64,
+                        hf.at_wrapped(i as isize, j as isize) as f64,
+                    ];
                     for r in 0..rays {
                         let h = rng::hash(seed, &[idx as u64, r as u64]);
                         let (u1, u2) = (rng::unit(h), rng::unit(rng::mix(h)));
@@ -227,8 +231,8 @@ impl Gather {
                 let at = [u, v, caster.height(u, v)];
                 lights.iter().flat_map(move |&light| {
                     let cos = (-gu * light[0] - gv * light[1] + light[2]) / len;
-                    let lit = cos > 0.0
-                        && matches!(caster.cast(at, light, 1e-4), Err(Miss::Escaped));
+                    let lit =
+                        cos > 0.0 && matches!(caster.cast(at, light, 1e-4), Err(Miss::Escaped));
                     [0, 1, 2].map(|c| {
                         if lit {
                             (albedo[c][idx] as f64 / PI * cos) as f32
@@ -246,15 +250,13 @@ impl Gather {
     /// order.
     fn gather(&self, radiance: &[f32], stride: usize) -> Vec<f32> {
         let mut out = vec![0f32; (self.starts.len() - 1) * stride];
-        out.par_chunks_mut(stride)
-            .enumerate()
-            .for_each(|(idx, e)| {
-                for &(s, weight) in &self.entries[self.starts[idx]..self.starts[idx + 1]] {
-                    let s = s as usize;
-                    let b = &radiance[s * stride..(s + 1) * stride];
-                    e.iter_mut().zip(b).for_each(|(e, b)| *e += weight * b);
-                }
-            });
+        out.par_chunks_mut(stride).enumerate().for_each(|(idx, e)| {
+            for &(s, weight) in &self.entries[self.starts[idx]..self.starts[idx + 1]] {
+                let s = s as usize;
+                let b = &radiance[s * stride..(s + 1) * stride];
+                e.iter_mut().zip(b).for_each(|(e, b)| *e += weight * b);
+            }
+        });
         out
     }
 }

@@ -407,7 +407,10 @@ fn pixel(
             let (t, b) = crate::support::geometry::frame(at.ns);
             let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
             let local = [r * phi.cos(), r * phi.sin(), (1.0 - u1).sqrt()];
-            let d = add(add(mul(t, local[0]), mul(b, local[1])), mul(at.ns, local[2]));
+            let d = add(
+                add(mul(t, local[0]), mul(b, local[1])),
+                mul(at.ns, local[2]),
+            );
             if dot(d, at.ng) <= 0.0 {
                 break; // into the surface the shading normal leans over
             }
@@ -495,7 +498,15 @@ impl Vertex {
         if scene.occluded(add(self.pos, mul(self.ng, scene.epsilon)), wi, reach) {
             return [0.0; 3];
         }
-        let f = brdf::eval_rgb(p.brdf, self.rho, p.specular, p.roughness, self.ns, wi, self.wo);
+        let f = brdf::eval_rgb(
+            p.brdf,
+            self.rho,
+            p.specular,
+            p.roughness,
+            self.ns,
+            wi,
+            self.wo,
+        );
         f.map(|f| irradiance * f * cos_i)
     }
 }
