@@ -126,7 +126,11 @@ fn headline(registry: &mesoflow_runtime::Registry, n: &mesoflow_runtime::NodeRep
     sig.outputs
         .iter()
         .filter(|o| o.ty == "Scalar")
-        .find_map(|o| n.metrics.get(&o.name).map(|v| format!("{} {}", o.name, short(*v))))
+        .find_map(|o| {
+            n.metrics
+                .get(&o.name)
+                .map(|v| format!("{} {}", o.name, short(*v)))
+        })
         .unwrap_or_default()
 }
 
@@ -147,7 +151,9 @@ fn short(v: f64) -> String {
 /// node's headline metric.
 pub fn summary_with(report: &RunReport, explain: bool) -> String {
     let registry = mesoflow_nodes::registry::builtin();
-    let header = ["node", "kind", "device", "status", "seconds", "bytes", "metric"];
+    let header = [
+        "node", "kind", "device", "status", "seconds", "bytes", "metric",
+    ];
     let rows: Vec<[String; 7]> = report
         .nodes
         .iter()
@@ -256,7 +262,13 @@ mod tests {
         .unwrap();
         let registry = mesoflow_nodes::registry::builtin();
         let sig = registry.node("image.compare").unwrap().signature();
-        let first = sig.outputs.iter().find(|o| o.ty == "Scalar").unwrap().name.clone();
+        let first = sig
+            .outputs
+            .iter()
+            .find(|o| o.ty == "Scalar")
+            .unwrap()
+            .name
+            .clone();
         let table = summary(&report);
         let row = table.lines().find(|l| l.starts_with("compare")).unwrap();
         assert!(row.contains(&first), "{table}");
