@@ -950,11 +950,9 @@ mod tests {
             ..Params::default()
         };
         let run = |threads| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| capture(grooves(16, 6.0), None, &p).unwrap())
+            mesoflow_testkit::threads::with_threads(threads, || {
+                capture(grooves(16, 6.0), None, &p).unwrap()
+            })
         };
         assert_eq!(run(1).data, run(3).data);
     }

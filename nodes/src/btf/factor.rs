@@ -769,18 +769,14 @@ mod tests {
         let (t, n) = (600, 150);
         let data = synthetic(t, n, &[4.0, 3.0, 2.0, 1.0, 0.5, 0.25]);
         let run = |threads| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| {
-                    let x = Block::new(&data, t, n, 0, t, Centring::Texels);
-                    let f = iterative(&x, 3, 5, Stop::PowerIterations(2), 1, &|| false).unwrap();
-                    (
-                        f.residual.to_bits(),
-                        values(&f.d).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
-                    )
-                })
+            mesoflow_testkit::threads::with_threads(threads, || {
+                let x = Block::new(&data, t, n, 0, t, Centring::Texels);
+                let f = iterative(&x, 3, 5, Stop::PowerIterations(2), 1, &|| false).unwrap();
+                (
+                    f.residual.to_bits(),
+                    values(&f.d).iter().map(|v| v.to_bits()).collect::<Vec<_>>(),
+                )
+            })
         };
         assert_eq!(run(1), run(3));
     }

@@ -501,11 +501,9 @@ mod tests {
             ..Params::default()
         };
         let run = |threads| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| isomap(&x, &knn(&x, 8).unwrap(), &p).unwrap())
+            mesoflow_testkit::threads::with_threads(threads, || {
+                isomap(&x, &knn(&x, 8).unwrap(), &p).unwrap()
+            })
         };
         let (a, b) = (run(1), run(3));
         assert_eq!(a.embedding.data, b.embedding.data);

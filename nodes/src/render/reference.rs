@@ -770,17 +770,26 @@ mod tests {
             ..Default::default()
         };
         let go = |threads| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap()
-                .install(|| render(torus.clone(), &p))
+            mesoflow_testkit::threads::with_threads(threads, || render(torus.clone(), &p))
         };
         let (a, ca, covered) = go(1);
         let (b, cb, _) = go(3);
         assert_eq!(a.data, b.data);
         assert_eq!(ca.data, cb.data);
         assert!(covered > 0.05 && covered < 0.9, "{covered}");
+        // Paths with bounces draw their directions from (pixel, sample, bounce) alone, and the
+        // torus's inner ring reflects light onto itself, so they change the image but not the
+        // bits with the thread count.
+        let bounced = Params {
+            bounces: 3,
+            ..p.clone()
+        };
+        let go = |threads| {
+            mesoflow_testkit::threads::with_threads(threads, || render(torus.clone(), &bounced))
+        };
+        let (c, _, _) = go(1);
+        assert_eq!(c.data, go(2).0.data);
+        assert_ne!(c.data, a.data);
         // A pixel no sample hits is the background.
         let i = ca.data.iter().position(|&c| c == 0.0).unwrap();
         assert_eq!(&a.data[i * 3..i * 3 + 3], &[0.25, 0.0, 0.0]);

@@ -429,13 +429,7 @@ mod tests {
     fn same_bits_for_any_thread_count() {
         let ex = blobs(32, 32, 3);
         let s = settings(40, 40, 2);
-        let go = |t| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(t)
-                .build()
-                .unwrap()
-                .install(|| run(&ex, &s).image.data)
-        };
+        let go = |t| mesoflow_testkit::threads::with_threads(t, || run(&ex, &s).image.data);
         assert_eq!(go(1), go(3));
     }
 
