@@ -115,8 +115,10 @@ fn user_text_speaks_of_mesoflow_not_of_how_it_was_made() {
             )
         })
         .collect();
-    for (name, text) in md_files(&root().join("docs/guide")) {
-        texts.push((format!("docs/guide/{name}"), text));
+    for folder in ["docs/guide", "docs/reference"] {
+        for (name, text) in md_files(&root().join(folder)) {
+            texts.push((format!("{folder}/{name}"), text));
+        }
     }
     let graphs = root().join("graphs");
     for entry in std::fs::read_dir(&graphs).unwrap() {

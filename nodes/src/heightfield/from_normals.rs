@@ -31,7 +31,7 @@ use std::f64::consts::PI;
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum Method {
-    /// Weighted least squares of seed 003's E(z), sparse Cholesky.
+    /// Weighted least squares of the normal-integration energy E(z), sparse Cholesky.
     LeastSquares,
     /// Frankot–Chellappa: projection onto integrable fields by FFT (periodic tiles only).
     Fourier,
@@ -93,7 +93,7 @@ impl Node for FromNormals {
         NodeSpec {
             kind: "heightfield.from_normals",
             version: 1,
-            doc: "Height field from a normal map minimising seed 003's E(z): weighted sparse least squares (periodic or free) or Frankot–Chellappa; mean zero.",
+            doc: "Height field from a normal map minimising the normal-integration energy E(z): weighted sparse least squares (periodic or free) or Frankot–Chellappa; mean zero.",
             device: DevicePreference::Cpu,
             inputs: vec![
                 Port::input("normals", NormalMap::TYPE, "unit normals, tangent frame"),
@@ -309,7 +309,7 @@ fn edges(w: usize, h: usize, boundary: Boundary) -> Vec<(usize, usize, usize)> {
     e
 }
 
-/// Minimises Σ_edges c_e n_z,e² ((z_j − z_i) − s_e)², which is seed 003's E(z) with each
+/// Minimises Σ_edges c_e n_z,e² ((z_j − z_i) − s_e)², which is the normal-integration energy E(z) with each
 /// residual n_z·Δz + n_x taken at the edge's midpoint: n_e is the two texels' normals averaged and
 /// renormalised, s_e the mean slope over the edge by the fourth-order rule
 /// (−p₋₁ + 13p₀ + 13p₁ − p₂)/24 (the two-point mean where the stencil would cross a free border),
