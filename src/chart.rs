@@ -70,15 +70,65 @@ fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
 }
 
 /// A numeric, positive x spanning more than two decades (timings, counts) is drawn on a log
-/// scale: on a linear one the fast cases collapse onto the axis.
+/// scale: on a linear one the fast cases collapse onto the axis. So is one whose values grow
+/// by a factor (ranks 1, 2, 4, 8, 16; samples 1, 4, 16, 64): each step then has its own width.
 fn wants_log_x(c: &Chart) -> bool {
-    let xs = || c.series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
-    let (lo, hi) = xs()
+    let mut xs: Vec<f64> = c
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.0))
         .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(v), b.max(v))
-        });
-    c.x_names.is_none() && lo > 0.0 && hi / lo > 100.0
+        .collect();
+    xs.sort_by(f64::total_cmp);
+    xs.dedup();
+    let (Some(&lo), Some(&hi)) = (xs.first(), xs.last()) else {
+        return false;
+    };
+    let geometric = xs.len() >= 3 && xs.windows(2).all(|w| w[1] >= 1.9 * w[0]);
+    c.x_names.is_none() && lo > 0.0 && (hi / lo > 100.0 || geometric)
+}
+
+/// An axis label with as many decimals as the axis's span needs (an axis of whole numbers
+/// reads 2, 4, 8, not 2.000).
+fn tick(v: f64, span: f64) -> String {
+    let step = span.abs() / 8.0;
+    let decimals = if step >= 1.0 || step == 0.0 {
+        0
+    } else {
+        ((-step.log10()).ceil() as usize).min(6)
+    };
+    format!("{v:.decimals$}")
+}
+
+/// A log axis's label: the value itself, three significant digits, no trailing zeros.
+fn log_tick(x: f64) -> String {
+    let v = 10f64.powf(x);
+    let decimals = (2 - v.abs().log10().floor() as i32).clamp(0, 6) as usize;
+    let s = format!("{v:.decimals$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Series names in natural order, numbers by value: `pca.rank=2` before `pca.rank=16`.
+fn natural_order(a: &str, b: &str) -> std::cmp::Ordering {
+    let parts = |s: &str| -> Vec<String> {
+        s.split([',', '=', ' '])
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    for (x, y) in parts(a).iter().zip(parts(b).iter()) {
+        let ord = match (x.parse::<f64>(), y.parse::<f64>()) {
+            (Ok(p), Ok(q)) => p.total_cmp(&q),
+            _ => x.cmp(y),
+        };
+        if ord != std::cmp::Ordering::Equal {
+            return ord;
+        }
+    }
+    a.len().cmp(&b.len())
 }
 
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(), String> {
@@ -125,8 +175,8 @@ fn draw_axes<DB: DrawingBackend>(
             n.get(x.round() as usize).cloned().unwrap_or_default()
         }
         Some(_) => String::new(),
-        None if log_x => format!("{:.3e}", 10f64.powf(*x)),
-        None => format!("{x:.3}"),
+        None if log_x => log_tick(*x),
+        None => tick(*x, x1 - x0),
     };
     let x_desc = if log_x {
         format!("{} (log scale)", c.x_label)
@@ -138,13 +188,16 @@ fn draw_axes<DB: DrawingBackend>(
         .x_desc(x_desc)
         .y_desc(c.y_label)
         .x_label_formatter(&x_fmt)
-        .y_label_formatter(&|y| format!("{y:.4}"))
+        .y_label_formatter(&|y| tick(*y, y1 - y0))
         .draw()
         .map_err(e)?;
-    for (i, s) in c.series.iter().enumerate() {
+    // The legend in the values' order; each series' points joined in the order given (the
+    // parameter's, so a trade-off curve is traced along its parameter).
+    let mut order: Vec<&Series> = c.series.iter().collect();
+    order.sort_by(|a, b| natural_order(&a.name, &b.name));
+    for (i, s) in order.into_iter().enumerate() {
         let colour = Palette99::pick(i).to_rgba();
-        let mut pts = s.points.clone();
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let pts = s.points.clone();
         chart
             .draw_series(LineSeries::new(
                 if s.scatter { Vec::new() } else { pts.clone() },
@@ -184,4 +237,37 @@ pub fn write(base: &Path, c: &Chart) -> Result<(), String> {
     )?;
     let img = image::RgbImage::from_raw(size.0, size.1, rgb).ok_or("chart buffer size")?;
     img.save(with("png")).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_legends_and_scales_read_as_the_data() {
+        assert_eq!(tick(4.0, 14.0), "4");
+        assert_eq!(tick(0.015, 0.02), "0.015");
+        assert_eq!(log_tick(2f64.log10()), "2");
+        assert_eq!(log_tick(0.5f64.log10()), "0.5");
+        let mut names = vec!["pca.rank=1", "pca.rank=16", "pca.rank=2", "pca.rank=4"];
+        names.sort_by(|a, b| natural_order(a, b));
+        assert_eq!(
+            names,
+            ["pca.rank=1", "pca.rank=2", "pca.rank=4", "pca.rank=16"]
+        );
+        let chart = |xs: &[f64]| Chart {
+            title: String::new(),
+            x_label: "x",
+            y_label: "y",
+            series: vec![Series {
+                name: String::new(),
+                points: xs.iter().map(|&x| (x, 1.0)).collect(),
+                scatter: false,
+            }],
+            x_names: None,
+        };
+        assert!(wants_log_x(&chart(&[1.0, 2.0, 4.0, 8.0, 16.0])));
+        assert!(!wants_log_x(&chart(&[1.0, 2.0, 3.0, 4.0])));
+        assert!(wants_log_x(&chart(&[0.01, 0.5, 3.0])));
+    }
 }

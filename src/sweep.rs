@@ -447,10 +447,14 @@ fn chart_against<'a>(
         y_label: measure,
         series: groups
             .into_iter()
-            .map(|(name, points)| Series {
-                name,
-                points,
-                scatter: false,
+            // Against the parameter itself, joined along it.
+            .map(|(name, mut points)| {
+                points.sort_by(|p, q| p.0.total_cmp(&q.0));
+                Series {
+                    name,
+                    points,
+                    scatter: false,
+                }
             })
             .collect(),
         x_names: (!numeric).then(|| varies[vi].values.iter().map(cell).collect()),
