@@ -337,6 +337,11 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         How::AsWritten,
     ),
     (
+        "run graphs/truth.json --device cpu --set truth.bounces=4 --set truth.samples=64 \
+         --set capture.bounces=4",
+        How::Slow("a 4-bounce capture and a 4-bounce truth at 64 samples a pixel, about 40 s here"),
+    ),
+    (
         "explain graphs/btf_compress.json --set pca.rank=8",
         How::AsWritten,
     ),

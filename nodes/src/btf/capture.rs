@@ -176,14 +176,17 @@ impl Node for Capture {
         }
         let mut scene = Scene::new(hf, albedo, lobe_maps, p);
         let plane = width * height;
-        // With bounces: the lights' light over the transport grid, and the gather's rays.
-        let grid = p
-            .bounce_grid
-            .unwrap_or_else(|| interreflect::default_grid(hf)) as u64;
+        // With bounces: the lights' light over the transport grid (three arrays of lights × RGB
+        // f32 per sample) and the gather (12 bytes a ray cast, then up to 4 merged entries of 8).
+        let grid = match p.bounces {
+            0 => 1,
+            _ => p
+                .bounce_grid
+                .unwrap_or_else(|| interreflect::default_grid(hf)) as u64,
+        };
         let samples = (hf.width * hf.height) as u64 * grid * grid;
         let transport = if p.bounces > 0 {
-            // three arrays of lights × RGB f32 per transport sample, and 12 bytes a gather ray
-            lights.len() as u64 * samples * 36 + samples * p.bounce_rays as u64 * 12
+            lights.len() as u64 * samples * 36 + samples * p.bounce_rays as u64 * 44
         } else {
             0
         };
