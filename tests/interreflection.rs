@@ -114,7 +114,7 @@ fn central_mean(view: [f64; 2], data: &[f32], channels: usize) -> f64 {
 fn truth(mesh: &Arc<Mesh>, view: [f64; 2], light: [f64; 2], bounces: u32) -> f64 {
     let p: ReferenceParams = serde_json::from_value(json!({
         "camera": camera(view), "light": {"direction": unit(light), "intensity": 1.0},
-        "albedo": [0.8, 0.8, 0.8], "samples": 64, "bounces": bounces
+        "albedo": [0.8, 0.8, 0.8], "samples": 32, "bounces": bounces
     }))
     .unwrap();
     let out = run(&Reference, &p, &Inputs::new().with("mesh", mesh.clone())).unwrap();
