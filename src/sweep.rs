@@ -287,15 +287,8 @@ pub fn write_all(
             title: format!("{}.{} against the time of `{}`", m.node, m.port, m.node),
             x_label: "seconds",
             y_label: &m.port,
-            series: groups
-                .into_iter()
-                // In sweep order (e.g. increasing rank), so a line traces one method's trade-off.
-                .map(|(name, points)| Series {
-                    name,
-                    points,
-                    scatter: false,
-                })
-                .collect(),
+            // In sweep order (e.g. increasing rank), so a line traces one method's trade-off.
+            series: series_of(groups, false),
             x_names: None,
         };
         if is_time {
@@ -445,25 +438,15 @@ fn chart_against<'a>(
         title: format!("{measure} against {}", varies[vi].name()),
         x_label: &varies[vi].param,
         y_label: measure,
-        series: groups
-            .into_iter()
-            // Against the parameter itself, joined along it.
-            .map(|(name, mut points)| {
-                points.sort_by(|p, q| p.0.total_cmp(&q.0));
-                Series {
-                    name,
-                    points,
-                    scatter: false,
-                }
-            })
-            .collect(),
+        // Against the parameter itself, joined along it.
+        series: series_of(groups, true),
         x_names: (!numeric).then(|| varies[vi].values.iter().map(cell).collect()),
     }
 }
 
 /// Measure `m` against measure `x`: each series traces the first varied parameter (e.g. the
 /// rank) with the other varied values fixed (one series per combination), so a line is one
-/// configuration's cost–error trade-off.
+/// configuration's cost–error trade-off, joined in the parameter's order.
 fn chart_versus<'a>(
     varies: &[Vary],
     rows: &[Row],
@@ -490,19 +473,28 @@ fn chart_versus<'a>(
         ),
         x_label: &x.port,
         y_label: &m.port,
-        series: groups
-            .into_iter()
-            .map(|(name, mut points)| {
-                points.sort_by(|p, q| p.0.total_cmp(&q.0));
-                Series {
-                    name,
-                    points,
-                    scatter: false,
-                }
-            })
-            .collect(),
+        // In the sweep's order of the first varied parameter: the trade-off along it.
+        series: series_of(groups, false),
         x_names: None,
     }
+}
+
+/// A chart's series from its groups of points: sorted along x with `along_x`, else joined in
+/// the order the runs gave them.
+fn series_of(groups: BTreeMap<String, Vec<(f64, f64)>>, along_x: bool) -> Vec<Series> {
+    groups
+        .into_iter()
+        .map(|(name, mut points)| {
+            if along_x {
+                points.sort_by(|p, q| p.0.total_cmp(&q.0));
+            }
+            Series {
+                name,
+                points,
+                scatter: false,
+            }
+        })
+        .collect()
 }
 
 /// Each measured node once, in the order of first mention.
