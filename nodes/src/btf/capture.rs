@@ -353,15 +353,7 @@ impl<'a> Scene<'a> {
         lobe_maps: Option<Vec<[f32; 2]>>,
         p: &Params,
     ) -> Self {
-        let grad = (0..hf.height as isize)
-            .flat_map(|j| (0..hf.width as isize).map(move |i| (i, j)))
-            .map(|(i, j)| {
-                [
-                    0.5 * (hf.at_wrapped(i + 1, j) - hf.at_wrapped(i - 1, j)),
-                    0.5 * (hf.at_wrapped(i, j + 1) - hf.at_wrapped(i, j - 1)),
-                ]
-            })
-            .collect();
+        let grad = hf.gradients();
         Scene {
             caster: Caster::new(hf),
             top: hf.min_max().1 as f64,

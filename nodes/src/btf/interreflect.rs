@@ -24,7 +24,7 @@
 
 use crate::heightfield::grid::bilerp;
 use crate::heightfield::raycast::{Caster, Miss};
-use crate::support::geometry::frame;
+use crate::support::geometry::cosine_direction;
 use crate::support::rng;
 use crate::types::{Direction, HeightField};
 use mesoflow_runtime::{NodeContext, NodeError};
@@ -92,7 +92,6 @@ impl Gather {
                 for i in 0..width {
                     let idx = j * width + i;
                     let n = normals[idx];
-                    let (t, b) = frame(n);
                     let origin = [
                         i as f64,
                         j as f64,
@@ -100,11 +99,7 @@ impl Gather {
                     ];
                     for r in 0..rays {
                         let h = rng::hash(seed, &[idx as u64, r as u64]);
-                        let (u1, u2) = (rng::unit(h), rng::unit(rng::mix(h)));
-                        // Cosine-weighted about n (Malley's method): pdf cos θ / π.
-                        let (rad, phi) = (u1.sqrt(), 2.0 * PI * u2);
-                        let (x, y, z) = (rad * phi.cos(), rad * phi.sin(), (1.0 - u1).sqrt());
-                        let d = [0, 1, 2].map(|k| t[k] * x + b[k] * y + n[k] * z);
+                        let d = cosine_direction(n, rng::unit(h), rng::unit(rng::mix(h)));
                         row.push(match caster.cast(origin, d, 1e-4) {
                             // A direction under the bilinear surface beside its smooth normal
                             // meets its own point: no light, as a path tracer that stops where a
@@ -322,15 +317,7 @@ impl Transport {
                 })
                 .collect()
         });
-        let grad: Vec<[f32; 2]> = (0..height as isize)
-            .flat_map(|j| (0..width as isize).map(move |i| (i, j)))
-            .map(|(i, j)| {
-                [
-                    0.5 * (fine.at_wrapped(i + 1, j) - fine.at_wrapped(i - 1, j)),
-                    0.5 * (fine.at_wrapped(i, j + 1) - fine.at_wrapped(i, j - 1)),
-                ]
-            })
-            .collect();
+        let grad = fine.gradients();
         let caster = Caster::new(&fine);
         let gather = Gather::new(ctx, &fine, &caster, &grad, rays, seed)?;
         // Tangent frame (y up the image) to grid (v down the image).

@@ -399,17 +399,11 @@ fn pixel(
         for bounce in 0..p.bounces as u64 {
             // The path's own stream, apart from the sub-pixel position's hash.
             let h = crate::support::rng::hash(p.seed ^ 0xb0_07ce, &[pixel_id, s as u64, bounce]);
-            let (u1, u2) = (
+            // Cosine-weighted about the shading normal: f · cos / pdf = π f.
+            let d = crate::support::geometry::cosine_direction(
+                at.ns,
                 crate::support::rng::unit(h),
                 crate::support::rng::unit(crate::support::rng::mix(h)),
-            );
-            // Cosine-weighted about the shading normal: f · cos / pdf = π f.
-            let (t, b) = crate::support::geometry::frame(at.ns);
-            let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
-            let local = [r * phi.cos(), r * phi.sin(), (1.0 - u1).sqrt()];
-            let d = add(
-                add(mul(t, local[0]), mul(b, local[1])),
-                mul(at.ns, local[2]),
             );
             if dot(d, at.ng) <= 0.0 {
                 break; // into the surface the shading normal leans over

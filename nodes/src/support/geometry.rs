@@ -44,6 +44,15 @@ pub fn frame(z: V3) -> (V3, V3) {
     )
 }
 
+/// A direction about the unit vector `n` distributed as cos θ / π (Malley's method: a uniform
+/// point of the unit disc lifted onto the hemisphere), from two uniforms in [0, 1).
+pub fn cosine_direction(n: V3, u1: f64, u2: f64) -> V3 {
+    let (t, b) = frame(n);
+    let (r, phi) = (u1.sqrt(), 2.0 * std::f64::consts::PI * u2);
+    let (x, y, z) = (r * phi.cos(), r * phi.sin(), (1.0 - u1).sqrt());
+    [0, 1, 2].map(|k| t[k] * x + b[k] * y + n[k] * z)
+}
+
 /// The mesh's bounding sphere (centre, radius): centred on its bounding box, radius at least
 /// 10⁻⁹ so that a single point still has a scale.
 pub fn bounding_sphere(mesh: &Mesh) -> (V3, f64) {

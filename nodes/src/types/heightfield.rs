@@ -16,6 +16,19 @@ pub struct HeightField {
 impl HeightField {
     pub const TYPE: &'static str = "HeightField";
 
+    /// Central-difference gradients (∂h/∂u, ∂h/∂v) at every sample, periodic, row-major.
+    pub fn gradients(&self) -> Vec<[f32; 2]> {
+        (0..self.height as isize)
+            .flat_map(|j| (0..self.width as isize).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                [
+                    0.5 * (self.at_wrapped(i + 1, j) - self.at_wrapped(i - 1, j)),
+                    0.5 * (self.at_wrapped(i, j + 1) - self.at_wrapped(i, j - 1)),
+                ]
+            })
+            .collect()
+    }
+
     /// A field of `width`×`height` samples with sample (x, y) = f(x, y).
     pub fn from_fn(width: usize, height: usize, f: impl Fn(usize, usize) -> f32) -> Self {
         let data = (0..height)
