@@ -50,12 +50,13 @@ import numpy as np
 
 # The scene is the test peer's (tests/peers/mitsuba_reference.py), written once.
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "peers"))
-from mitsuba_reference import direct_scene  # noqa: E402
+from mitsuba_reference import scene_of  # noqa: E402
 
 
 def scene_dict(mi, cfg, pixel_format):
-    """The test peer's direct-light scene, with the mesh instanced where "instances" asks."""
-    d = direct_scene(mi, cfg, pixel_format=pixel_format)
+    """The test peer's scene (direct light; `path` to "max_depth" where given; an environment
+    where the light is one), with the mesh instanced where "instances" asks."""
+    d = scene_of(mi, cfg, pixel_format=pixel_format)
     offsets = cfg.get("instances")
     if offsets:
         tile = d.pop("shape")

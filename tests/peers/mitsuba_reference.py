@@ -16,8 +16,12 @@ normals (`face_normals`), as mesoflow's reference refracts.
 SCENE.json: {"mesh": PLY path, "camera": {eye, target, up, fov, resolution: [w, h]}, "seed" (7),
 "light": {direction (towards the light), intensity}, "albedo": [r, g, b], "samples": N}, and
 optionally "max_depth" (path tracing with interreflections instead of direct light) and
-"orthographic" in the camera (half the view's height; a square image).
+"orthographic" in the camera (half the view's height; a square image). A light of
+{"envmap": EXR path, "rotation": degrees} is instead an environment in mesoflow's lat-long
+convention (its intensity already in the texels, as `export.mitsuba` writes them), hidden from
+the camera as mesoflow's background is not the environment.
 """
+import math
 import json
 import sys
 
@@ -47,16 +51,31 @@ def direct_scene(mi, cfg, pixel_format="rgba"):
             "sampler": {"type": "independent", "sample_count": cfg["samples"], "seed": cfg.get("seed", 7)},
         },
         # Mitsuba's direction is the one the light travels in.
-        "light": {
-            "type": "directional",
-            "direction": [-d for d in light["direction"]],
-            "irradiance": {"type": "rgb", "value": [light["intensity"]] * 3},
-        },
+        "light": emitter(mi, light),
         "shape": {
             "type": "ply", "filename": cfg["mesh"],
             "bsdf": {"type": "diffuse", "reflectance": {"type": "rgb", "value": cfg["albedo"]}},
         },
     }
+
+
+def emitter(mi, light):
+    """A directional light, or an environment turned onto mesoflow's convention as
+    `export.mitsuba` turns it: Mitsuba's local (x, y, z) is mesoflow's (-z, x, y), then the
+    light's rotation about +z."""
+    if "envmap" not in light:
+        return {
+            "type": "directional",
+            "direction": [-d for d in light["direction"]],
+            "irradiance": {"type": "rgb", "value": [light["intensity"]] * 3},
+        }
+    r = math.radians(light.get("rotation", 0.0))
+    c, s = math.cos(r), math.sin(r)
+    m = [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    rz = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]]
+    t = [[sum(rz[a][k] * m[k][b] for k in range(3)) for b in range(3)] for a in range(3)]
+    matrix = [t[0] + [0.0], t[1] + [0.0], t[2] + [0.0], [0.0, 0.0, 0.0, 1.0]]
+    return {"type": "envmap", "filename": light["envmap"], "to_world": mi.ScalarTransform4f(matrix)}
 
 
 def scene_of(mi, cfg, pixel_format="rgba"):
@@ -69,6 +88,8 @@ def scene_of(mi, cfg, pixel_format="rgba"):
         # roulette, so each path runs to its depth as mesoflow's do.
         scene_dict["integrator"] = {"type": "path", "max_depth": cfg["max_depth"],
                                     "rr_depth": 1 << 30}
+    if "envmap" in cfg["light"]:
+        scene_dict["integrator"]["hide_emitters"] = True
     if cam_ortho := cfg["camera"].get("orthographic"):
         # Mitsuba's orthographic view spans [-1, 1] on both axes of a square image before its
         # to_world: scaled to mesoflow's half-height.

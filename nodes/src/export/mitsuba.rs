@@ -6,8 +6,13 @@
 //!   the view's half-height; a box pixel filter; `independent` samples, `$spp` and `$seed`
 //!   defaults so `-Dspp=…` overrides them;
 //! - the directional light → `directional` (its travel direction, the same irradiance); a point
-//!   light → `point` (the same intensity and 1/r²);
-//! - direct light only → `direct` (one emitter sample, no BSDF samples: the light is a delta);
+//!   light → `point` (the same intensity and 1/r²); an environment → `envmap` of its lat-long
+//!   image (EXR beside the scene, the intensity applied) turned onto mesoflow's convention
+//!   (Mitsuba's envmap looks up along +y with u = atan2(x, −z)/2π; mesoflow's up is +z, u from
+//!   +x towards +y) and by the light's rotation, hidden from the camera (`hide_emitters`) as
+//!   the reference's background is not the environment;
+//! - direct light only → `direct` (one emitter sample, no BSDF samples: the light is a delta, and
+//!   an environment is sampled by its radiance as the reference does);
 //!   with `bounces` N → `path` at `max_depth` N + 2 (Mitsuba counts the camera segment and the
 //!   direct bounce), no Russian roulette;
 //! - Lambert → `diffuse` (exact; a texture is a bilinear, repeating `bitmap` of linear values,
@@ -44,18 +49,39 @@ impl Node for ExportMitsuba {
         }
     }
 
+    fn files(
+        &self,
+        p: &scene::Params,
+        base: &std::path::Path,
+    ) -> Result<Vec<std::path::PathBuf>, NodeError> {
+        Ok(p.render.light.files(base))
+    }
+
     fn check(&self, p: &scene::Params) -> Result<(), NodeError> {
         scene::check(&p.path, &p.render)
     }
 
     fn run(
         &self,
-        _ctx: &NodeContext,
+        ctx: &NodeContext,
         p: &scene::Params,
         inputs: &Inputs,
     ) -> Result<Outputs, NodeError> {
-        let s = scene::build(&p.path, &p.render, inputs)?;
-        let xml = write(&s);
+        let mut s = scene::build(ctx, &p.path, &p.render, inputs)?;
+        let env_file = match s.environment.clone() {
+            Some(env) => {
+                let texels = env.radiance.iter().flatten().copied().collect();
+                Some(scene::environment_file(
+                    &mut s,
+                    &p.path,
+                    env.width,
+                    env.height,
+                    texels,
+                )?)
+            }
+            None => None,
+        };
+        let xml = write(&s, env_file.as_deref());
         Ok(scene::outputs_with(s, &p.path, xml))
     }
 }
@@ -78,7 +104,8 @@ fn attr(s: &str) -> String {
 }
 
 /// The scene file's text.
-pub fn write(s: &Scene) -> String {
+/// `env_file`: the environment's image, relative to the scene file, where the light is one.
+pub fn write(s: &Scene, env_file: Option<&str>) -> String {
     let mut x = String::new();
     let c = &s.camera;
     let [w, h] = c.resolution;
@@ -104,11 +131,17 @@ pub fn write(s: &Scene) -> String {
                 x,
                 r#"        <integer name="rr_depth" value="1073741824"/>"#
             );
+            if env_file.is_some() {
+                let _ = writeln!(x, r#"        <boolean name="hide_emitters" value="true"/>"#);
+            }
         }
         Look::Surface { .. } => {
             let _ = writeln!(x, r#"    <integrator type="direct">"#);
             let _ = writeln!(x, r#"        <integer name="emitter_samples" value="1"/>"#);
             let _ = writeln!(x, r#"        <integer name="bsdf_samples" value="0"/>"#);
+            if env_file.is_some() {
+                let _ = writeln!(x, r#"        <boolean name="hide_emitters" value="true"/>"#);
+            }
         }
         Look::Medium(_) => {
             let _ = writeln!(x, r#"    <integrator type="volpathmis">"#);
@@ -162,8 +195,34 @@ pub fn write(s: &Scene) -> String {
     let _ = writeln!(x, "        </film>");
     let _ = writeln!(x, "    </sensor>");
     let i = s.light.intensity;
-    match s.light.position {
-        None => {
+    match (s.light.position, env_file, &s.environment) {
+        (_, Some(file), Some(env)) => {
+            // Mitsuba's local direction (x, y, z) is mesoflow's (−z, x, y) before the rotation
+            // about +z: its up +y is mesoflow's +z, its u = 0 (−z) is mesoflow's +x.
+            let (c, sn) = (env.rotation.cos(), env.rotation.sin());
+            let m = [[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+            let r = [[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]];
+            let mut t = [[0.0; 3]; 3];
+            for a in 0..3 {
+                for b in 0..3 {
+                    t[a][b] = (0..3).map(|k| r[a][k] * m[k][b]).sum::<f64>();
+                }
+            }
+            let _ = writeln!(x, r#"    <emitter type="envmap">"#);
+            let _ = writeln!(
+                x,
+                r#"        <string name="filename" value="{}"/>"#,
+                attr(file)
+            );
+            let _ = writeln!(x, r#"        <transform name="to_world">"#);
+            let _ = writeln!(
+                x,
+                r#"            <matrix value="{} {} {} 0 {} {} {} 0 {} {} {} 0 0 0 0 1"/>"#,
+                t[0][0], t[0][1], t[0][2], t[1][0], t[1][1], t[1][2], t[2][0], t[2][1], t[2][2]
+            );
+            let _ = writeln!(x, "        </transform>");
+        }
+        (None, ..) => {
             let _ = writeln!(x, r#"    <emitter type="directional">"#);
             // Mitsuba's direction is the one the light travels in.
             let _ = writeln!(
@@ -173,7 +232,7 @@ pub fn write(s: &Scene) -> String {
             );
             let _ = writeln!(x, "        {}", rgb("irradiance", [i; 3]));
         }
-        Some(at) => {
+        (Some(at), ..) => {
             let _ = writeln!(x, r#"    <emitter type="point">"#);
             let _ = writeln!(x, r#"        <point name="position" value="{}"/>"#, v3(at));
             let _ = writeln!(x, "        {}", rgb("intensity", [i; 3]));

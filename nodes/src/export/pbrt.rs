@@ -10,7 +10,9 @@
 //!   with the view's `screenwindow`; a box pixel filter; `independent` samples;
 //! - the lights → `distant` (from 0 towards the light's travel direction, `L` the irradiance) or
 //!   `point` (`I`); pbrt-v4 normalises an RGB light's illuminant to 1 nit, which is what its
-//!   sRGB film reads back as 1;
+//!   sRGB film reads back as 1; an environment → `infinite` with its image resampled onto
+//!   pbrt-v4's equal-area octahedral square (512 × 512, each texel the environment along its
+//!   centre's direction, world axes as mesoflow's), which is what that light reads;
 //! - direct light only → `path` with `maxdepth` 1; with `bounces` N, `maxdepth` N + 1;
 //! - Lambert → `diffuse`; Ward and GGX → `mix` of `diffuse` and a `conductor` of GGX roughness α
 //!   (pbrt-v4's only microfacet distribution, so Ward's Beckmann lobe becomes GGX of the same α)
@@ -87,8 +89,28 @@ impl Node for ExportPbrt {
         Ok(())
     }
 
-    fn run(&self, _ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let s = scene::build(&p.path, &p.render, inputs)?;
+    fn files(
+        &self,
+        p: &Params,
+        base: &std::path::Path,
+    ) -> Result<Vec<std::path::PathBuf>, NodeError> {
+        Ok(p.render.light.files(base))
+    }
+
+    fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let mut s = scene::build(ctx, &p.path, &p.render, inputs)?;
+        if let Some(env) = s.environment.clone() {
+            let n = EQUAL_AREA_SIDE;
+            let mut texels = Vec::with_capacity(n * n * 3);
+            for y in 0..n {
+                for x in 0..n {
+                    let d = equal_area_direction((x as f64 + 0.5) / n as f64, (y as f64 + 0.5) / n as f64);
+                    texels.extend(env.radiance(d).map(|c| c as f32));
+                }
+            }
+            let file = scene::environment_file(&mut s, &p.path, n, n, texels)?;
+            s.light.environment = Some(file);
+        }
         let image = std::path::Path::new(&p.path)
             .with_extension("exr")
             .file_name()
@@ -98,6 +120,23 @@ impl Node for ExportPbrt {
         let text = write(&s, p.translucency, &image);
         Ok(scene::outputs_with(s, &p.path, text))
     }
+}
+
+/// Texels per side of the environment's equal-area image.
+const EQUAL_AREA_SIDE: usize = 512;
+
+/// pbrt-v4's equal-area square-to-sphere map (Clarberg 2008), (u, v) ∈ [0, 1]², v down the
+/// image: the direction a texel of an `infinite` light's image holds.
+pub fn equal_area_direction(u: f64, v: f64) -> [f64; 3] {
+    let (u, v) = (2.0 * u - 1.0, 2.0 * v - 1.0);
+    let (up, vp) = (u.abs(), v.abs());
+    let signed = 1.0 - (up + vp);
+    let r = 1.0 - signed.abs();
+    let phi = if r == 0.0 { 1.0 } else { (vp - up) / r + 1.0 } * std::f64::consts::FRAC_PI_4;
+    let z = (1.0 - r * r).copysign(signed);
+    let (c, s) = (phi.cos().copysign(u), phi.sin().copysign(v));
+    let k = r * (2.0 - r * r).max(0.0).sqrt();
+    [c * k, s * k, z]
 }
 
 fn nums(v: &[f64]) -> String {
@@ -186,6 +225,14 @@ pub fn write(s: &Scene, translucency: Translucency, image: &str) -> String {
     let _ = writeln!(x, "\nWorldBegin\n");
     let i = s.light.intensity;
     match s.light.position {
+        _ if s.environment.is_some() => {
+            let file = s.light.environment.as_deref().unwrap_or_default();
+            let _ = writeln!(
+                x,
+                "LightSource \"infinite\" \"string filename\" [ {} ]",
+                quoted(file)
+            );
+        }
         None => {
             let _ = writeln!(
                 x,
@@ -305,5 +352,33 @@ mod tests {
         assert!(e.contains("path") && e.contains("quote"), "{e}");
         let p: Params = serde_json::from_value(serde_json::json!({ "path": "ok.pbrt" })).unwrap();
         assert!(ExportPbrt.check(&p).is_ok());
+    }
+}
+
+#[cfg(test)]
+mod equal_area_tests {
+    use super::equal_area_direction;
+
+    /// Unit directions, the square's centre straight up and its corners straight down, and
+    /// equal areas: a uniform grid over the square averages z to 0 and z² to 1/3, as the
+    /// uniform sphere does (midpoints of 400², error ~1e-5).
+    #[test]
+    fn the_equal_area_map_covers_the_sphere_evenly() {
+        let up = equal_area_direction(0.5, 0.5);
+        assert!((up[2] - 1.0).abs() < 1e-12);
+        assert!((equal_area_direction(0.0, 0.0)[2] + 1.0).abs() < 1e-12);
+        let n = 400;
+        let (mut z, mut z2) = (0.0, 0.0);
+        for y in 0..n {
+            for x in 0..n {
+                let d = equal_area_direction((x as f64 + 0.5) / n as f64, (y as f64 + 0.5) / n as f64);
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                assert!((len - 1.0).abs() < 1e-9);
+                z += d[2];
+                z2 += d[2] * d[2];
+            }
+        }
+        let m = (n * n) as f64;
+        assert!((z / m).abs() < 1e-3 && (z2 / m - 1.0 / 3.0).abs() < 1e-3, "{} {}", z / m, z2 / m);
     }
 }

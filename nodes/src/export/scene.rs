@@ -12,9 +12,13 @@ use crate::render::reference::{check_albedo, Params as RenderParams, Reference};
 use crate::render::volume::Medium as CheckedMedium;
 use crate::support::formats::encode_exr;
 use crate::support::raytrace::camera::CameraParams;
+use crate::support::raytrace::environment::Environment;
 use crate::support::raytrace::light::{Light, LightParams};
 use crate::types::{Image, Mesh, ScatteringMaterial};
-use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeError, Outputs, Port};
+use mesoflow_runtime::{
+    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, Outputs, Port,
+};
+use std::sync::Arc;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -73,6 +77,8 @@ pub struct Scene {
     pub light: LightParams,
     /// Unit direction towards a directional light.
     pub direction: [f64; 3],
+    /// The environment, where the light is one (intensity applied; its rotation is its own).
+    pub environment: Option<Arc<Environment>>,
     pub samples: u32,
     pub seed: u64,
     /// Reflections after the direct one a surface path follows (`render.reference`'s `bounces`).
@@ -127,6 +133,28 @@ pub struct Medium {
     pub roughness: Option<f64>,
 }
 
+/// The environment's file beside the scene file: `texels` (RGB, row-major from the top) of
+/// `width` × `height` as EXR; the name relative to the scene file.
+pub fn environment_file(
+    scene: &mut Scene,
+    scene_path: &str,
+    width: usize,
+    height: usize,
+    texels: Vec<f32>,
+) -> Result<String, NodeError> {
+    let (full, name) = beside(scene_path, "_environment.exr");
+    let img = Image {
+        width,
+        height,
+        channels: 3,
+        data: texels,
+    };
+    let bytes = encode_exr(&img)
+        .map_err(|e| NodeError::Failed(format!("the environment's EXR: {e}")))?;
+    scene.files.push(Artifact { path: full, bytes });
+    Ok(name)
+}
+
 /// The file beside `scene_path` with `suffix` after its stem: (path under the output folder,
 /// name relative to the scene file).
 fn beside(scene_path: &str, suffix: &str) -> (String, String) {
@@ -168,11 +196,22 @@ pub fn check(path: &str, render: &RenderParams) -> Result<(), NodeError> {
 }
 
 /// Reads the inputs and builds the scene; every refusal names its port or parameter.
-pub fn build(path: &str, r: &RenderParams, inputs: &Inputs) -> Result<Scene, NodeError> {
+pub fn build(
+    ctx: &NodeContext,
+    path: &str,
+    r: &RenderParams,
+    inputs: &Inputs,
+) -> Result<Scene, NodeError> {
     check(path, r)?;
     let mesh = inputs.get::<Mesh>("mesh")?;
     mesh.check().map_err(|e| NodeError::input("mesh", e))?;
-    let light = Light::new(&r.light)?;
+    let light = Light::open(&r.light, ctx)?;
+    if light.environment.is_some() && inputs.opt::<ScatteringMaterial>("medium")?.is_some() {
+        return Err(NodeError::param(
+            "light",
+            "a translucent medium is rendered under a directional or point light: an environment is for a surface",
+        ));
+    }
     let (mesh_path, mesh_file) = beside(path, ".ply");
     let mut files = Vec::new();
     let albedo = inputs.opt::<Image>("albedo")?;
@@ -220,6 +259,7 @@ pub fn build(path: &str, r: &RenderParams, inputs: &Inputs) -> Result<Scene, Nod
         camera: r.camera.clone(),
         light: r.light.clone(),
         direction: light.direction,
+        environment: light.environment.clone(),
         samples: r.samples,
         seed: r.seed,
         bounces: r.bounces,

@@ -225,6 +225,7 @@ pub fn render(
         parallax: false,
         sides: Vec::new(),
         aspect: Vec::new(),
+        env: None,
     };
     let shadow = if p.shadows {
         Some(sss_render::shadow_map(
@@ -422,6 +423,7 @@ mod tests {
                 direction: [1.0, 0.8, 0.3],
                 position: None,
                 intensity: 3.0,
+                ..Default::default()
             },
             shadow_resolution: 128,
             mm_per_unit: 5.0,

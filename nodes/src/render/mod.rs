@@ -1,5 +1,6 @@
 //! Rendering a BTF-mapped mesh, with mesostructure silhouettes from an MDF (thesis ch. 4).
 
+pub mod environment;
 pub mod gpu_render;
 pub mod material;
 pub mod reference;

@@ -124,9 +124,17 @@ impl Node for Reference {
         ]
     }
 
+    fn files(
+        &self,
+        p: &Params,
+        base: &std::path::Path,
+    ) -> Result<Vec<std::path::PathBuf>, NodeError> {
+        Ok(p.light.files(base))
+    }
+
     fn check(&self, p: &Params) -> Result<(), NodeError> {
         Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
-        Light::new(&p.light)?;
+        Light::check(&p.light)?;
         if !p.albedo.iter().all(|a| a.is_finite() && *a >= 0.0) {
             return Err(NodeError::param(
                 "albedo",
@@ -153,6 +161,12 @@ impl Node for Reference {
                 return Err(NodeError::param(
                     "bounces",
                     "is for a surface: with a `medium` every path already follows each scattering event to its end",
+                ));
+            }
+            Some(_) if p.light.is_environment() => {
+                return Err(NodeError::param(
+                    "light",
+                    "a translucent medium is rendered under a directional or point light: an environment is for a surface",
                 ));
             }
             Some(m) => {
@@ -185,7 +199,7 @@ impl Node for Reference {
             }
         }
         let camera = Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
-        let light = Light::new(&p.light)?;
+        let light = Light::open(&p.light, ctx)?;
         let built = Instant::now();
         let scene = Tracer::in_context(mesh, Some(ctx));
         ctx.timing("bvh_seconds", built.elapsed().as_secs_f64());
@@ -394,7 +408,11 @@ fn pixel(
         let Some(mut at) = Vertex::of(scene, &hit, dir, p, maps) else {
             continue; // one-sided: seen from behind
         };
-        let mut l = at.direct(scene, light, p, &mut rays);
+        // The light's own stream at each vertex (an environment's sampled direction).
+        let at_light = |bounce: u64| {
+            crate::support::rng::hash(p.seed ^ 0x119_4700, &[pixel_id, s as u64, bounce])
+        };
+        let mut l = at.direct(scene, light, p, &mut rays, at_light(0));
         let mut throughput = [1.0; 3];
         for bounce in 0..p.bounces as u64 {
             // The path's own stream, apart from the sub-pixel position's hash.
@@ -412,13 +430,16 @@ fn pixel(
             throughput = [0, 1, 2].map(|k| throughput[k] * f[k] * std::f64::consts::PI);
             rays += 1;
             let Some(next) = scene.closest(add(at.pos, mul(at.ng, scene.epsilon)), d) else {
-                break; // left the mesh: a directional or point light sends nothing back
+                // Left the mesh: a directional or point light sends nothing back, and an
+                // environment's light along it is what the next-event sample at this vertex
+                // already counted.
+                break;
             };
             let Some(next) = Vertex::of(scene, &next, d, p, maps) else {
                 break;
             };
             at = next;
-            let direct = at.direct(scene, light, p, &mut rays);
+            let direct = at.direct(scene, light, p, &mut rays, at_light(bounce + 1));
             l = [0, 1, 2].map(|k| l[k] + throughput[k] * direct[k]);
         }
         halves[s % 2] = add(halves[s % 2], l);
@@ -480,9 +501,31 @@ impl Vertex {
     }
 
     /// The light's reflection towards `wo`: E · f · cos θi where the light is in front of both
-    /// normals' sides and a shadow ray reaches it; one shadow ray counted in `rays`.
-    fn direct(&self, scene: &Tracer, light: &Light, p: &Params, rays: &mut u64) -> [f64; 3] {
-        let (wi, irradiance) = light.at(self.pos);
+    /// normals' sides and a shadow ray reaches it; one shadow ray counted in `rays`. An
+    /// environment is sampled once, from hash `h`, in proportion to its radiance
+    /// (L · f · cos θi / pdf).
+    fn direct(
+        &self,
+        scene: &Tracer,
+        light: &Light,
+        p: &Params,
+        rays: &mut u64,
+        h: u64,
+    ) -> [f64; 3] {
+        let (wi, irradiance) = match light.env() {
+            Some(env) => {
+                let u = crate::support::rng::unit(h);
+                let v = crate::support::rng::unit(crate::support::rng::mix(h));
+                match env.sample(u, v) {
+                    Some((w, l, pdf)) => (w, l.map(|c| c / pdf)),
+                    None => return [0.0; 3],
+                }
+            }
+            None => {
+                let (w, e) = light.at(self.pos);
+                (w, [e; 3])
+            }
+        };
         let cos_i = dot(self.ns, wi);
         if cos_i <= 0.0 || dot(self.ns, self.wo) <= 0.0 {
             return [0.0; 3];
@@ -501,7 +544,7 @@ impl Vertex {
             wi,
             self.wo,
         );
-        f.map(|f| irradiance * f * cos_i)
+        [0, 1, 2].map(|k| irradiance[k] * f[k] * cos_i)
     }
 }
 
@@ -605,6 +648,7 @@ mod tests {
                 direction: [t.sin(), 0.0, t.cos()],
                 position: None,
                 intensity: 2.0,
+                ..Default::default()
             },
             albedo: [0.2, 0.5, 0.8],
             samples: 4,
@@ -658,6 +702,7 @@ mod tests {
                     direction: [sign * a.sin(), 0.0, a.cos()],
                     position: None,
                     intensity: 2.0,
+                    ..Default::default()
                 },
                 albedo: [0.5; 3],
                 samples: 1,
@@ -710,6 +755,7 @@ mod tests {
                 direction: [0.0, 0.0, 1.0],
                 position: None,
                 intensity: 1.0,
+                ..Default::default()
             },
             albedo: [0.5; 3],
             samples: 16,
@@ -727,6 +773,7 @@ mod tests {
                 direction: [1.0, 0.0, 1.0],
                 position: None,
                 intensity: 1.0,
+                ..Default::default()
             },
             ..p
         };

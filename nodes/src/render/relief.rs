@@ -457,6 +457,7 @@ mod tests {
                 direction: light,
                 position: None,
                 intensity: 1.0,
+                ..Default::default()
             },
             shell,
             linear_steps: 512,

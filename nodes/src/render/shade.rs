@@ -63,6 +63,9 @@ pub struct Scene<'a> {
     /// The tile's texel aspect per vertex ([`texel_aspect`]); empty for the tile's own
     /// proportions everywhere.
     pub aspect: Vec<[f32; 2]>,
+    /// Under an environment light: the BTF's transfer and the mesh's lighting
+    /// (`environment.rs`), which then shade every hit instead of `light`.
+    pub env: Option<super::environment::EnvShading>,
 }
 
 /// The tile's texel aspect at each vertex, (k_u, k_v): how many more of the MDF's texels a
@@ -283,6 +286,7 @@ pub fn surface_at(m: &Mesh, tiling: [f64; 2], aspect: &[[f32; 2]], f: &Frag) -> 
         n,
         k,
         tri: f.tri as usize,
+        bary: w,
     }
 }
 
@@ -297,8 +301,9 @@ pub struct Surface {
     pub n: V3,
     /// The texel aspect (k_u, k_v) here ([`texel_aspect`]).
     pub k: [f64; 2],
-    /// The mesh triangle it lies on.
+    /// The mesh triangle it lies on, and the weights of its corners here.
     pub tri: usize,
+    pub bary: [f64; 3],
 }
 
 impl Surface {
@@ -546,6 +551,9 @@ impl Scene<'_> {
         shadow: Option<&LazyShadowMap>,
     ) -> Option<[f64; 3]> {
         let (t, t_front, s, wo, depth) = self.hit_with_depth(layers, px, o, d)?;
+        if let Some(env) = &self.env {
+            return Some(env.shade(self.material, self.mesh, &s, wo, depth));
+        }
         let p = add(o, mul(d, t_front));
         let (to_light, irradiance) = self.light.at(p);
         let wi = Self::local(&s, to_light);

@@ -425,6 +425,7 @@ mod tests {
                 direction: [s0, s0, mu0],
                 position: None,
                 intensity: 2.0,
+                ..Default::default()
             })
             .unwrap();
             const CHUNK: u64 = 1000;

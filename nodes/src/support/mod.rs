@@ -10,3 +10,4 @@ pub mod optics;
 pub mod progress;
 pub mod raytrace;
 pub mod rng;
+pub mod sh;

@@ -10,6 +10,7 @@
 pub mod validity;
 
 use super::material::{Material, MdfLookup, Source};
+use super::environment::EnvShading;
 use super::shade::{shell_sides, texel_aspect, Scene};
 use crate::support::geometry::{bounding_sphere, normalize, sub};
 use crate::support::progress::Counter;
@@ -49,6 +50,11 @@ crate::view_params! {
         /// of a ring-sampled set, the default) or "nearest" (the three nearest directions by
         /// inverse angle, what sets without rings always get; for comparisons).
         pub interpolation: Interpolation = Interpolation::Rings,
+        /// Under an environment light: the spherical-harmonic bands the BTF and the environment
+        /// are integrated in (`order`² functions; a pixel costs about that many directional
+        /// lookups' arithmetic). See the BTF guide for the error each order leaves.
+        #[schemars(range(min = 1, max = 12))]
+        pub environment_order: u32 = 6,
     }
 }
 
@@ -78,8 +84,8 @@ impl Node for RenderMesh {
             // 4: directions looked up in the tile's own proportions where the UVs stretch it,
             // the MDF's shadows, shell sides rays enter by. 5: light past the macro horizon.
             // 6: the validity warnings (images unchanged; a cache hit repeats the warnings its
-            // entry stored, so older entries rerun once to have them).
-            version: 6,
+            // entry stored, so older entries rerun once to have them). 7: environment lights.
+            version: 7,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -100,6 +106,14 @@ impl Node for RenderMesh {
         }
     }
 
+    fn files(
+        &self,
+        p: &Params,
+        base: &std::path::Path,
+    ) -> Result<Vec<std::path::PathBuf>, NodeError> {
+        Ok(p.light.files(base))
+    }
+
     fn check(&self, p: &Params) -> Result<(), NodeError> {
         Camera::new(&p.camera).map_err(|e| NodeError::param("camera", e))?;
         let [w, h] = p.camera.resolution;
@@ -111,7 +125,7 @@ impl Node for RenderMesh {
                 ),
             ));
         }
-        Light::new(&p.light)?;
+        Light::check(&p.light)?;
         for (name, v) in [("tiling", p.tiling[0]), ("tiling", p.tiling[1])] {
             if !(v >= 0.0 && v.is_finite()) {
                 return Err(NodeError::param(name, "must be finite and not negative"));
@@ -153,6 +167,7 @@ impl Node for RenderMesh {
             ("shadow_setup_ms", "CPU, shadows on: binning the mesh for the light camera and allocating the lazy map, ms a frame"),
             ("shadow_thread_ms", "CPU, shadows on: time spent tracing shadow texels, summed over threads (its share of shade_ms × threads is the shadows' share), ms a frame"),
             ("shadow_texels", "CPU, shadows on: shadow-map texels traced a frame (the rest of the map is never traced)"),
+            ("environment_ms", "under an environment light, once before the frames: the BTF's transfer and the mesh's lighting with its visibility, ms"),
         ]
     }
     fn run(&self, ctx: &NodeContext, p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
@@ -200,8 +215,25 @@ impl Node for RenderMesh {
         for w in validity.warnings(mdf_lookup.is_some().then_some(p.shell)) {
             ctx.warn(w);
         }
-        let scene = scene_for(mesh, &material, mdf_lookup, p)?;
-        let (data, mask, ms, gpu_ms) = match ctx.gpu() {
+        let light = Light::open(&p.light, ctx)?;
+        let mut scene = scene_for(mesh, &material, mdf_lookup, p, light.clone())?;
+        if let Some(env) = light.env() {
+            let start = Instant::now();
+            let tracer = crate::support::raytrace::tracer::Tracer::in_context(mesh, Some(ctx));
+            scene.env = Some(EnvShading::new(
+                &material,
+                mesh,
+                &tracer,
+                env,
+                p.environment_order as usize,
+            )?);
+            ctx.timing("environment_ms", start.elapsed().as_secs_f64() * 1e3);
+            if ctx.gpu().is_some() {
+                ctx.warn("an environment light is shaded on the CPU: the GPU path shades a directional or point light only");
+            }
+        }
+        let gpu = ctx.gpu().filter(|_| scene.env.is_none());
+        let (data, mask, ms, gpu_ms) = match gpu {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
             None => {
                 let start = Instant::now();
@@ -261,25 +293,28 @@ impl Node for RenderMesh {
 }
 
 /// The scene `p` describes: the mesh as the top of its shell, the material, the MDF's lookup
-/// (the tile's proportions come from the MDF it reads), the light, the shell's side walls.
+/// (the tile's proportions come from the MDF it reads), the light, the shell's side walls (an
+/// environment's shading is added by the caller).
 pub fn scene_for<'a>(
     mesh: &'a Mesh,
     material: &'a Material<'a>,
     mdf: Option<MdfLookup<'a>>,
     p: &Params,
+    light: Light,
 ) -> Result<Scene<'a>, NodeError> {
     let aspect = texel_aspect(mesh, p.tiling, p.shell, mdf.as_ref().map(|m| m.mdf));
     Ok(Scene {
         mesh,
         material,
         mdf,
-        light: Light::new(&p.light)?,
+        light,
         tiling: p.tiling,
         shell: p.shell,
         background: p.background,
         parallax: p.parallax,
         sides: shell_sides(mesh, p.shell),
         aspect,
+        env: None,
     })
 }
 
@@ -357,7 +392,8 @@ pub fn render_cpu_stages(
     let count = p.layers.max(1) as usize;
     let mut stages = Stages::default();
     let clock = Instant::now();
-    let shadow_cam = if p.shadows {
+    // Under an environment the mesh's shadows are in its lighting.
+    let shadow_cam = if p.shadows && scene.env.is_none() {
         if p.shadow_resolution == 0 || p.shadow_resolution > CPU_MAX_SIDE {
             return Err(NodeError::param(
                 "shadow_resolution",

@@ -63,6 +63,7 @@ fn plane_params(n: u32) -> Params {
             direction: [1.0, 0.0, 1.0],
             position: None,
             intensity: 1.0,
+            ..Default::default()
         },
         tiling: [1.0, 1.0],
         ..Default::default()
@@ -236,6 +237,7 @@ fn an_open_planes_shell_has_sides_rays_leave_and_enter_by_on_cpu_and_gpu() {
         parallax: false,
         sides: shell_sides(&mesh, p.shell),
         aspect: Vec::new(),
+        env: None,
     };
     let cam = Camera::new(&p.camera).unwrap();
     let plain = render_cpu(&scene(false), &cam, &p, &Counter::none())
@@ -317,6 +319,7 @@ fn parallax_moves_the_lookup_by_the_mdf_offset() {
             parallax,
             sides: Vec::new(),
             aspect: Vec::new(),
+            env: None,
         };
         let (o, d) = cam.ray(0, 0);
         let (_, _, s, wo) = scene.hit(&layers, 0, o, d).unwrap();
@@ -373,6 +376,7 @@ fn a_stretched_tile_is_looked_up_in_its_own_proportions() {
         parallax: true,
         sides: Vec::new(),
         aspect,
+        env: None,
     };
     let (o, d) = cam.ray(0, 0);
     let (t, t_front, s, _) = scene.hit(&layers, 0, o, d).unwrap();
@@ -513,7 +517,14 @@ fn scene_of<'a>(
     mdf: Option<&'a Mdf>,
     p: &Params,
 ) -> Scene<'a> {
-    scene_for(mesh, material, mdf.map(MdfLookup::new), p).unwrap()
+    scene_for(
+        mesh,
+        material,
+        mdf.map(MdfLookup::new),
+        p,
+        Light::new(&p.light).unwrap(),
+    )
+    .unwrap()
 }
 
 #[test]

@@ -134,6 +134,7 @@ pub fn measure(
             seen_beyond += w;
         }
         let to_light = match light.position {
+            _ if light.is_environment() => None,
             Some(p) => unit(sub(p, centre)),
             None => unit(light.direction),
         };

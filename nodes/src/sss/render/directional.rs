@@ -160,6 +160,7 @@ mod tests {
             direction,
             position: None,
             intensity: 1.0,
+            ..Default::default()
         })
         .unwrap()
     }

@@ -61,6 +61,7 @@ fn slab_view() -> Params {
             direction: [0.0, 0.0, 1.0],
             position: None,
             intensity: 2.0,
+            ..Default::default()
         },
         shadows: false,
         threshold: 0.0,
@@ -112,6 +113,7 @@ fn sphere_scene(threshold: f64) -> Params {
             direction: [1.0, 0.8, 0.3],
             position: None,
             intensity: 3.0,
+            ..Default::default()
         },
         threshold,
         shadow_resolution: 128,
@@ -219,6 +221,7 @@ fn single_scattering_integrates_to_the_closed_form() {
         direction: [0.0, 0.0, 1.0],
         position: None,
         intensity: 1.0,
+        ..Default::default()
     })
     .unwrap();
     let n = 20_000;
@@ -387,6 +390,7 @@ fn bounces_leave_a_convex_object_alone_and_light_a_concave_one() {
             direction: [0.3, 1.0, -0.5],
             position: None,
             intensity: 2.0,
+            ..Default::default()
         },
         mm_per_unit: 4.0,
         max_points: 4000,
@@ -497,6 +501,7 @@ fn traced_single_scattering_is_the_slab_closed_form_thin_or_deep() {
                 direction: [theta.sin(), 0.0, mu_i],
                 position: None,
                 intensity: 2.0,
+                ..Default::default()
             },
             mm_per_unit: 1.0,
             mode: Mode::Brdf,
@@ -561,6 +566,7 @@ fn half_space_energy_returns_what_a_white_half_space_reflects() {
             direction: [(1.0f64 - mu0 * mu0).sqrt(), 0.0, mu0],
             position: None,
             intensity: 2.0,
+            ..Default::default()
         },
         mode: Mode::Brdf,
         energy: Energy::HalfSpace,

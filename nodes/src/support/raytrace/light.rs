@@ -1,11 +1,17 @@
-//! The one light of a scene: directional (irradiance `intensity` on a plane facing it) or a point
-//! light (intensity with 1/r² falloff), as parameters and resolved, for `render.mesh`,
-//! `sss.render`, `qh.render` and the planner.
+//! The one light of a scene: directional (irradiance `intensity` on a plane facing it), a point
+//! light (intensity with 1/r² falloff), or an environment around the scene (a lat-long image
+//! file, a procedural sky or studio: `environment.rs`), as parameters and resolved, for
+//! `render.mesh`, `render.reference`, `sss.render`, `qh.render`, the exports and the planner.
+//! An environment is read once per content and shared ([`Light::open`]); a node that cannot
+//! shade one refuses it by name ([`Light::new`]).
 
+use super::environment::{Environment, SkyParams, StudioParams, PROCEDURAL_SIZE};
 use crate::support::geometry::{dot, normalize, sub, V3};
-use mesoflow_runtime::NodeError;
+use mesoflow_runtime::{NodeContext, NodeError};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock};
 
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
 #[serde(default, deny_unknown_fields)]
@@ -14,9 +20,20 @@ pub struct LightParams {
     pub direction: [f64; 3],
     /// Position of a point light; when set the light is a point light with 1/r² falloff.
     pub position: Option<[f64; 3]>,
-    /// Irradiance on a plane facing a directional light (or intensity of a point light).
+    /// Irradiance on a plane facing a directional light (or intensity of a point light); for an
+    /// environment, the factor its radiance is multiplied by.
     #[schemars(range(min = 0.0))]
     pub intensity: f64,
+    /// An environment around the scene instead: a linear lat-long HDR image (EXR, or `.npy` of
+    /// shape (H, W, 3)), relative to the graph file; row 0 looks up (+z), columns run from +x
+    /// towards +y. `direction` and `position` are then unused.
+    pub environment: Option<String>,
+    /// A procedural sky instead (no file): sky blue to the horizon, a soft sun, dim ground.
+    pub sky: Option<SkyParams>,
+    /// A procedural studio instead (no file): two soft windows in a dim room.
+    pub studio: Option<StudioParams>,
+    /// Rotation of an environment about +z, degrees.
+    pub rotation: f64,
 }
 
 impl Default for LightParams {
@@ -25,11 +42,29 @@ impl Default for LightParams {
             direction: [0.6, 0.7, 0.9],
             position: None,
             intensity: 3.0,
+            environment: None,
+            sky: None,
+            studio: None,
+            rotation: 0.0,
         }
     }
 }
 
-/// A checked light: unit direction, optional position, intensity.
+impl LightParams {
+    /// Whether this is an environment (a file, a sky or a studio).
+    pub fn is_environment(&self) -> bool {
+        self.environment.is_some() || self.sky.is_some() || self.studio.is_some()
+    }
+
+    /// The file an environment light reads, for the node's `files` (its content is part of the
+    /// cache key).
+    pub fn files(&self, base: &Path) -> Vec<PathBuf> {
+        self.environment.iter().map(|p| base.join(p)).collect()
+    }
+}
+
+/// A checked light: unit direction, optional position, intensity, and the environment where
+/// the light is one.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Light {
     /// Unit direction towards a directional light.
@@ -37,11 +72,90 @@ pub struct Light {
     /// Position of a point light (then `direction` only breaks ties at the light itself).
     pub position: Option<V3>,
     pub intensity: f64,
+    /// The environment, intensity and rotation applied; `None` for a directional or point light.
+    pub environment: Option<Arc<Environment>>,
 }
 
 impl Light {
-    /// Errors name the parameter `light`.
+    /// A directional or point light; an environment is refused by name (for the nodes that do
+    /// not shade one). Errors name the parameter `light`.
     pub fn new(p: &LightParams) -> Result<Light, NodeError> {
+        if p.is_environment() {
+            return Err(NodeError::param(
+                "light",
+                "an environment light (environment, sky or studio) is not supported by this node: give a directional or point light",
+            ));
+        }
+        Self::directional(p)
+    }
+
+    /// The parameters checked, an environment's included, without reading its file (for a
+    /// node's `check`).
+    pub fn check(p: &LightParams) -> Result<(), NodeError> {
+        let kinds = [p.environment.is_some(), p.sky.is_some(), p.studio.is_some()];
+        if kinds.iter().filter(|k| **k).count() > 1 {
+            return Err(NodeError::param(
+                "light",
+                "give one of environment, sky and studio",
+            ));
+        }
+        if p.is_environment() && p.position.is_some() {
+            return Err(NodeError::param(
+                "light",
+                "an environment has no position: drop `position` or the environment",
+            ));
+        }
+        if !p.rotation.is_finite() {
+            return Err(NodeError::param("light", "rotation must be finite"));
+        }
+        if let Some(s) = &p.sky {
+            s.texels().map_err(|e| NodeError::param("light", e))?;
+        }
+        if let Some(s) = &p.studio {
+            s.texels().map_err(|e| NodeError::param("light", e))?;
+        }
+        Self::directional(p).map(drop)
+    }
+
+    /// Any light, an environment's file read (relative to the graph's folder) and shared
+    /// between the nodes that use the same content, intensity and rotation.
+    pub fn open(p: &LightParams, ctx: &NodeContext) -> Result<Light, NodeError> {
+        Self::check(p)?;
+        let mut light = Self::directional(p)?;
+        if !p.is_environment() {
+            return Ok(light);
+        }
+        let (w, h) = PROCEDURAL_SIZE;
+        let make = |texels: Result<Vec<[f32; 3]>, String>, w: usize, h: usize| {
+            texels
+                .and_then(|t| Environment::new(w, h, &t, p.intensity, p.rotation.to_radians()))
+                .map_err(|e| NodeError::param("light", e))
+        };
+        let env = if let Some(s) = &p.sky {
+            shared(make(s.texels(), w, h)?)
+        } else if let Some(s) = &p.studio {
+            shared(make(s.texels(), w, h)?)
+        } else {
+            let file = p.environment.as_deref().unwrap_or_default();
+            let path = ctx.input_path("light", file)?;
+            let (tw, th, texels) = read_lat_long(&path)?;
+            let env = Environment::new(tw, th, &texels, p.intensity, p.rotation.to_radians())
+                .map_err(|e| NodeError::file(&path, e))?;
+            shared(env)
+        };
+        if env.is_black() {
+            ctx.warn("the environment light is black everywhere: the image will be too");
+        }
+        light.environment = Some(env);
+        Ok(light)
+    }
+
+    /// The environment, where the light is one.
+    pub fn env(&self) -> Option<&Environment> {
+        self.environment.as_deref()
+    }
+
+    fn directional(p: &LightParams) -> Result<Light, NodeError> {
         let direction = normalize(p.direction)
             .ok_or_else(|| NodeError::param("light", "direction has zero length"))?;
         if !(p.intensity >= 0.0 && p.intensity.is_finite()) {
@@ -57,6 +171,7 @@ impl Light {
             direction,
             position: p.position,
             intensity: p.intensity,
+            environment: None,
         })
     }
 
@@ -77,6 +192,59 @@ impl Light {
     pub fn reach(&self, x: V3, l: V3) -> f64 {
         self.position.map_or(f64::INFINITY, |q| dot(sub(q, x), l))
     }
+}
+
+/// One copy per content: the renderers of a graph (and their frames) share an environment and
+/// its sampling tables. Holds the last few.
+fn shared(env: Environment) -> Arc<Environment> {
+    static CACHE: OnceLock<Mutex<Vec<Arc<Environment>>>> = OnceLock::new();
+    let mut cache = CACHE
+        .get_or_init(|| Mutex::new(Vec::new()))
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    if let Some(e) = cache.iter().find(|e| e.id == env.id) {
+        return e.clone();
+    }
+    let env = Arc::new(env);
+    if cache.len() >= 4 {
+        cache.remove(0);
+    }
+    cache.push(env.clone());
+    env
+}
+
+/// A lat-long image's texels: EXR (or any image `image.read` reads; 8-bit files are
+/// sRGB-decoded) or `.npy` of shape (H, W, 3), float32 or float64.
+fn read_lat_long(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), NodeError> {
+    let is_npy = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if is_npy {
+        let a = crate::support::npy::read(path, 3, "(H, W, 3)")?;
+        if a.shape[2] != 3 {
+            return Err(NodeError::file(
+                path,
+                format!("expected (H, W, 3) linear RGB, got shape {:?}", a.shape),
+            ));
+        }
+        let texels = a
+            .data
+            .chunks_exact(3)
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect();
+        return Ok((a.shape[1], a.shape[0], texels));
+    }
+    let img = crate::support::formats::read_image(path)?;
+    let texels = img
+        .data
+        .chunks_exact(img.channels.max(1))
+        .map(|c| match c.len() {
+            1 | 2 => [c[0]; 3],
+            _ => [c[0], c[1], c[2]],
+        })
+        .collect();
+    Ok((img.width, img.height, texels))
 }
 
 #[cfg(test)]

@@ -57,7 +57,8 @@ macro_rules! view_params {
         [light $(= $o:expr)? $(, $($more:tt)*)?] $($own:tt)*) => {
         $crate::view_params!(@munch $hdr
             [$($f)*
-             /// A directional light, or a point light with `position`.
+             /// A directional light, a point light with `position`, or an environment (`environment`,
+             /// `sky` or `studio`) where the node shades one.
              pub light: $crate::support::raytrace::light::LightParams,]
             [$($d)* light: $crate::view_params!(@or ($crate::support::raytrace::light::LightParams::default()) $(($o))?),]
             [$($n)* "light",]
