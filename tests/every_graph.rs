@@ -54,6 +54,18 @@ fn small(graph: &str) -> Vec<String> {
             "relief_converged.camera.resolution=[32,24]".into(),
         ],
         "btf_compress" => vec!["surface.size=16".into(), "pca.rank=3".into()],
+        "btf_environment" => vec![
+            "surface.size=16".into(),
+            format!("capture.views={DIRS}"),
+            format!("capture.lights={DIRS}"),
+            "capture.bounce_rays=16".into(),
+            format!("mdf.views={DIRS}"),
+            "torus.segments=[24,12]".into(),
+            "truth.camera.resolution=[32,24]".into(),
+            "truth.samples=4".into(),
+            "ours.camera.resolution=[32,24]".into(),
+            "ours.environment_order=3".into(),
+        ],
         "family_translucent" => vec![
             "mesh.segments=[32,16]".into(),
             "truth.samples=4".into(),
