@@ -383,4 +383,53 @@ mod tests {
     fn attribute_values_are_escaped() {
         assert_eq!(attr(r#"a&b"<'>.ply"#), "a&amp;b&quot;&lt;&apos;&gt;.ply");
     }
+
+    /// A sky becomes an `envmap` of the EXR written beside the scene, hidden from the camera;
+    /// pbrt's an `infinite` light of its equal-area image. The EXR reads back as the sky's
+    /// texels (the light's intensity applied), and the transform takes Mitsuba's up (+y) to
+    /// mesoflow's (+z).
+    #[test]
+    fn an_environment_is_written_beside_the_scene() {
+        use mesoflow_testkit::node::{run, OutputsExt};
+        let mesh = crate::mesh::primitive::build(
+            &serde_json::from_value(serde_json::json!({"shape": "plane"})).unwrap(),
+        )
+        .unwrap();
+        let inputs = Inputs::new().with("mesh", std::sync::Arc::new(mesh));
+        let p: scene::Params = serde_json::from_value(serde_json::json!({
+            "path": "m/scene.xml", "light": {"sky": {}, "intensity": 2.0}, "bounces": 2
+        }))
+        .unwrap();
+        let out = run(&ExportMitsuba, &p, &inputs).unwrap();
+        let files = out.value::<mesoflow_runtime::Artifacts>("files");
+        let names: Vec<&str> = files.files.iter().map(|f| f.path.as_str()).collect();
+        assert!(names.contains(&"m/scene_environment.exr"), "{names:?}");
+        let xml = String::from_utf8(files.files.last().unwrap().bytes.clone()).unwrap();
+        assert!(xml.contains(r#"<emitter type="envmap">"#), "{xml}");
+        assert!(xml.contains(r#"value="scene_environment.exr""#));
+        assert!(xml.contains(r#"<boolean name="hide_emitters" value="true"/>"#));
+        // Columns of the to_world matrix: local +y (Mitsuba's up) → world +z.
+        assert!(xml.contains(r#"<matrix value="0 0 -1 0 1 0 0 0 0 1 0 0 0 0 0 1"/>"#), "{xml}");
+        let exr = files.files.iter().find(|f| f.path.ends_with(".exr")).unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("e.exr");
+        std::fs::write(&path, &exr.bytes).unwrap();
+        let img = crate::support::formats::read_image(&path).unwrap();
+        let sky = crate::support::raytrace::environment::SkyParams::default()
+            .texels()
+            .unwrap();
+        assert_eq!((img.width, img.height), (256, 128));
+        assert_eq!(img.data[3 * 1000 + 1], 2.0 * sky[1000][1]);
+        let pbrt: crate::export::pbrt::Params = serde_json::from_value(serde_json::json!({
+            "path": "p/scene.pbrt", "light": {"sky": {}}
+        }))
+        .unwrap();
+        let out = run(&crate::export::pbrt::ExportPbrt, &pbrt, &inputs).unwrap();
+        let files = out.value::<mesoflow_runtime::Artifacts>("files");
+        let text = String::from_utf8(files.files.last().unwrap().bytes.clone()).unwrap();
+        assert!(
+            text.contains(r#"LightSource "infinite" "string filename" [ "scene_environment.exr" ]"#),
+            "{text}"
+        );
+    }
 }

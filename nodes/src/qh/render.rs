@@ -226,6 +226,7 @@ pub fn render(
         sides: Vec::new(),
         aspect: Vec::new(),
         env: None,
+        footprint: None,
     };
     let shadow = if p.shadows {
         Some(sss_render::shadow_map(

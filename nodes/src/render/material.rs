@@ -149,6 +149,52 @@ pub struct Material<'a> {
     /// The views' and lights' rings, where they are ring-structured.
     pub view_table: Option<Rings>,
     pub light_table: Option<Rings>,
+    /// Box-filtered levels 1, 2, … of the texels for reading at a pixel's footprint
+    /// ([`Material::with_levels`]); empty: level 0 only.
+    pub levels: Vec<Level>,
+}
+
+/// Up to 8 taps (two levels' bilinear taps): (level, x, y, weight).
+#[derive(Default)]
+pub struct LevelTaps {
+    taps: [(usize, usize, usize, f64); 8],
+    count: usize,
+}
+
+impl LevelTaps {
+    pub fn iter(&self) -> impl Iterator<Item = &(usize, usize, usize, f64)> {
+        self.taps[..self.count].iter()
+    }
+}
+
+/// One level of the texels, (W >> k) × (H >> k), each the mean of the 2 × 2 texels below it.
+pub struct Level {
+    pub width: usize,
+    pub height: usize,
+    data: LevelData,
+}
+
+enum LevelData {
+    /// The raw BTF's layout: pair, channel, texel.
+    Raw(Vec<f32>),
+    /// Per basis block: its coefficient maps (rank × texels) and, for texel centring, its mean.
+    Basis(Vec<(Vec<f32>, Option<Vec<f32>>)>),
+}
+
+/// The 2 × 2 box filter of `planes` planes of w × h values (w, h even), row-major.
+fn halve(src: &[f32], planes: usize, w: usize, h: usize) -> Vec<f32> {
+    let (hw, hh) = (w / 2, h / 2);
+    let mut out = vec![0.0f32; planes * hw * hh];
+    for p in 0..planes {
+        let (s, o) = (&src[p * w * h..(p + 1) * w * h], &mut out[p * hw * hh..(p + 1) * hw * hh]);
+        for y in 0..hh {
+            for x in 0..hw {
+                let a = |dx: usize, dy: usize| s[(2 * y + dy) * w + 2 * x + dx];
+                o[y * hw + x] = 0.25 * (a(0, 0) + a(1, 0) + a(0, 1) + a(1, 1));
+            }
+        }
+    }
+    out
 }
 
 /// cos θ of the most oblique direction and of the most oblique one at least 0.01 rad less so.
@@ -199,7 +245,120 @@ impl<'a> Material<'a> {
             light_table: Rings::of(&lights),
             lights,
             pair_of,
+            levels: Vec::new(),
         }
+    }
+
+    /// The material with its box-filtered levels, down to `min_side` texels a side or the first
+    /// odd size: what reading at a pixel's footprint needs ([`Material::eval_shadowed`]'s
+    /// `level`). Costs a third of the texels' memory more.
+    pub fn with_levels(mut self, min_side: usize) -> Self {
+        let (mut w, mut h) = (self.width, self.height);
+        let mut levels: Vec<Level> = Vec::new();
+        while w % 2 == 0 && h % 2 == 0 && w / 2 >= min_side.max(1) && h / 2 >= min_side.max(1) {
+            let data = match (&self.source, levels.last()) {
+                (Source::Raw(b), None) => LevelData::Raw(halve(&b.data, b.pairs.len() * 3, w, h)),
+                (Source::Basis { basis, .. }, None) => LevelData::Basis(
+                    basis
+                        .blocks
+                        .iter()
+                        .map(|blk| {
+                            let mean = matches!(blk.centring, Centring::Texels)
+                                .then(|| halve(&blk.mean, 1, w, h));
+                            (halve(&blk.maps, blk.rank(), w, h), mean)
+                        })
+                        .collect(),
+                ),
+                (_, Some(prev)) => match &prev.data {
+                    LevelData::Raw(d) => LevelData::Raw(halve(d, d.len() / (w * h), w, h)),
+                    LevelData::Basis(blocks) => LevelData::Basis(
+                        blocks
+                            .iter()
+                            .map(|(maps, mean)| {
+                                (
+                                    halve(maps, maps.len() / (w * h), w, h),
+                                    mean.as_ref().map(|m| halve(m, 1, w, h)),
+                                )
+                            })
+                            .collect(),
+                    ),
+                },
+            };
+            w /= 2;
+            h /= 2;
+            levels.push(Level {
+                width: w,
+                height: h,
+                data,
+            });
+        }
+        self.levels = levels;
+        self
+    }
+
+    /// One texel of one pair at level `k` (0: the texels themselves), linear RGB.
+    pub fn texel_at(&self, k: usize, pair: usize, x: usize, y: usize) -> [f64; 3] {
+        if k == 0 {
+            return self.texel(pair, x, y);
+        }
+        let level = &self.levels[k - 1];
+        let n = level.width * level.height;
+        let t = y * level.width + x;
+        match (&level.data, &self.source) {
+            (LevelData::Raw(d), _) => {
+                let base = pair * 3 * n + t;
+                [d[base] as f64, d[base + n] as f64, d[base + 2 * n] as f64]
+            }
+            (LevelData::Basis(blocks), Source::Basis { basis, owners }) => {
+                let mut c = [0.0; 3];
+                for (ch, v) in c.iter_mut().enumerate() {
+                    let Some((bi, j)) = owners[pair * 3 + ch] else {
+                        continue;
+                    };
+                    let blk = &basis.blocks[bi];
+                    let (maps, mean) = &blocks[bi];
+                    let (rank, cols) = (blk.rank(), blk.cols());
+                    let mut s = match mean {
+                        Some(m) => m[t] as f64,
+                        None => blk.mean[j] as f64,
+                    };
+                    for kk in 0..rank {
+                        s += maps[kk * n + t] as f64 * blk.basis[kk * cols + j] as f64;
+                    }
+                    *v = s;
+                }
+                match basis.color {
+                    ColorSpace::Rgb => c,
+                    space => space.to_rgb(c),
+                }
+            }
+            (LevelData::Basis(_), Source::Raw(_)) => [0.0; 3],
+        }
+    }
+
+    /// Bilinear taps at a continuous level λ ≥ 0: (level, x, y, weight), the two bracketing
+    /// levels blended (trilinear), λ beyond the coarsest clamped to it.
+    pub fn level_taps(&self, u: f64, v: f64, level: f64) -> LevelTaps {
+        let coarsest = self.levels.len() as f64;
+        let l = if level.is_finite() { level.clamp(0.0, coarsest) } else { 0.0 };
+        let lo = l.floor() as usize;
+        let f = l - lo as f64;
+        let mut out = LevelTaps::default();
+        for (k, w) in [(lo, 1.0 - f), (lo + 1, f)] {
+            if w <= 0.0 || k > self.levels.len() {
+                continue;
+            }
+            let (lw, lh) = if k == 0 {
+                (self.width, self.height)
+            } else {
+                (self.levels[k - 1].width, self.levels[k - 1].height)
+            };
+            for (x, y, tw) in texel_taps(u, v, lw, lh) {
+                out.taps[out.count] = (k, x, y, w * tw);
+                out.count += 1;
+            }
+        }
+        out
     }
 
     pub fn from_basis(basis: &'a BtfBasis) -> Material<'a> {
@@ -262,14 +421,17 @@ impl<'a> Material<'a> {
         wi: [f64; 3],
         depth: Option<[f64; 2]>,
     ) -> [f64; 3] {
-        self.eval_shadowed(u, v, wo, wi, depth, None)
+        self.eval_shadowed(u, v, wo, wi, depth, None, 0.0)
     }
 
     /// [`Material::eval_at_depth`] with the hit's own visibility of the light: `visible(l)` is
     /// how much of the light from local direction `l` reaches the hit (0–1, from the MDF). The
     /// sampled lights' values are divided by the visibility they had there (blended and, beyond
     /// the cone, extrapolated alike) and multiplied by the query light's own (see the module's
-    /// doc, "Shadows from the MDF").
+    /// doc, "Shadows from the MDF"). `level`: where the pixel's footprint covers 2^level
+    /// texels, the levels it lies between are blended ([`Material::with_levels`]; 0 or no
+    /// levels: the texels themselves, bilinear).
+    #[allow(clippy::too_many_arguments)]
     pub fn eval_shadowed(
         &self,
         u: f64,
@@ -278,8 +440,15 @@ impl<'a> Material<'a> {
         wi: [f64; 3],
         depth: Option<[f64; 2]>,
         visible: Option<&dyn Fn([f64; 3]) -> f64>,
+        level: f64,
     ) -> [f64; 3] {
-        let at = Lookup { u, v, wo, depth };
+        let at = Lookup {
+            u,
+            v,
+            wo,
+            depth,
+            level,
+        };
         let bv = lookup(&self.views, self.view_table.as_ref(), wo);
         // The visibility a blend of sampled lights implies: theirs, with its weights.
         let implied = |bl: &Blend| match visible {
@@ -370,6 +539,29 @@ impl<'a> Material<'a> {
                 }
                 None => (at.u, at.v),
             };
+            if at.level > 0.0 && !self.levels.is_empty() {
+                // The footprint's box as four boxes of half its side, each read at its own
+                // level: the two levels' bilinear tents around one centre blur a box of F
+                // texels as a kernel three times its variance.
+                let quarter = 0.25 * at.level.exp2();
+                let sub = (at.level - 1.0).max(0.0);
+                for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+                    let (uq, vq) = (
+                        u + sx * quarter / self.width as f64,
+                        v + sy * quarter / self.height as f64,
+                    );
+                    for &(lk, x, y, tw) in self.level_taps(uq, vq, sub).iter() {
+                        if tw == 0.0 {
+                            continue;
+                        }
+                        let c = self.texel_at(lk, p, x, y);
+                        for k in 0..3 {
+                            out[k] += 0.25 * c[k] * w * tw / total;
+                        }
+                    }
+                }
+                continue;
+            }
             let taps = texel_taps(u, v, self.width, self.height);
             for &(x, y, tw) in &taps {
                 if tw == 0.0 {
@@ -392,6 +584,8 @@ struct Lookup {
     v: f64,
     wo: [f64; 3],
     depth: Option<[f64; 2]>,
+    /// The footprint's level (0: the texels themselves).
+    level: f64,
 }
 
 /// The MDF as the renderer samples it.
@@ -626,7 +820,7 @@ mod tests {
                         let vis = |l: [f64; 3]| {
                             crate::render::shade::light_visibility(&m, [u, v], wo, tile, l)
                         };
-                        ours += mat.eval_shadowed(u, v, wo, wi, Some(tile), Some(&vis))[0];
+                        ours += mat.eval_shadowed(u, v, wo, wi, Some(tile), Some(&vis), 0.0)[0];
                         exact += probe.data[pi * 3 * n + y * 64 + x] as f64;
                     }
                 }

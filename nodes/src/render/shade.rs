@@ -66,6 +66,59 @@ pub struct Scene<'a> {
     /// Under an environment light: the BTF's transfer and the mesh's lighting
     /// (`environment.rs`), which then shade every hit instead of `light`.
     pub env: Option<super::environment::EnvShading>,
+    /// How many texels a pixel covers, for reading the BTF at its level of detail
+    /// ([`PixelFootprint`]); `None`: the texels themselves everywhere.
+    pub footprint: Option<PixelFootprint>,
+}
+
+/// What one pixel covers of the texture at a hit: the camera's pixel (world size per unit of
+/// distance for a pinhole, world size for an orthographic camera), the texels a texture unit
+/// holds along u and v (tiling × the BTF's texels), and each vertex's world length of a
+/// texture unit along u and v (`Mesh::uv_scale`).
+pub struct PixelFootprint {
+    pub pixel: f64,
+    pub orthographic: bool,
+    pub texels: [f64; 2],
+    pub uv_len: Vec<[f32; 2]>,
+}
+
+impl PixelFootprint {
+    pub fn new(
+        mesh: &Mesh,
+        camera: &crate::support::raytrace::camera::Camera,
+        tiling: [f64; 2],
+        texels: [usize; 2],
+    ) -> Self {
+        PixelFootprint {
+            pixel: 2.0 * camera.half / camera.height as f64,
+            orthographic: camera.orthographic,
+            texels: [tiling[0] * texels[0] as f64, tiling[1] * texels[1] as f64],
+            uv_len: mesh.uv_scale(),
+        }
+    }
+
+    /// The level of detail at a hit `t` along a ray meeting the surface `s` at cosine `cos`
+    /// from its normal: log₂ F for a footprint F texels across (the geometric mean of its two
+    /// axes, the long one widened by 1/cos), 0 below one texel.
+    pub fn level(&self, mesh: &Mesh, s: &Surface, t: f64, cos: f64) -> f64 {
+        let world = if self.orthographic {
+            self.pixel
+        } else {
+            self.pixel * t
+        } / cos.abs().max(0.05).sqrt();
+        let c = mesh.corners(s.tri);
+        let len = [0, 1].map(|k| {
+            c.iter()
+                .zip(&s.bary)
+                .map(|(&i, w)| self.uv_len[i][k] as f64 * w)
+                .sum::<f64>()
+        });
+        if !(len[0] > 0.0 && len[1] > 0.0) {
+            return 0.0;
+        }
+        let per_world = (self.texels[0] / len[0] * self.texels[1] / len[1]).sqrt();
+        (world * per_world).max(1.0).log2()
+    }
 }
 
 /// The tile's texel aspect at each vertex, (k_u, k_v): how many more of the MDF's texels a
@@ -551,6 +604,10 @@ impl Scene<'_> {
         shadow: Option<&LazyShadowMap>,
     ) -> Option<[f64; 3]> {
         let (t, t_front, s, wo, depth) = self.hit_with_depth(layers, px, o, d)?;
+        let level = self
+            .footprint
+            .as_ref()
+            .map_or(0.0, |f| f.level(self.mesh, &s, t_front, dot(d, s.n)));
         if let Some(env) = &self.env {
             return Some(env.shade(self.material, self.mesh, &s, wo, depth));
         }
@@ -576,9 +633,11 @@ impl Scene<'_> {
             (Some(m), Some(tile)) => {
                 let visible = |l: V3| light_visibility(m, s.uv, wo, tile, l);
                 self.material
-                    .eval_shadowed(s.uv[0], s.uv[1], wo, wc, depth, Some(&visible))
+                    .eval_shadowed(s.uv[0], s.uv[1], wo, wc, depth, Some(&visible), level)
             }
-            _ => self.material.eval_at_depth(s.uv[0], s.uv[1], wo, wc, depth),
+            _ => self
+                .material
+                .eval_shadowed(s.uv[0], s.uv[1], wo, wc, depth, None, level),
         };
         Some(f.map(|c| c * irradiance))
     }

@@ -11,7 +11,7 @@ pub mod validity;
 
 use super::material::{Material, MdfLookup, Source};
 use super::environment::EnvShading;
-use super::shade::{shell_sides, texel_aspect, Scene};
+use super::shade::{shell_sides, texel_aspect, PixelFootprint, Scene};
 use crate::support::geometry::{bounding_sphere, normalize, sub};
 use crate::support::progress::Counter;
 use crate::support::raytrace::camera::Camera;
@@ -55,6 +55,11 @@ crate::view_params! {
         /// lookups' arithmetic). See the BTF guide for the error each order leaves.
         #[schemars(range(min = 1, max = 12))]
         pub environment_order: u32 = 6,
+        /// Read the BTF at the level of detail each pixel's footprint covers (box-filtered
+        /// levels, blended between the two around it), so that a tile a few pixels wide is
+        /// its mean, not an alias of one texel; false reads the texels themselves (the CPU
+        /// path; the GPU path reads the texels themselves).
+        pub footprint: bool = true,
     }
 }
 
@@ -84,7 +89,8 @@ impl Node for RenderMesh {
             // 4: directions looked up in the tile's own proportions where the UVs stretch it,
             // the MDF's shadows, shell sides rays enter by. 5: light past the macro horizon.
             // 6: the validity warnings (images unchanged; a cache hit repeats the warnings its
-            // entry stored, so older entries rerun once to have them). 7: environment lights.
+            // entry stored, so older entries rerun once to have them). 7: environment lights, and
+            // the BTF read at the pixel's footprint.
             version: 7,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
@@ -186,6 +192,19 @@ impl Node for RenderMesh {
             return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
         };
         let mut material = Material::new(source);
+        if p.footprint {
+            crate::support::memory::check_param(
+                match &material.source {
+                    Source::Raw(b) => b.data.len() as u64 * 4 / 3,
+                    Source::Basis { basis, .. } => {
+                        basis.blocks.iter().map(|b| b.maps.len() as u64 * 4 / 3).sum()
+                    }
+                },
+                "the BTF's levels of detail",
+                "footprint",
+            )?;
+            material = material.with_levels(1);
+        }
         let mdf = inputs.opt::<Mdf>("mdf")?.filter(|_| p.use_mdf);
         let mut mdf_lookup = mdf.map(MdfLookup::new);
         if p.interpolation == Interpolation::Nearest {
@@ -217,6 +236,14 @@ impl Node for RenderMesh {
         }
         let light = Light::open(&p.light, ctx)?;
         let mut scene = scene_for(mesh, &material, mdf_lookup, p, light.clone())?;
+        if p.footprint {
+            scene.footprint = Some(PixelFootprint::new(
+                mesh,
+                &camera,
+                p.tiling,
+                [material.width, material.height],
+            ));
+        }
         if let Some(env) = light.env() {
             let start = Instant::now();
             let tracer = crate::support::raytrace::tracer::Tracer::in_context(mesh, Some(ctx));
@@ -315,6 +342,7 @@ pub fn scene_for<'a>(
         sides: shell_sides(mesh, p.shell),
         aspect,
         env: None,
+        footprint: None,
     })
 }
 

@@ -229,9 +229,11 @@ pub struct SkyParams {
     pub sun_size: f64,
     /// Linear RGB radiance at the glow's centre.
     pub sun_radiance: [f64; 3],
-    /// Linear RGB radiance of the sky at the zenith and at the horizon, and of the ground.
+    /// Linear RGB radiance of the sky at the zenith.
     pub zenith: [f64; 3],
+    /// Linear RGB radiance of the sky at the horizon.
     pub horizon: [f64; 3],
+    /// Linear RGB radiance below the horizon.
     pub ground: [f64; 3],
 }
 
@@ -256,16 +258,21 @@ impl Default for SkyParams {
 pub struct StudioParams {
     /// The windows: direction (world, z up), angular radius in degrees, linear RGB radiance.
     pub windows: Vec<Window>,
+    /// Linear RGB radiance of the room above the horizon, between the windows.
     pub walls: [f64; 3],
+    /// Linear RGB radiance below the horizon.
     pub floor: [f64; 3],
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Window {
+    /// Direction towards the window's centre (world, z up; need not be unit length).
     pub direction: [f64; 3],
+    /// Angular radius, degrees.
     #[schemars(range(min = 0.5, max = 90.0))]
     pub size: f64,
+    /// Linear RGB radiance.
     pub radiance: [f64; 3],
 }
 

@@ -264,6 +264,78 @@ mod tests {
         assert!((e - 2.0).abs() < 1e-12);
     }
 
+    /// A `.npy` lat-long file is read relative to the graph's folder, shared by content, and
+    /// looked up as written (row 0 up); an EXR of the same texels is the same environment.
+    #[test]
+    fn an_environment_file_is_read_relative_to_the_graph() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (8usize, 4usize);
+        let texels: Vec<f32> = (0..w * h * 3).map(|i| (i / 3) as f32 / 10.0).collect();
+        let npy = crate::support::formats::encode_npy(&[h, w, 3], &texels).unwrap();
+        std::fs::write(dir.path().join("env.npy"), npy).unwrap();
+        let img = crate::types::Image {
+            width: w,
+            height: h,
+            channels: 3,
+            data: texels.clone(),
+        };
+        std::fs::write(
+            dir.path().join("env.exr"),
+            crate::support::formats::encode_exr(&img).unwrap(),
+        )
+        .unwrap();
+        let ctx = NodeContext::detached(None).with_base(dir.path().to_path_buf());
+        let open = |file: &str| {
+            Light::open(
+                &LightParams {
+                    environment: Some(file.into()),
+                    intensity: 2.0,
+                    ..Default::default()
+                },
+                &ctx,
+            )
+            .unwrap()
+        };
+        let (a, b) = (open("env.npy"), open("env.exr"));
+        assert_eq!(a, b);
+        assert!(Arc::ptr_eq(
+            a.environment.as_ref().unwrap(),
+            b.environment.as_ref().unwrap()
+        ));
+        // Straight up is row 0; texel (0, 0) holds 0, so the first texel along +x just above
+        // the horizon is row 1 (of 4), column 0: value 8/10, times the intensity.
+        let env = a.env().unwrap();
+        assert_eq!(env.radiance([0.0, 0.0, 1.0]), [0.0; 3]);
+        let l = env.radiance([0.999, 0.01, 0.03]);
+        assert!((l[0] - 1.6).abs() < 1e-6, "{l:?}");
+        let missing = Light::open(
+            &LightParams {
+                environment: Some("none.exr".into()),
+                ..Default::default()
+            },
+            &ctx,
+        );
+        assert!(missing.unwrap_err().to_string().contains("light"));
+    }
+
+    #[test]
+    fn an_environment_is_refused_where_it_is_not_shaded_and_kinds_do_not_mix() {
+        let sky = LightParams {
+            sky: Some(SkyParams::default()),
+            ..Default::default()
+        };
+        assert!(Light::check(&sky).is_ok());
+        assert!(Light::new(&sky)
+            .unwrap_err()
+            .to_string()
+            .contains("not supported"));
+        let both = LightParams {
+            studio: Some(StudioParams::default()),
+            ..sky
+        };
+        assert!(Light::check(&both).unwrap_err().to_string().contains("one of"));
+    }
+
     #[test]
     fn bad_lights_name_the_parameter() {
         for p in [
