@@ -342,6 +342,10 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         How::Slow("a 4-bounce capture and a 4-bounce truth at 64 samples a pixel, about 40 s here"),
     ),
     (
+        "run graphs/btf_environment.json --device cpu",
+        How::Slow("a 4-bounce capture and a 4-bounce truth under the sky, about 50 s here"),
+    ),
+    (
         "explain graphs/btf_compress.json --set pca.rank=8",
         How::AsWritten,
     ),

@@ -47,9 +47,9 @@ pub const LIGHTING_TEXELS: (usize, usize) = (48, 24);
 pub struct EnvShading {
     pub order: usize,
     n: usize,
-    /// [view][texel][function] RGB.
-    transfer: Vec<[f32; 3]>,
-    texels: usize,
+    /// Per level of the material (0: its texels), [view][texel][function] RGB: the transfer
+    /// box-filtered as the BTF's levels are (it is linear in the BTF).
+    transfer: Vec<Vec<[f32; 3]>>,
     /// [vertex][function] RGB.
     lighting: Vec<[f32; 3]>,
 }
@@ -72,7 +72,8 @@ impl EnvShading {
         let n = sh::count(order);
         let texels = material.width * material.height;
         crate::support::memory::check_param(
-            transfer_bytes(texels, material.views.len(), order),
+            // Its levels add a third.
+            transfer_bytes(texels, material.views.len(), order) / 3 * 4,
             &format!(
                 "the environment transfer of a {} × {} BTF with {} views at {order} bands",
                 material.width,
@@ -105,17 +106,40 @@ impl EnvShading {
             })
             .collect();
         let lighting = lighting(mesh, tracer, env, order);
+        let mut levels = vec![transfer];
+        for k in 1..=material.levels.len() {
+            let (w, h) = material.level_size(k - 1);
+            let prev = &levels[k - 1];
+            let (hw, hh) = (w / 2, h / 2);
+            let views = material.views.len();
+            let mut next = vec![[0.0f32; 3]; views * hw * hh * n];
+            for vi in 0..views {
+                for y in 0..hh {
+                    for x in 0..hw {
+                        for f in 0..n {
+                            let at = |dx: usize, dy: usize| {
+                                prev[((vi * h + 2 * y + dy) * w + 2 * x + dx) * n + f]
+                            };
+                            let (a, b, c, d) = (at(0, 0), at(1, 0), at(0, 1), at(1, 1));
+                            next[((vi * hh + y) * hw + x) * n + f] =
+                                [0, 1, 2].map(|k| 0.25 * (a[k] + b[k] + c[k] + d[k]));
+                        }
+                    }
+                }
+            }
+            levels.push(next);
+        }
         Ok(EnvShading {
             order,
             n,
-            transfer,
-            texels,
+            transfer: levels,
             lighting,
         })
     }
 
     /// Radiance towards local view `wo` at a hit on `s` (entry texel `s.uv`, the hit `depth`
-    /// below it where known, as [`Material::eval_at_depth`] takes them).
+    /// below it where known, as [`Material::eval_at_depth`] takes them), read at the
+    /// footprint's `level` as the directional path reads the BTF.
     pub fn shade(
         &self,
         material: &Material,
@@ -123,6 +147,7 @@ impl EnvShading {
         s: &Surface,
         wo: V3,
         depth: Option<[f64; 2]>,
+        level: f64,
     ) -> [f64; 3] {
         let n = self.n;
         // The lighting at the hit: its triangle's corners', barycentric.
@@ -153,16 +178,25 @@ impl EnvShading {
                 }
                 None => (s.uv[0], s.uv[1]),
             };
-            for (x, y, tw) in texel_taps(u, v, material.width, material.height) {
-                if tw == 0.0 {
-                    continue;
-                }
-                let base = (vi * self.texels + y * material.width + x) * n;
-                let t = &self.transfer[base..base + n];
+            let mut add = |lk: usize, x: usize, y: usize, tw: f64| {
+                let (lw, lh) = material.level_size(lk);
+                let base = ((vi * lh + y) * lw + x) * n;
+                let t = &self.transfer[lk][base..base + n];
                 let w = wv * tw / total;
                 for (ti, li) in t.iter().zip(&light[..n]) {
                     for k in 0..3 {
                         out[k] += w * ti[k] as f64 * li[k];
+                    }
+                }
+            };
+            if level > 0.0 && !material.levels.is_empty() {
+                for &(lk, x, y, tw) in material.footprint_taps(u, v, level).iter() {
+                    add(lk, x, y, tw);
+                }
+            } else {
+                for (x, y, tw) in texel_taps(u, v, material.width, material.height) {
+                    if tw > 0.0 {
+                        add(0, x, y, tw);
                     }
                 }
             }

@@ -154,11 +154,19 @@ pub struct Material<'a> {
     pub levels: Vec<Level>,
 }
 
-/// Up to 8 taps (two levels' bilinear taps): (level, x, y, weight).
-#[derive(Default)]
+/// Up to 32 taps (four boxes' two levels' bilinear taps): (level, x, y, weight).
 pub struct LevelTaps {
-    taps: [(usize, usize, usize, f64); 8],
+    taps: [(usize, usize, usize, f64); 32],
     count: usize,
+}
+
+impl Default for LevelTaps {
+    fn default() -> Self {
+        LevelTaps {
+            taps: [(0, 0, 0, 0.0); 32],
+            count: 0,
+        }
+    }
 }
 
 impl LevelTaps {
@@ -336,29 +344,50 @@ impl<'a> Material<'a> {
         }
     }
 
-    /// Bilinear taps at a continuous level λ ≥ 0: (level, x, y, weight), the two bracketing
-    /// levels blended (trilinear), λ beyond the coarsest clamped to it.
-    pub fn level_taps(&self, u: f64, v: f64, level: f64) -> LevelTaps {
+    /// The taps that read a footprint of 2^`level` texels a side centred on (u, v): its box as
+    /// four boxes of half its side, each read trilinearly at its own level (one trilinear read
+    /// of the whole box blurs it with a kernel of three times its variance: relative RMSE 0.083
+    /// against the exact box at 3.3 texels a pixel, four half-boxes 0.043; `render_mesh`'s
+    /// test). Weights sum to 1; zero-weight taps are left out.
+    pub fn footprint_taps(&self, u: f64, v: f64, level: f64) -> LevelTaps {
+        let quarter = 0.25 * level.exp2();
+        let sub = (level - 1.0).max(0.0);
+        let mut out = LevelTaps::default();
+        for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
+            let uq = u + sx * quarter / self.width as f64;
+            let vq = v + sy * quarter / self.height as f64;
+            self.level_taps(uq, vq, sub, 0.25, &mut out);
+        }
+        out
+    }
+
+    /// Bilinear taps at a continuous level λ ≥ 0, times `weight`, added to `out`: the two
+    /// bracketing levels blended (trilinear), λ beyond the coarsest clamped to it.
+    fn level_taps(&self, u: f64, v: f64, level: f64, weight: f64, out: &mut LevelTaps) {
         let coarsest = self.levels.len() as f64;
         let l = if level.is_finite() { level.clamp(0.0, coarsest) } else { 0.0 };
         let lo = l.floor() as usize;
         let f = l - lo as f64;
-        let mut out = LevelTaps::default();
         for (k, w) in [(lo, 1.0 - f), (lo + 1, f)] {
             if w <= 0.0 || k > self.levels.len() {
                 continue;
             }
-            let (lw, lh) = if k == 0 {
-                (self.width, self.height)
-            } else {
-                (self.levels[k - 1].width, self.levels[k - 1].height)
-            };
+            let (lw, lh) = self.level_size(k);
             for (x, y, tw) in texel_taps(u, v, lw, lh) {
-                out.taps[out.count] = (k, x, y, w * tw);
-                out.count += 1;
+                if tw > 0.0 {
+                    out.taps[out.count] = (k, x, y, weight * w * tw);
+                    out.count += 1;
+                }
             }
         }
-        out
+    }
+
+    /// Texels a side at level `k`.
+    pub fn level_size(&self, k: usize) -> (usize, usize) {
+        match k {
+            0 => (self.width, self.height),
+            _ => (self.levels[k - 1].width, self.levels[k - 1].height),
+        }
     }
 
     pub fn from_basis(basis: &'a BtfBasis) -> Material<'a> {
@@ -540,24 +569,10 @@ impl<'a> Material<'a> {
                 None => (at.u, at.v),
             };
             if at.level > 0.0 && !self.levels.is_empty() {
-                // The footprint's box as four boxes of half its side, each read at its own
-                // level: the two levels' bilinear tents around one centre blur a box of F
-                // texels as a kernel three times its variance.
-                let quarter = 0.25 * at.level.exp2();
-                let sub = (at.level - 1.0).max(0.0);
-                for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
-                    let (uq, vq) = (
-                        u + sx * quarter / self.width as f64,
-                        v + sy * quarter / self.height as f64,
-                    );
-                    for &(lk, x, y, tw) in self.level_taps(uq, vq, sub).iter() {
-                        if tw == 0.0 {
-                            continue;
-                        }
-                        let c = self.texel_at(lk, p, x, y);
-                        for k in 0..3 {
-                            out[k] += 0.25 * c[k] * w * tw / total;
-                        }
+                for &(lk, x, y, tw) in self.footprint_taps(u, v, at.level).iter() {
+                    let c = self.texel_at(lk, p, x, y);
+                    for k in 0..3 {
+                        out[k] += c[k] * w * tw / total;
                     }
                 }
                 continue;

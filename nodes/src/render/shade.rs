@@ -609,7 +609,7 @@ impl Scene<'_> {
             .as_ref()
             .map_or(0.0, |f| f.level(self.mesh, &s, t_front, dot(d, s.n)));
         if let Some(env) = &self.env {
-            return Some(env.shade(self.material, self.mesh, &s, wo, depth));
+            return Some(env.shade(self.material, self.mesh, &s, wo, depth, level));
         }
         let p = add(o, mul(d, t_front));
         let (to_light, irradiance) = self.light.at(p);
