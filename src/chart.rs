@@ -88,6 +88,20 @@ fn wants_log_x(c: &Chart) -> bool {
     c.x_names.is_none() && lo > 0.0 && (hi / lo > 100.0 || geometric)
 }
 
+/// A positive y spanning more than two decades (ratios from 0.04 to 6, say) is drawn on a log
+/// scale too: on a linear one the small values collapse onto the axis.
+fn wants_log_y(c: &Chart) -> bool {
+    let ys: Vec<f64> = c
+        .series
+        .iter()
+        .flat_map(|s| s.points.iter().map(|p| p.1))
+        .filter(|v| v.is_finite())
+        .collect();
+    let lo = ys.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = ys.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    !ys.is_empty() && lo > 0.0 && hi / lo > 100.0
+}
+
 /// An axis label with as many decimals as the axis's span needs (an axis of whole numbers
 /// reads 2, 4, 8, not 2.000).
 fn tick(v: f64, span: f64) -> String {
@@ -132,7 +146,9 @@ fn natural_order(a: &str, b: &str) -> std::cmp::Ordering {
 }
 
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(), String> {
-    if wants_log_x(c) {
+    let (log_x, log_y) = (wants_log_x(c), wants_log_y(c));
+    if log_x || log_y {
+        let f = |v: f64, log: bool| if log { v.log10() } else { v };
         let logged = Chart {
             title: c.title.clone(),
             x_label: c.x_label,
@@ -142,21 +158,22 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(
                 .iter()
                 .map(|s| Series {
                     name: s.name.clone(),
-                    points: s.points.iter().map(|p| (p.0.log10(), p.1)).collect(),
+                    points: s.points.iter().map(|p| (f(p.0, log_x), f(p.1, log_y))).collect(),
                     scatter: s.scatter,
                 })
                 .collect(),
-            x_names: None,
+            x_names: c.x_names.clone(),
         };
-        return draw_axes(root, &logged, true);
+        return draw_axes(root, &logged, log_x, log_y);
     }
-    draw_axes(root, c, false)
+    draw_axes(root, c, false, false)
 }
 
 fn draw_axes<DB: DrawingBackend>(
     root: DrawingArea<DB, Shift>,
     c: &Chart,
     log_x: bool,
+    log_y: bool,
 ) -> Result<(), String> {
     let e = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(e)?;
@@ -183,12 +200,24 @@ fn draw_axes<DB: DrawingBackend>(
     } else {
         c.x_label.to_string()
     };
+    let y_desc = if log_y {
+        format!("{} (log scale)", c.y_label)
+    } else {
+        c.y_label.to_string()
+    };
+    let y_fmt = move |y: &f64| {
+        if log_y {
+            log_tick(*y)
+        } else {
+            tick(*y, y1 - y0)
+        }
+    };
     chart
         .configure_mesh()
         .x_desc(x_desc)
-        .y_desc(c.y_label)
+        .y_desc(y_desc)
         .x_label_formatter(&x_fmt)
-        .y_label_formatter(&|y| tick(*y, y1 - y0))
+        .y_label_formatter(&y_fmt)
         .draw()
         .map_err(e)?;
     // The legend in the values' order; each series' points joined in the order given (the
@@ -269,5 +298,16 @@ mod tests {
         assert!(wants_log_x(&chart(&[1.0, 2.0, 4.0, 8.0, 16.0])));
         assert!(!wants_log_x(&chart(&[1.0, 2.0, 3.0, 4.0])));
         assert!(wants_log_x(&chart(&[0.01, 0.5, 3.0])));
+        let ys = |ys: &[f64]| Chart {
+            series: vec![Series {
+                name: String::new(),
+                points: ys.iter().map(|&y| (1.0, y)).collect(),
+                scatter: false,
+            }],
+            ..chart(&[])
+        };
+        assert!(wants_log_y(&ys(&[0.04, 0.5, 6.2])));
+        assert!(!wants_log_y(&ys(&[0.5, 1.0, 6.2])));
+        assert!(!wants_log_y(&ys(&[-1.0, 0.5, 600.0])));
     }
 }
