@@ -495,3 +495,38 @@ fn a_captured_mesostructure_is_judged_against_its_displaced_truth() {
     run(&s.path("mesh-rmse=0.9.json"));
     bad_planners_fail(&[&tight, &doc]);
 }
+
+/// The same scene under the procedural sky: the truth probe is path traced under the sky (the
+/// environment sampled by its radiance), every candidate is measured under it, and the planned
+/// graph, brute force at a budget no model meets, keeps the sky and runs.
+#[test]
+fn a_mesostructure_under_an_environment_is_planned_against_its_truth() {
+    let s = Scratch::new();
+    let path = mesh_graph(&s);
+    let mut g: Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    g["nodes"]["ours"]["params"]["light"] = serde_json::json!({ "sky": {}, "intensity": 3.0 });
+    let graph = s.path("sky.json");
+    std::fs::write(&graph, g.to_string()).unwrap();
+    let (doc, planned) = plan_named(&s, &graph, "sky", "rmse=0.05", &[]);
+    assert_eq!(doc["judge"], "truth", "{doc}");
+    let c = chosen(&doc);
+    assert_eq!(c["family"], "brute force", "{doc}");
+    assert_eq!(planned["nodes"]["ours"]["kind"], "render.reference");
+    assert!(
+        planned["nodes"]["ours"]["params"]["light"]["sky"].is_object(),
+        "{planned}"
+    );
+    let r = mesoflow(
+        &[
+            "run",
+            s.path("sky-rmse=0.05.json").to_str().unwrap(),
+            "--quiet",
+            "--out-dir",
+            s.path("out").to_str().unwrap(),
+            "--cache-dir",
+            s.path("cache").to_str().unwrap(),
+        ],
+        s.dir.path(),
+    );
+    assert_eq!(r.code, 0, "{}{}", r.stdout, r.stderr);
+}
