@@ -84,7 +84,14 @@ fn run(dir: &Path) -> Result<Value, String> {
     let output = Command::new(cli::bin())
         .args(["run"])
         .arg(dir.join("graph.json"))
-        .args(["--output", "save_ours.files", "--output", "save_ours_mask.files", "--output", "export.files"])
+        .args([
+            "--output",
+            "save_ours.files",
+            "--output",
+            "save_ours_mask.files",
+            "--output",
+            "export.files",
+        ])
         .args(["--quiet", "--no-cache", "--device", "cpu", "--out-dir"])
         .arg(&out)
         .output()
@@ -98,7 +105,14 @@ fn run(dir: &Path) -> Result<Value, String> {
 }
 
 /// Mitsuba's truth and its time at ours' error: `benches/mesh_peer.py`'s JSON line, or why not.
-fn peer(dir: &Path, p: &Point, res: [u32; 2], spp: u32, truth_spp: u32, ours_s: f64) -> Result<Value, String> {
+fn peer(
+    dir: &Path,
+    p: &Point,
+    res: [u32; 2],
+    spp: u32,
+    truth_spp: u32,
+    ours_s: f64,
+) -> Result<Value, String> {
     let python = cli::repo().join("target/peer-venv/bin/python");
     if !python.exists() {
         return Err("no peer venv (target/peer-venv; .ci/run makes it)".into());
@@ -217,8 +231,8 @@ fn main() {
     std::fs::create_dir_all(&out).expect("the output folder");
     let replot: String = arg("--replot", String::new());
     if !replot.is_empty() {
-        let rows: Vec<Value> = serde_json::from_slice(&std::fs::read(&replot).expect("--replot FILE"))
-            .expect("rows");
+        let rows: Vec<Value> =
+            serde_json::from_slice(&std::fs::read(&replot).expect("--replot FILE")).expect("rows");
         charts(&rows, &out);
         return;
     }
@@ -236,15 +250,26 @@ fn main() {
     for l in &lights {
         for &b in &bounces {
             for &a in &albedos {
-                let p = Point { light: l.clone(), bounces: b, albedo: a };
+                let p = Point {
+                    light: l.clone(),
+                    bounces: b,
+                    albedo: a,
+                };
                 let dir = out.join(format!("{l}_{b}_{a}"));
                 std::fs::create_dir_all(&dir).expect("a point's folder");
-                std::fs::write(dir.join("graph.json"), graph(l, b, a, res, frames).to_string())
-                    .expect("the graph");
+                std::fs::write(
+                    dir.join("graph.json"),
+                    graph(l, b, a, res, frames).to_string(),
+                )
+                .expect("the graph");
                 let report = run(&dir);
                 let ours = report.as_ref().ok().map(|r| cli::node(r, "ours").clone());
-                let frame_ms = ours.as_ref().and_then(|o| o["timings"]["frame_ms"].as_f64());
-                let env_ms = ours.as_ref().and_then(|o| o["timings"]["environment_ms"].as_f64());
+                let frame_ms = ours
+                    .as_ref()
+                    .and_then(|o| o["timings"]["frame_ms"].as_f64());
+                let env_ms = ours
+                    .as_ref()
+                    .and_then(|o| o["timings"]["environment_ms"].as_f64());
                 let theirs = match frame_ms {
                     Some(ms) => peer(&dir, &p, res, spp, truth_spp, ms / 1e3),
                     None => Err(report.clone().err().unwrap_or_else(|| "no frame".into())),
@@ -261,7 +286,9 @@ fn main() {
                     "error": theirs.as_ref().err(),
                 });
                 let f = |k: &str, d: usize| {
-                    row[k].as_f64().map_or("—".to_string(), |v| format!("{v:.d$}"))
+                    row[k]
+                        .as_f64()
+                        .map_or("—".to_string(), |v| format!("{v:.d$}"))
                 };
                 println!(
                     "| {l} | {b} | {a} | {} | {} | {} | {} | {} | {} |{}",
@@ -271,11 +298,18 @@ fn main() {
                     f("equal_spp", 1),
                     f("equal_ms", 0),
                     f("ratio", 3),
-                    theirs.as_ref().err().map(|e| format!(" {e}")).unwrap_or_default()
+                    theirs
+                        .as_ref()
+                        .err()
+                        .map(|e| format!(" {e}"))
+                        .unwrap_or_default()
                 );
                 rows.push(row);
-                std::fs::write(out.join("environment.json"), serde_json::to_string_pretty(&rows).unwrap())
-                    .expect("the rows");
+                std::fs::write(
+                    out.join("environment.json"),
+                    serde_json::to_string_pretty(&rows).unwrap(),
+                )
+                .expect("the rows");
             }
         }
     }

@@ -155,6 +155,7 @@ fn renders(counts: &[usize], width: u32, height: u32, gpu: Option<&Gpu>) {
                 direction: [0.5, 0.5, -1.0],
                 position: None,
                 intensity: 5.0,
+                ..Default::default()
             },
             mm_per_unit: 20.0,
             // Ask for far denser samples than the cap: the cap sets the count.

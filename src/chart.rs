@@ -158,7 +158,11 @@ fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, c: &Chart) -> Result<(
                 .iter()
                 .map(|s| Series {
                     name: s.name.clone(),
-                    points: s.points.iter().map(|p| (f(p.0, log_x), f(p.1, log_y))).collect(),
+                    points: s
+                        .points
+                        .iter()
+                        .map(|p| (f(p.0, log_x), f(p.1, log_y)))
+                        .collect(),
                     scatter: s.scatter,
                 })
                 .collect(),

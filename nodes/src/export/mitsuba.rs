@@ -72,11 +72,7 @@ impl Node for ExportMitsuba {
             Some(env) => {
                 let texels = env.radiance.iter().flatten().copied().collect();
                 Some(scene::environment_file(
-                    &mut s,
-                    &p.path,
-                    env.width,
-                    env.height,
-                    texels,
+                    &mut s, &p.path, env.width, env.height, texels,
                 )?)
             }
             None => None,
@@ -409,8 +405,15 @@ mod tests {
         assert!(xml.contains(r#"value="scene_environment.exr""#));
         assert!(xml.contains(r#"<boolean name="hide_emitters" value="true"/>"#));
         // Columns of the to_world matrix: local +y (Mitsuba's up) → world +z.
-        assert!(xml.contains(r#"<matrix value="0 0 -1 0 1 0 0 0 0 1 0 0 0 0 0 1"/>"#), "{xml}");
-        let exr = files.files.iter().find(|f| f.path.ends_with(".exr")).unwrap();
+        assert!(
+            xml.contains(r#"<matrix value="0 0 -1 0 1 0 0 0 0 1 0 0 0 0 0 1"/>"#),
+            "{xml}"
+        );
+        let exr = files
+            .files
+            .iter()
+            .find(|f| f.path.ends_with(".exr"))
+            .unwrap();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("e.exr");
         std::fs::write(&path, &exr.bytes).unwrap();
@@ -428,7 +431,9 @@ mod tests {
         let files = out.value::<mesoflow_runtime::Artifacts>("files");
         let text = String::from_utf8(files.files.last().unwrap().bytes.clone()).unwrap();
         assert!(
-            text.contains(r#"LightSource "infinite" "string filename" [ "scene_environment.exr" ]"#),
+            text.contains(
+                r#"LightSource "infinite" "string filename" [ "scene_environment.exr" ]"#
+            ),
             "{text}"
         );
     }

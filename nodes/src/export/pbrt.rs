@@ -104,7 +104,10 @@ impl Node for ExportPbrt {
             let mut texels = Vec::with_capacity(n * n * 3);
             for y in 0..n {
                 for x in 0..n {
-                    let d = equal_area_direction((x as f64 + 0.5) / n as f64, (y as f64 + 0.5) / n as f64);
+                    let d = equal_area_direction(
+                        (x as f64 + 0.5) / n as f64,
+                        (y as f64 + 0.5) / n as f64,
+                    );
                     texels.extend(env.radiance(d).map(|c| c as f32));
                 }
             }
@@ -371,7 +374,8 @@ mod equal_area_tests {
         let (mut z, mut z2) = (0.0, 0.0);
         for y in 0..n {
             for x in 0..n {
-                let d = equal_area_direction((x as f64 + 0.5) / n as f64, (y as f64 + 0.5) / n as f64);
+                let d =
+                    equal_area_direction((x as f64 + 0.5) / n as f64, (y as f64 + 0.5) / n as f64);
                 let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
                 assert!((len - 1.0).abs() < 1e-9);
                 z += d[2];
@@ -379,6 +383,11 @@ mod equal_area_tests {
             }
         }
         let m = (n * n) as f64;
-        assert!((z / m).abs() < 1e-3 && (z2 / m - 1.0 / 3.0).abs() < 1e-3, "{} {}", z / m, z2 / m);
+        assert!(
+            (z / m).abs() < 1e-3 && (z2 / m - 1.0 / 3.0).abs() < 1e-3,
+            "{} {}",
+            z / m,
+            z2 / m
+        );
     }
 }

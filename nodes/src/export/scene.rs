@@ -15,12 +15,10 @@ use crate::support::raytrace::camera::CameraParams;
 use crate::support::raytrace::environment::Environment;
 use crate::support::raytrace::light::{Light, LightParams};
 use crate::types::{Image, Mesh, ScatteringMaterial};
-use mesoflow_runtime::{
-    Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, Outputs, Port,
-};
-use std::sync::Arc;
+use mesoflow_runtime::{Artifact, Artifacts, Inputs, Node, NodeContext, NodeError, Outputs, Port};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 
 /// `export.mitsuba`'s parameters: where the scene file goes, and the render it describes.
 #[derive(Clone, Debug, Serialize, Deserialize, JsonSchema)]
@@ -149,8 +147,8 @@ pub fn environment_file(
         channels: 3,
         data: texels,
     };
-    let bytes = encode_exr(&img)
-        .map_err(|e| NodeError::Failed(format!("the environment's EXR: {e}")))?;
+    let bytes =
+        encode_exr(&img).map_err(|e| NodeError::Failed(format!("the environment's EXR: {e}")))?;
     scene.files.push(Artifact { path: full, bytes });
     Ok(name)
 }

@@ -224,7 +224,10 @@ pub fn light_weights(material: &Material, order: usize) -> Vec<f64> {
             let outer = material.light_rings.filter(|r| z < r.0 - 1e-9);
             let (blend, scale) = match (outer, &material.light_table) {
                 (Some((c1, _)), Some(t)) => (t.on_ring(t.rings.len() - 1, phi), z / c1),
-                _ => (lookup(&material.lights, material.light_table.as_ref(), w), 1.0),
+                _ => (
+                    lookup(&material.lights, material.light_table.as_ref(), w),
+                    1.0,
+                ),
             };
             let total: f64 = blend.iter().map(|b| b.1).sum();
             if total <= 0.0 {
@@ -342,9 +345,13 @@ mod tests {
             "samples": 4, "bounces": bounces, "bounce_rays": 256
         }))
         .unwrap();
-        run(&Capture, &p, &Inputs::new().with("height", Arc::new(height)))
-            .unwrap()
-            .take::<Btf>("btf")
+        run(
+            &Capture,
+            &p,
+            &Inputs::new().with("height", Arc::new(height)),
+        )
+        .unwrap()
+        .take::<Btf>("btf")
     }
 
     fn plane() -> Mesh {
@@ -415,7 +422,10 @@ mod tests {
     fn lights() -> [(&'static str, Value); 2] {
         [
             ("sky", json!({"sky": {}, "intensity": 1.0})),
-            ("studio", json!({"studio": {}, "intensity": 1.0, "rotation": 40.0})),
+            (
+                "studio",
+                json!({"studio": {}, "intensity": 1.0, "rotation": 40.0}),
+            ),
         ]
     }
 
@@ -431,7 +441,10 @@ mod tests {
             for view in VIEWS {
                 let t = truth(&mesh, view, &light, 0);
                 let o = ours(&btf, view, &light, 6);
-                eprintln!("flat, {name}, view {view:?}: ours {o:.5}, truth {t:.5}, {:+.2}%", (o / t - 1.0) * 100.0);
+                eprintln!(
+                    "flat, {name}, view {view:?}: ours {o:.5}, truth {t:.5}, {:+.2}%",
+                    (o / t - 1.0) * 100.0
+                );
                 assert!((o / t - 1.0).abs() < 0.03, "{name} {view:?}: {o} vs {t}");
             }
         }

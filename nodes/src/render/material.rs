@@ -208,7 +208,10 @@ fn halve(src: &[f32], planes: usize, w: usize, h: usize) -> Vec<f32> {
     let (hw, hh) = (w / 2, h / 2);
     let mut out = vec![0.0f32; planes * hw * hh];
     for p in 0..planes {
-        let (s, o) = (&src[p * w * h..(p + 1) * w * h], &mut out[p * hw * hh..(p + 1) * hw * hh]);
+        let (s, o) = (
+            &src[p * w * h..(p + 1) * w * h],
+            &mut out[p * hw * hh..(p + 1) * hw * hh],
+        );
         for y in 0..hh {
             for x in 0..hw {
                 let a = |dx: usize, dy: usize| s[(2 * y + dy) * w + 2 * x + dx];
@@ -386,7 +389,11 @@ impl<'a> Material<'a> {
     /// bracketing levels blended (trilinear), λ beyond the coarsest clamped to it.
     fn level_taps(&self, u: f64, v: f64, level: f64, weight: f64, out: &mut LevelTaps) {
         let coarsest = self.levels.len() as f64;
-        let l = if level.is_finite() { level.clamp(0.0, coarsest) } else { 0.0 };
+        let l = if level.is_finite() {
+            level.clamp(0.0, coarsest)
+        } else {
+            0.0
+        };
         let lo = l.floor() as usize;
         let f = l - lo as f64;
         for (k, w) in [(lo, 1.0 - f), (lo + 1, f)] {

@@ -37,16 +37,16 @@ pub fn basis(order: usize, w: V3, out: &mut [f64]) {
                 / (l - m) as f64;
         }
     }
-    for l in 0..order {
+    for (l, pl) in p.iter().enumerate().take(order) {
         for m in 0..=l {
             // (l − m)!/(l + m)! as a product, so nothing overflows.
             let ratio: f64 = (l - m + 1..=l + m).map(|k| 1.0 / k as f64).product();
             let k = ((2 * l + 1) as f64 / (4.0 * std::f64::consts::PI) * ratio).sqrt();
             let base = l * (l + 1);
             if m == 0 {
-                out[base] = k * p[l][0];
+                out[base] = k * pl[0];
             } else {
-                let a = std::f64::consts::SQRT_2 * k * p[l][m];
+                let a = std::f64::consts::SQRT_2 * k * pl[m];
                 let mf = m as f64 * phi;
                 out[base + m] = a * mf.cos();
                 out[base - m] = a * mf.sin();

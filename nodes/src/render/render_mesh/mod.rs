@@ -9,8 +9,8 @@
 
 pub mod validity;
 
-use super::material::{Material, MdfLookup, Source};
 use super::environment::EnvShading;
+use super::material::{Material, MdfLookup, Source};
 use super::shade::{shell_sides, texel_aspect, PixelFootprint, Scene};
 use crate::support::geometry::{bounding_sphere, normalize, sub};
 use crate::support::progress::Counter;
@@ -196,9 +196,11 @@ impl Node for RenderMesh {
             crate::support::memory::check_param(
                 match &material.source {
                     Source::Raw(b) => b.data.len() as u64 * 4 / 3,
-                    Source::Basis { basis, .. } => {
-                        basis.blocks.iter().map(|b| b.maps.len() as u64 * 4 / 3).sum()
-                    }
+                    Source::Basis { basis, .. } => basis
+                        .blocks
+                        .iter()
+                        .map(|b| b.maps.len() as u64 * 4 / 3)
+                        .sum(),
                 },
                 "the BTF's levels of detail",
                 "footprint",

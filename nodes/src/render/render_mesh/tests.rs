@@ -723,8 +723,13 @@ fn reading_at_the_footprint_keeps_the_error_flat_as_tiles_shrink() {
     };
     let (n, ss) = (16usize, 32usize);
     for tiles in [3.3, 7.7, 21.3, 45.7] {
-        let (fine, _) =
-            render(plane(), btf.clone(), None, &params(tiles, (n * ss) as u32, false)).unwrap();
+        let (fine, _) = render(
+            plane(),
+            btf.clone(),
+            None,
+            &params(tiles, (n * ss) as u32, false),
+        )
+        .unwrap();
         let mut truth = vec![0.0f64; n * n * 3];
         for y in 0..n * ss {
             for x in 0..n * ss {
@@ -734,8 +739,10 @@ fn reading_at_the_footprint_keeps_the_error_flat_as_tiles_shrink() {
                 }
             }
         }
-        let (texel, _) = render(plane(), btf.clone(), None, &params(tiles, n as u32, false)).unwrap();
-        let (level, _) = render(plane(), btf.clone(), None, &params(tiles, n as u32, true)).unwrap();
+        let (texel, _) =
+            render(plane(), btf.clone(), None, &params(tiles, n as u32, false)).unwrap();
+        let (level, _) =
+            render(plane(), btf.clone(), None, &params(tiles, n as u32, true)).unwrap();
         let (e_texel, e_level) = (rel(&texel, &truth), rel(&level, &truth));
         eprintln!(
             "{:.1} texels a pixel: texel reads {e_texel:.4}, at the footprint {e_level:.4}",

@@ -185,11 +185,20 @@ impl Environment {
         let (width, height) = (width.clamp(2, self.width), height.clamp(1, self.height));
         let mut out = Vec::with_capacity(width * height);
         for y in 0..height {
-            let (y0, y1) = (y * self.height / height, ((y + 1) * self.height / height).max(y * self.height / height + 1));
-            let (t0, t1) = (PI * y as f64 / height as f64, PI * (y + 1) as f64 / height as f64);
+            let (y0, y1) = (
+                y * self.height / height,
+                ((y + 1) * self.height / height).max(y * self.height / height + 1),
+            );
+            let (t0, t1) = (
+                PI * y as f64 / height as f64,
+                PI * (y + 1) as f64 / height as f64,
+            );
             let omega_row = 2.0 * PI * (t0.cos() - t1.cos()) / width as f64;
             for x in 0..width {
-                let (x0, x1) = (x * self.width / width, ((x + 1) * self.width / width).max(x * self.width / width + 1));
+                let (x0, x1) = (
+                    x * self.width / width,
+                    ((x + 1) * self.width / width).max(x * self.width / width + 1),
+                );
                 let mut sum = [0.0; 3];
                 let mut weight = 0.0;
                 for yy in y0..y1 {
@@ -322,7 +331,11 @@ fn tabulate(f: impl Fn(V3) -> [f64; 3]) -> Vec<[f32; 3]> {
         let theta = PI * (y as f64 + 0.5) / h as f64;
         for x in 0..w {
             let phi = 2.0 * PI * (x as f64 + 0.5) / w as f64;
-            let d = [theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()];
+            let d = [
+                theta.sin() * phi.cos(),
+                theta.sin() * phi.sin(),
+                theta.cos(),
+            ];
             out.push(f(d).map(|c| c as f32));
         }
     }
@@ -370,7 +383,9 @@ impl StudioParams {
             let d = unit(w.direction, &format!("studio.windows[{i}].direction"))?;
             check_rgb(w.radiance, &format!("studio.windows[{i}].radiance"))?;
             if !(0.5..=90.0).contains(&w.size) {
-                return Err(format!("studio.windows[{i}].size must be in [0.5, 90] degrees"));
+                return Err(format!(
+                    "studio.windows[{i}].size must be in [0.5, 90] degrees"
+                ));
             }
             windows.push((d, w.size.to_radians(), w.radiance));
         }
@@ -421,7 +436,11 @@ mod tests {
         // weights' difference between a texel's centre and its rows', well under 1%).
         let power = |q: &[(V3, [f64; 3], f64)]| q.iter().map(|t| t.1[1] * t.2).sum::<f64>();
         let full = power(&env.quadrature(env.width, env.height));
-        assert!((power(&q) / full - 1.0).abs() < 0.01, "{} vs {full}", power(&q));
+        assert!(
+            (power(&q) / full - 1.0).abs() < 0.01,
+            "{} vs {full}",
+            power(&q)
+        );
     }
 
     #[test]
@@ -450,7 +469,10 @@ mod tests {
         for i in 0..count {
             let h = crate::support::rng::hash(7, &[i]);
             let (d, l, pdf) = env
-                .sample(crate::support::rng::unit(h), crate::support::rng::unit(crate::support::rng::mix(h)))
+                .sample(
+                    crate::support::rng::unit(h),
+                    crate::support::rng::unit(crate::support::rng::mix(h)),
+                )
                 .unwrap();
             assert!((pdf / env.pdf(d) - 1.0).abs() < 1e-9);
             assert_eq!(l, env.radiance(d));
@@ -460,7 +482,10 @@ mod tests {
         }
         let mean = sum / count as f64;
         let se = ((sq / count as f64 - mean * mean) / count as f64).sqrt();
-        assert!((mean - want).abs() < 3.0 * se + 1e-3 * want, "{mean} vs {want} (se {se})");
+        assert!(
+            (mean - want).abs() < 3.0 * se + 1e-3 * want,
+            "{mean} vs {want} (se {se})"
+        );
     }
 
     #[test]
@@ -478,9 +503,11 @@ mod tests {
 
     #[test]
     fn bad_texels_and_parameters_are_named() {
-        assert!(Environment::new(2, 1, &[[0.0, f32::NAN, 0.0], [0.0; 3]], 1.0, 0.0)
-            .unwrap_err()
-            .contains("(0, 0)"));
+        assert!(
+            Environment::new(2, 1, &[[0.0, f32::NAN, 0.0], [0.0; 3]], 1.0, 0.0)
+                .unwrap_err()
+                .contains("(0, 0)")
+        );
         let bad = SkyParams {
             sun: [0.0; 3],
             ..Default::default()

@@ -333,7 +333,10 @@ mod tests {
             studio: Some(StudioParams::default()),
             ..sky
         };
-        assert!(Light::check(&both).unwrap_err().to_string().contains("one of"));
+        assert!(Light::check(&both)
+            .unwrap_err()
+            .to_string()
+            .contains("one of"));
     }
 
     #[test]
