@@ -28,8 +28,8 @@
 //! macro shadowing is in the lighting, the tile's own in the transfer.
 
 use super::material::{lookup, texel_taps, Material};
-use super::shade::Surface;
-use crate::support::geometry::{cross, dot, mul, normalize, sub, V3};
+use super::shade::{tangent_frame, Surface};
+use crate::support::geometry::{dot, mul, V3};
 use crate::support::raytrace::environment::Environment;
 use crate::support::raytrace::tracer::Tracer;
 use crate::support::sh;
@@ -167,17 +167,7 @@ impl EnvShading {
         }
         let mut out = [0.0; 3];
         for &(vi, wv) in &bv {
-            let (u, v) = match depth {
-                Some(d) => {
-                    let vk = material.views[vi];
-                    let k = wo[2] / vk[2].max(1e-3);
-                    (
-                        s.uv[0] + d[0] * (vk[0] * k - wo[0]),
-                        s.uv[1] + d[1] * (vk[1] * k - wo[1]),
-                    )
-                }
-                None => (s.uv[0], s.uv[1]),
-            };
+            let (u, v) = material.view_texel(s.uv, wo, depth, vi);
             let mut add = |lk: usize, x: usize, y: usize, tw: f64| {
                 let (lw, lh) = material.level_size(lk);
                 let base = ((vi * lh + y) * lw + x) * n;
@@ -244,19 +234,15 @@ pub fn light_weights(material: &Material, order: usize) -> Vec<f64> {
     a
 }
 
-/// Each vertex's tangent frame (t, b, n) as the shading builds it (`shade::surface_at`).
+/// Each vertex's tangent frame (t, b, n) as the shading builds it at a hit.
 fn vertex_frame(mesh: &Mesh, i: usize) -> (V3, V3, V3) {
     let f = |v: [f32; 3]| v.map(|x| x as f64);
-    let n = normalize(f(mesh.normals[i])).unwrap_or([0.0, 0.0, 1.0]);
-    let t0 = [
-        mesh.tangents[i][0] as f64,
-        mesh.tangents[i][1] as f64,
-        mesh.tangents[i][2] as f64,
-    ];
-    let t = normalize(sub(t0, mul(n, dot(n, t0))))
-        .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
-    let b = mul(cross(n, t), mesh.tangents[i][3] as f64);
-    (t, b, n)
+    let t = mesh.tangents[i];
+    tangent_frame(
+        f(mesh.normals[i]),
+        [t[0] as f64, t[1] as f64, t[2] as f64],
+        t[3] as f64,
+    )
 }
 
 /// L_i at every vertex: the environment above its horizon that the mesh leaves visible, in its

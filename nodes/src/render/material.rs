@@ -422,6 +422,30 @@ impl<'a> Material<'a> {
         Material::new(Source::Basis { basis, owners })
     }
 
+    /// Where sampled view `vi` is looked up for a query from entry point `uv` along local view
+    /// `wo`: where its ray meets the query's hit, `depth` (tiles along u and v) below the entry
+    /// point (see the module's doc, "Parallax-compensated view blend"); the entry point itself
+    /// without a depth.
+    pub fn view_texel(
+        &self,
+        uv: [f64; 2],
+        wo: [f64; 3],
+        depth: Option<[f64; 2]>,
+        vi: usize,
+    ) -> (f64, f64) {
+        match depth {
+            Some(d) => {
+                let vk = self.views[vi];
+                let k = wo[2] / vk[2].max(1e-3);
+                (
+                    uv[0] + d[0] * (vk[0] * k - wo[0]),
+                    uv[1] + d[1] * (vk[1] * k - wo[1]),
+                )
+            }
+            None => (uv[0], uv[1]),
+        }
+    }
+
     /// One texel of one pair, linear RGB.
     pub fn texel(&self, pair: usize, x: usize, y: usize) -> [f64; 3] {
         let t = y * self.width + x;
@@ -584,17 +608,7 @@ impl<'a> Material<'a> {
         }
         let mut out = [0.0; 3];
         for &(vi, p, w) in weights {
-            let (u, v) = match at.depth {
-                Some(d) => {
-                    let vk = self.views[vi];
-                    let k = wo[2] / vk[2].max(1e-3);
-                    (
-                        at.u + d[0] * (vk[0] * k - wo[0]),
-                        at.v + d[1] * (vk[1] * k - wo[1]),
-                    )
-                }
-                None => (at.u, at.v),
-            };
+            let (u, v) = self.view_texel([at.u, at.v], wo, at.depth, vi);
             if at.level > 0.0 && !self.levels.is_empty() {
                 for &(lk, x, y, tw) in self.footprint_taps(u, v, at.level).iter() {
                     let c = self.texel_at(lk, p, x, y);

@@ -320,10 +320,7 @@ pub fn surface_at(m: &Mesh, tiling: [f64; 2], aspect: &[[f32; 2]], f: &Frag) -> 
         (m.uvs[i0][k] as f64 * w[0] + m.uvs[i1][k] as f64 * w[1] + m.uvs[i2][k] as f64 * w[2])
             * tiling[k]
     });
-    let n = normalize(n0).unwrap_or([0.0, 0.0, 1.0]);
-    let t = normalize(sub(t0, mul(n, dot(n, t0))))
-        .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
-    let b = mul(cross(n, t), hand);
+    let (t, b, n) = tangent_frame(n0, t0, hand);
     let k = if aspect.is_empty() {
         [1.0, 1.0]
     } else {
@@ -341,6 +338,15 @@ pub fn surface_at(m: &Mesh, tiling: [f64; 2], aspect: &[[f32; 2]], f: &Frag) -> 
         tri: f.tri as usize,
         bary: w,
     }
+}
+
+/// The shading's tangent frame (t, b, n) from a normal `n0`, a tangent `t0` (orthogonalised
+/// against it; any perpendicular where it is parallel) and the tangent's handedness.
+pub fn tangent_frame(n0: V3, t0: V3, hand: f64) -> (V3, V3, V3) {
+    let n = normalize(n0).unwrap_or([0.0, 0.0, 1.0]);
+    let t = normalize(sub(t0, mul(n, dot(n, t0))))
+        .unwrap_or_else(|| normalize(cross(n, [0.0, 1.0, 0.3])).unwrap_or([1.0, 0.0, 0.0]));
+    (t, mul(cross(n, t), hand), n)
 }
 
 type DeepHit = (f64, f64, Surface, V3, Option<[f64; 2]>);

@@ -192,7 +192,10 @@ impl Node for RenderMesh {
             return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
         };
         let mut material = Material::new(source);
-        if p.footprint {
+        // The GPU path reads the texels themselves: the levels are for the CPU's (which an
+        // environment light always takes).
+        let on_cpu = ctx.gpu().is_none() || p.light.is_environment();
+        if p.footprint && on_cpu {
             crate::support::memory::check_param(
                 match &material.source {
                     Source::Raw(b) => b.data.len() as u64 * 4 / 3,
@@ -238,7 +241,7 @@ impl Node for RenderMesh {
         }
         let light = Light::open(&p.light, ctx)?;
         let mut scene = scene_for(mesh, &material, mdf_lookup, p, light.clone())?;
-        if p.footprint {
+        if p.footprint && on_cpu {
             scene.footprint = Some(PixelFootprint::new(
                 mesh,
                 &camera,
