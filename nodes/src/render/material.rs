@@ -365,14 +365,21 @@ impl<'a> Material<'a> {
     /// four boxes of half its side, each read trilinearly at its own level (one trilinear read
     /// of the whole box blurs it with a kernel of three times its variance: relative RMSE 0.083
     /// against the exact box at 3.3 texels a pixel, four half-boxes 0.043; `render_mesh`'s
-    /// test); under two texels a side, one trilinear read. Weights sum to 1; zero-weight taps
-    /// are left out.
+    /// test); under two texels a side, one trilinear read at the level whose blur matches the
+    /// box's. Weights sum to 1; zero-weight taps are left out.
     pub fn footprint_taps(&self, u: f64, v: f64, level: f64) -> LevelTaps {
         let mut out = LevelTaps::default();
         if level < 1.0 {
             // Under two texels a side the half-size boxes would all read level 0: one
-            // trilinear read between levels 0 and 1 costs half as much.
-            self.level_taps(u, v, level, 1.0, &mut out);
+            // trilinear read between levels 0 and 1 costs half as much. Its level is matched by
+            // variance, not log₂ F: the surface seen through a pixel is the texels' bilinear
+            // reconstruction (variance 1/6 texel²) averaged over a box F texels wide (F²/12);
+            // level 0 read bilinearly has 1/6, level 1 has 1/3 (its 2-texel box) + 4/6, and a
+            // blend λ between them 1/6 + 5λ/6. Equal at λ = F²/10 (0.1 at one texel a pixel,
+            // 0.4 at two, where the half-boxes below take over with ±½-texel taps: 1/4 + 1/6).
+            // log₂ F itself would blur 2.5× too much at two texels a pixel.
+            let f = level.max(0.0).exp2();
+            self.level_taps(u, v, f * f / 10.0, 1.0, &mut out);
             return out;
         }
         let quarter = 0.25 * level.exp2();

@@ -23,6 +23,8 @@ pub struct Relief<'a> {
     pub aspect: Vec<[f32; 2]>,
     pub tiling: [f64; 2],
     pub light: Light,
+    /// Directions a pixel integrates an environment light over.
+    pub environment_samples: u32,
     pub linear_steps: u32,
     pub binary_steps: u32,
     pub shadows: bool,
