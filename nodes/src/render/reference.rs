@@ -397,10 +397,14 @@ fn pixel(
     let mut hits = 0usize;
     let mut rays = 0u64;
     let pixel_id = (y * camera.width as usize + x) as u64;
+    // Where the pixel's last camera ray hit: the next one's first guess.
+    let mut last = None;
     for s in 0..n {
         let (origin, dir) = camera_ray(camera, p, x, y, s);
         rays += 1;
-        let Some(hit) = scene.closest(origin, dir) else {
+        let found = scene.closest_near(origin, dir, last);
+        last = found.as_ref().map(|h| h.slot).or(last);
+        let Some(hit) = found else {
             halves[s % 2] = add(halves[s % 2], p.background);
             continue;
         };

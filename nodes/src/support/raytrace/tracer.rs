@@ -11,7 +11,7 @@
 //! process (`bvh_store`).
 
 use super::bvh_store;
-use crate::support::geometry::{add, cross, mul, normalize, sub, V3};
+use crate::support::geometry::{add, cross, dot, mul, normalize, sub, V3};
 use crate::types::Mesh;
 use mesoflow_runtime::NodeContext;
 use obvhs::cwbvh::CwBvh;
@@ -23,9 +23,32 @@ use std::sync::{Arc, Mutex};
 /// seconds).
 pub const KEEP_FROM: usize = 100_000;
 
+/// A BVH with its triangles' corners in its own leaf order ([`Slots`]).
+type Kept = (Arc<CwBvh>, Arc<Slots>);
+
 /// The last kept BVH: its mesh's hash and the BVH (one entry, so at most one BVH a process
 /// outlives its render).
-static KEPT: Mutex<Option<([u8; 32], Arc<CwBvh>)>> = Mutex::new(None);
+static KEPT: Mutex<Option<([u8; 32], Kept)>> = Mutex::new(None);
+
+/// Each BVH primitive slot's triangle corners (9 × f32, the mesh's own values), in the BVH's
+/// order: a leaf's triangles are read from one place instead of through the primitive index,
+/// the mesh's indices and three scattered positions (the intersection's cache misses were
+/// a fifth of `render.reference`'s frame).
+pub struct Slots(Vec<[f32; 9]>);
+
+impl Slots {
+    fn new(mesh: &Mesh, bvh: &CwBvh) -> Slots {
+        Slots(
+            bvh.primitive_indices
+                .iter()
+                .map(|&t| {
+                    let [a, b, c] = mesh.corners(t as usize).map(|i| mesh.positions[i]);
+                    [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]]
+                })
+                .collect(),
+        )
+    }
+}
 
 /// Forgets the kept BVH, as a new process starts without one (tests).
 #[cfg(test)]
@@ -45,6 +68,9 @@ fn mesh_hash(mesh: &Mesh) -> [u8; 32] {
 
 pub struct Hit {
     pub tri: usize,
+    /// The BVH slot the triangle is stored in: a hint for a neighbouring ray
+    /// ([`Tracer::closest_near`]).
+    pub slot: usize,
     pub t: f64,
     pub b1: f64,
     pub b2: f64,
@@ -71,6 +97,7 @@ pub enum BvhFrom {
 pub struct Tracer<'a> {
     pub mesh: &'a Mesh,
     bvh: Arc<CwBvh>,
+    slots: Arc<Slots>,
     /// Where the BVH came from.
     pub from: BvhFrom,
     /// Shadow-ray offset along the geometric normal: a millionth of the scene's size.
@@ -91,7 +118,11 @@ impl<'a> Tracer<'a> {
     }
 
     fn with_bvh(mesh: &'a Mesh, ctx: Option<&NodeContext>) -> Self {
-        let (bvh, from) = if mesh.triangles() >= KEEP_FROM {
+        let with_slots = |bvh: CwBvh| -> Kept {
+            let slots = Slots::new(mesh, &bvh);
+            (Arc::new(bvh), Arc::new(slots))
+        };
+        let ((bvh, slots), from) = if mesh.triangles() >= KEEP_FROM {
             let key = mesh_hash(mesh);
             let kept = KEPT.lock().ok().and_then(|k| {
                 k.as_ref()
@@ -99,24 +130,25 @@ impl<'a> Tracer<'a> {
                     .map(|(_, b)| b.clone())
             });
             match kept {
-                Some(bvh) => (bvh, BvhFrom::Kept),
+                Some(kept) => (kept, BvhFrom::Kept),
                 None => {
                     let (bvh, from) = Self::stored_or_built(mesh, &key, ctx);
-                    let bvh = Arc::new(bvh);
+                    let kept = with_slots(bvh);
                     if let Ok(mut k) = KEPT.lock() {
-                        *k = Some((key, bvh.clone()));
+                        *k = Some((key, kept.clone()));
                     }
-                    (bvh, from)
+                    (kept, from)
                 }
             }
         } else {
-            (Arc::new(bvh_store::build(mesh)), BvhFrom::Built)
+            (with_slots(bvh_store::build(mesh)), BvhFrom::Built)
         };
         let (lo, hi) = mesh.bounds();
         let size = (0..3).map(|k| (hi[k] - lo[k]) as f64).fold(0.0, f64::max);
         Tracer {
             mesh,
             bvh,
+            slots,
             from,
             epsilon: 1e-6 * size.max(1e-30),
         }
@@ -160,14 +192,34 @@ impl<'a> Tracer<'a> {
         )
     }
 
-    /// Möller–Trumbore in f64 (the CPU ray caster's): distance and barycentrics (of corners
-    /// 1 and 2).
-    fn intersect(&self, t: usize, o: V3, d: V3) -> Option<(f64, f64, f64)> {
-        let [a, b, c] = self
-            .mesh
-            .corners(t)
-            .map(|i| self.mesh.positions[i].map(|x| x as f64));
-        super::layers::intersect(o, d, a, b, c).map(|(dist, b1, b2, _)| (dist, b1, b2))
+    /// Möller–Trumbore in f64 (the CPU ray caster's, `layers::intersect`, with its
+    /// degeneracy test squared rather than two square roots) against BVH slot `id`'s triangle:
+    /// distance and barycentrics (of corners 1 and 2).
+    #[inline(always)]
+    fn intersect(&self, id: usize, o: V3, d: V3) -> Option<(f64, f64, f64)> {
+        let v = self.slots.0[id].map(|x| x as f64);
+        let p0 = [v[0], v[1], v[2]];
+        let e1 = [v[3] - v[0], v[4] - v[1], v[5] - v[2]];
+        let e2 = [v[6] - v[0], v[7] - v[1], v[8] - v[2]];
+        let pv = cross(d, e2);
+        let det = dot(e1, pv);
+        let scale2 = dot(e1, e1) * dot(e2, e2);
+        if det * det <= 1e-24 * scale2 || scale2 == 0.0 {
+            return None; // parallel to the ray or degenerate
+        }
+        let inv = 1.0 / det;
+        let s = sub(o, p0);
+        let b1 = dot(s, pv) * inv;
+        if !(0.0..=1.0).contains(&b1) {
+            return None;
+        }
+        let q = cross(s, e1);
+        let b2 = dot(d, q) * inv;
+        if b2 < 0.0 || b1 + b2 > 1.0 {
+            return None;
+        }
+        let t = dot(e2, q) * inv;
+        (t > 0.0).then_some((t, b1, b2))
     }
 
     /// The BVH's ray: started [`BACK_OFF`] behind `o`, so that the traversal's t is the
@@ -186,36 +238,56 @@ impl<'a> Tracer<'a> {
     /// The nearest hit along the ray from `o` in unit direction `d`. Ties go to the lower
     /// triangle index, so the answer does not depend on the traversal order.
     pub fn closest(&self, o: V3, d: V3) -> Option<Hit> {
+        self.closest_near(o, d, None)
+    }
+
+    /// [`closest`](Self::closest), trying first the BVH slot `hint` (where a neighbouring
+    /// ray hit, [`Hit::slot`]): its distance prunes the traversal from the start, and the
+    /// answer is the same (the true nearest is never beyond it, and ties are settled by index
+    /// as without a hint).
+    pub fn closest_near(&self, o: V3, d: V3, hint: Option<usize>) -> Option<Hit> {
         let mut best: Option<Hit> = None;
+        let mut ray = Self::ray(o, d, f64::INFINITY);
+        if let Some(id) = hint.filter(|&id| id < self.slots.0.len()) {
+            let end = self.consider(id, o, d, &mut best);
+            if end < ray.tmax {
+                ray.tmax = end;
+            }
+        }
         let mut hit = RayHit::none();
         self.bvh
-            .ray_traverse(Self::ray(o, d, f64::INFINITY), &mut hit, |_, id| {
-                let t = self.bvh.primitive_indices[id] as usize;
-                let Some((dist, b1, b2)) = self.intersect(t, o, d) else {
-                    return f32::INFINITY;
-                };
-                let better = best
-                    .as_ref()
-                    .is_none_or(|h| dist < h.t || (dist == h.t && t < h.tri));
-                if better {
-                    best = Some(Hit {
-                        tri: t,
-                        t: dist,
-                        b1,
-                        b2,
-                    });
-                }
-                // Widened a little so that an f32 rounding never prunes an equal-distance tie.
-                ((dist + BACK_OFF) * (1.0 + 1e-6)) as f32
-            });
+            .ray_traverse(ray, &mut hit, |_, id| self.consider(id, o, d, &mut best));
         best
+    }
+
+    /// BVH slot `id`'s triangle against the ray from `o` along `d`: kept in `best` where
+    /// nearer (ties to the lower triangle index); the traversal's new end, or infinity.
+    #[inline(always)]
+    fn consider(&self, id: usize, o: V3, d: V3, best: &mut Option<Hit>) -> f32 {
+        let Some((dist, b1, b2)) = self.intersect(id, o, d) else {
+            return f32::INFINITY;
+        };
+        let t = self.bvh.primitive_indices[id] as usize;
+        let better = best
+            .as_ref()
+            .is_none_or(|h| dist < h.t || (dist == h.t && t < h.tri));
+        if better {
+            *best = Some(Hit {
+                tri: t,
+                slot: id,
+                t: dist,
+                b1,
+                b2,
+            });
+        }
+        // Widened a little so that an f32 rounding never prunes an equal-distance tie.
+        ((dist + BACK_OFF) * (1.0 + 1e-6)) as f32
     }
 
     /// Whether anything lies along the ray from `o` in direction `d` closer than `reach`.
     pub fn occluded(&self, o: V3, d: V3, reach: f64) -> bool {
         !self.bvh.ray_traverse_miss(Self::ray(o, d, reach), |_, id| {
-            let t = self.bvh.primitive_indices[id] as usize;
-            match self.intersect(t, o, d) {
+            match self.intersect(id, o, d) {
                 // Any value below the ray's end is a hit: the f64 test has decided.
                 Some((dist, ..)) if dist < reach => 0.0,
                 _ => f32::INFINITY,
