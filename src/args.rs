@@ -30,6 +30,7 @@ pub enum Command {
     },
     /// List node kinds, or describe one.
     Nodes {
+        /// A kind to describe (`render.mesh`), or a prefix whose kinds to list (`btf`).
         kind: Option<String>,
         /// Machine-readable: a JSON array, one object per kind.
         #[arg(long)]

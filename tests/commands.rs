@@ -556,3 +556,24 @@ fn nodes_lines_fit_a_hundred_columns_and_wrap_under_their_column() {
         );
     }
 }
+
+#[test]
+fn a_prefix_lists_its_kinds() {
+    let s = Scratch::new();
+    let r = mesoflow(&["nodes", "btf"], s.dir.path());
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let kinds: Vec<&str> = r
+        .stdout
+        .lines()
+        .filter(|l| !l.starts_with(' '))
+        .filter_map(|l| l.split_whitespace().next())
+        .collect();
+    assert!(kinds.len() >= 3, "{}", r.stdout);
+    assert!(kinds.iter().all(|k| k.starts_with("btf.")), "{}", r.stdout);
+    // A whole kind is still described, and a mistyped one still refused.
+    let one = mesoflow(&["nodes", "btf.pca"], s.dir.path());
+    assert!(one.stdout.contains("btf.pca"), "{}", one.stdout);
+    let bad = mesoflow(&["nodes", "btff"], s.dir.path());
+    assert_ne!(bad.code, 0);
+    assert!(bad.stderr.contains("unknown node kind"), "{}", bad.stderr);
+}

@@ -127,9 +127,16 @@ fn verify_cache_catches_a_kind_changed_without_a_version_bump() {
 
 #[test]
 fn independent_nodes_run_at_the_same_time() {
-    if rayon::current_num_threads() < 2 {
-        return; // one worker cannot overlap anything; the CLI tests cover RAYON_NUM_THREADS=1
-    }
+    // Two workers of its own, whatever the machine's or RAYON_NUM_THREADS: one worker cannot
+    // overlap anything, and a test that returned early would pass with the feature broken.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .expect("a pool of two workers");
+    pool.install(independent_nodes_meet);
+}
+
+fn independent_nodes_meet() {
     let dir = tempfile::tempdir().unwrap();
     let mut r = Registry::new();
     r.register(Rendezvous(Arc::new(AtomicUsize::new(0)), 2));

@@ -184,8 +184,20 @@ pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
     }
     let registry = mesoflow_nodes::registry::builtin();
     let sigs: Vec<&KindSignature> = registry.signatures().collect();
+    // A prefix (`btf`, `render.`) lists its kinds as the whole list does.
+    let prefix = kind.map(|k| format!("{}.", k.trim_end_matches('.')));
+    let family: Vec<&KindSignature> = match &prefix {
+        Some(p) if !sigs.iter().any(|s| Some(s.kind.as_str()) == kind) => sigs
+            .iter()
+            .copied()
+            .filter(|s| s.kind.starts_with(p.as_str()))
+            .collect(),
+        _ => Vec::new(),
+    };
+    let listed = kind.is_none() || !family.is_empty();
     let chosen: Vec<&KindSignature> = match kind {
         None => sigs,
+        Some(_) if !family.is_empty() => family,
         Some(k) => match sigs.iter().find(|s| s.kind == k) {
             Some(s) => vec![*s],
             None => {
@@ -199,7 +211,7 @@ pub fn nodes(kind: Option<&str>, as_json: bool) -> anyhow::Result<i32> {
     if as_json {
         let arr: Vec<Value> = chosen.iter().map(|s| kind_json(s)).collect();
         println!("{}", serde_json::to_string_pretty(&arr)?);
-    } else if kind.is_some() {
+    } else if !listed {
         print!("{}", describe(chosen[0]));
     } else {
         let width = chosen

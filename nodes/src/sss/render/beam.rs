@@ -751,7 +751,7 @@ mod tests {
             }
             assert_eq!(compared, 600);
         } else {
-            eprintln!("skipped: this CPU has no AVX2, so only the portable kernels run");
+            mesoflow_testkit::skip::skip("this CPU has no AVX2, so only the portable kernels run");
         }
     }
 
