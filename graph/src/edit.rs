@@ -63,9 +63,43 @@ pub fn check_target(node: &str, param: &str) -> Result<(), String> {
 }
 
 impl GraphFile {
+    /// `--set values.NAME[.field]=V`: the shared value changed, and written again at every use.
+    fn apply_to_value(&mut self, o: &Override) -> Result<(), String> {
+        let mut keys = o.param.split('.');
+        let name = keys.next().unwrap_or_default().to_string();
+        let Some(mut slot) = self.values.get_mut(&name) else {
+            let hint = crate::nearest(&name, self.values.keys().map(String::as_str))
+                .map(|s| format!(" (did you mean `{s}`?)"))
+                .unwrap_or_default();
+            return Err(format!(
+                "--set values.{}: the graph has no shared value `{name}`{hint}",
+                o.param
+            ));
+        };
+        let mut path = name.clone();
+        for key in keys {
+            let Value::Object(map) = slot else {
+                return Err(format!(
+                    "--set values.{}: `{path}` is not an object",
+                    o.param
+                ));
+            };
+            slot = map
+                .entry(key.to_string())
+                .or_insert_with(|| Value::Object(Default::default()));
+            path = format!("{path}.{key}");
+        }
+        *slot = o.value.clone();
+        crate::values::propagate(&self.values, &name, &self.uses, &mut self.nodes)
+            .map_err(|e| format!("--set values.{}: {e}", o.param))
+    }
+
     /// Applies an override; the static check then validates the new value like any other.
     pub fn apply(&mut self, o: &Override) -> Result<(), String> {
         check_target(&o.node, &o.param).map_err(|e| format!("--set {e}"))?;
+        if o.node == crate::values::OVERRIDE_NODE && self.node(&o.node).is_none() {
+            return self.apply_to_value(o);
+        }
         let ids: Vec<String> = self.nodes.iter().map(|(id, _)| id.clone()).collect();
         match self.node_mut(&o.node) {
             Some(decl) => {

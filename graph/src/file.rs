@@ -36,6 +36,10 @@ pub struct GraphFile {
     /// The file it was read from, canonical, where known (a subgraph that includes it again is
     /// refused).
     pub source: Option<std::path::PathBuf>,
+    /// The file's shared values (`crate::values`), already resolved into the nodes' parameters.
+    pub values: Map<String, Value>,
+    /// Where each shared value was used, so that an override of it reaches every use.
+    pub uses: Vec<crate::values::Use>,
 }
 
 /// A JSON object that keeps duplicate keys, so that a duplicated node id can be reported instead
@@ -191,10 +195,20 @@ impl GraphFile {
                 }
             },
         };
+        let values = match rest.remove("values") {
+            None => Map::new(),
+            Some(v) => crate::values::parse(v).unwrap_or_else(|e| {
+                errors.push(e);
+                Map::new()
+            }),
+        };
         for key in rest.keys() {
-            let hint = crate::nearest(key, ["mesoflow", "description", "interface", "nodes"])
-                .map(|s| format!(" (did you mean `{s}`?)"))
-                .unwrap_or_default();
+            let hint = crate::nearest(
+                key,
+                ["mesoflow", "description", "interface", "values", "nodes"],
+            )
+            .map(|s| format!(" (did you mean `{s}`?)"))
+            .unwrap_or_default();
             errors.push(structure(
                 None,
                 Some(key),
@@ -210,6 +224,7 @@ impl GraphFile {
             return Err(errors);
         };
         let mut nodes = Vec::new();
+        let mut uses = Vec::new();
         let mut seen = std::collections::HashSet::new();
         for (id, value) in entries {
             if !seen.insert(id.clone()) {
@@ -220,7 +235,15 @@ impl GraphFile {
                 errors.push(GraphError::BadNodeId { node: id.clone() });
             }
             match parse_node(&id, value) {
-                Ok(decl) => nodes.push((id, decl)),
+                Ok(mut decl) => {
+                    errors.extend(crate::values::resolve(
+                        &values,
+                        &id,
+                        &mut decl.params,
+                        &mut uses,
+                    ));
+                    nodes.push((id, decl));
+                }
                 Err(mut es) => errors.append(&mut es),
             }
         }
@@ -231,6 +254,8 @@ impl GraphFile {
                 nodes,
                 base: None,
                 source: None,
+                values,
+                uses,
             })
         } else {
             Err(errors)

@@ -21,6 +21,7 @@ pub mod schema;
 pub mod source_edit;
 pub mod subgraph;
 mod suggest;
+pub mod values;
 
 pub use catalog::{Catalog, DevicePreference, InputSpec, KindSignature, OutputSpec, TypedProblem};
 pub use check::{check, CheckedGraph, CheckedNode, Edge};

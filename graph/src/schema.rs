@@ -87,6 +87,7 @@ pub fn graph_schema(catalog: &dyn Catalog) -> Value {
         "properties": {
             "mesoflow": { "const": 1, "description": "format version" },
             "description": { "type": "string" },
+            "values": { "type": "object", "description": "shared values, written once and referred to from any node's parameters as {\"$value\": \"name\"} (with fields beside it replacing an object value's own)" },
             "nodes": {
                 "type": "object",
                 "propertyNames": { "pattern": "^[a-z][a-z0-9_]*$" },

@@ -58,6 +58,8 @@ pub fn expand(file: &GraphFile) -> Result<GraphFile, Vec<GraphError>> {
         nodes,
         base: file.base.clone(),
         source: file.source.clone(),
+        values: file.values.clone(),
+        uses: file.uses.clone(),
     })
 }
 

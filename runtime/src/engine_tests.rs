@@ -127,12 +127,14 @@ fn verify_cache_catches_a_kind_changed_without_a_version_bump() {
 
 #[test]
 fn independent_nodes_run_at_the_same_time() {
-    // Two workers of its own, whatever the machine's or RAYON_NUM_THREADS: one worker cannot
-    // overlap anything, and a test that returned early would pass with the feature broken.
+    // Workers of its own, whatever the machine's or RAYON_NUM_THREADS (one worker cannot
+    // overlap anything, and a test that returned early would pass with the feature broken):
+    // three, as the scheduler itself waits on one of them here, where the command line runs it
+    // on the main thread.
     let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(2)
+        .num_threads(3)
         .build()
-        .expect("a pool of two workers");
+        .expect("a pool of three workers");
     pool.install(independent_nodes_meet);
 }
 

@@ -93,6 +93,9 @@ fn file_name(path: &str) -> &str {
 
 /// The differences in a node's own ingredients (not its inputs): version, parameters, files,
 /// device; empty when none.
+///
+/// A changed parameter is shown at the leaves that changed (`camera.eye[1] 1.5 → 1.6`), not
+/// as the whole object cut off before the part that differs.
 pub fn own_changes(prev: &KeyRecord, now: &KeyRecord) -> Vec<String> {
     let mut out = Vec::new();
     if prev.kind != now.kind {
@@ -112,11 +115,14 @@ pub fn own_changes(prev: &KeyRecord, now: &KeyRecord) -> Vec<String> {
     names.sort();
     names.dedup();
     for name in names {
-        let (a, b) = (p.get(name), n.get(name));
-        if crate::key::canonical(a.unwrap_or(&Value::Null))
-            != crate::key::canonical(b.unwrap_or(&Value::Null))
-        {
-            out.push(format!("parameter `{name}` {} → {}", shown(a), shown(b)));
+        let mut leaves = Vec::new();
+        changed_leaves(name.clone(), p.get(name), n.get(name), &mut leaves);
+        let more = leaves.len().saturating_sub(MAX_LEAVES);
+        for (path, a, b) in leaves.into_iter().take(MAX_LEAVES) {
+            out.push(format!("parameter `{path}` {} → {}", shown(a), shown(b)));
+        }
+        if more > 0 {
+            out.push(format!("and {more} more values of parameter `{name}`"));
         }
     }
     if prev.files.len() != now.files.len() {
@@ -236,6 +242,42 @@ pub fn reason(use_cache: bool, change: Option<&String>, on_disk: bool) -> String
     }
 }
 
+/// The most changed leaves of one parameter shown; the rest are counted.
+const MAX_LEAVES: usize = 4;
+
+/// The leaves where `a` and `b` differ, under `path`: objects compared key by key, arrays of
+/// the same length index by index, anything else as a whole.
+fn changed_leaves<'a>(
+    path: String,
+    a: Option<&'a Value>,
+    b: Option<&'a Value>,
+    out: &mut Vec<(String, Option<&'a Value>, Option<&'a Value>)>,
+) {
+    let same = |x: Option<&Value>, y: Option<&Value>| {
+        crate::key::canonical(x.unwrap_or(&Value::Null))
+            == crate::key::canonical(y.unwrap_or(&Value::Null))
+    };
+    if same(a, b) {
+        return;
+    }
+    match (a, b) {
+        (Some(Value::Object(x)), Some(Value::Object(y))) => {
+            let mut keys: Vec<&String> = x.keys().chain(y.keys()).collect();
+            keys.sort();
+            keys.dedup();
+            for k in keys {
+                changed_leaves(format!("{path}.{k}"), x.get(k), y.get(k), out);
+            }
+        }
+        (Some(Value::Array(x)), Some(Value::Array(y))) if x.len() == y.len() => {
+            for (i, (u, v)) in x.iter().zip(y).enumerate() {
+                changed_leaves(format!("{path}[{i}]"), Some(u), Some(v), out);
+            }
+        }
+        _ => out.push((path, a, b)),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -295,5 +337,20 @@ mod tests {
         let first = changes(&order, &now, None);
         assert!(first["b"].starts_with("first run"));
         assert!(changes(&order, &now, Some(&now)).is_empty());
+    }
+
+    #[test]
+    fn a_nested_change_is_shown_at_its_leaf() {
+        let (a, b) = (
+            serde_json::json!({ "eye": [0.0, 1.5, 2.7], "fov": 42 }),
+            serde_json::json!({ "eye": [0.0, 1.6, 2.7], "fov": 42 }),
+        );
+        let mut leaves = Vec::new();
+        super::changed_leaves("camera".into(), Some(&a), Some(&b), &mut leaves);
+        let shown: Vec<String> = leaves
+            .iter()
+            .map(|(p, x, y)| format!("{p} {} → {}", super::shown(*x), super::shown(*y)))
+            .collect();
+        assert_eq!(shown, ["camera.eye[1] 1.5 → 1.6"]);
     }
 }

@@ -150,6 +150,8 @@ impl Studio {
                     nodes: Vec::new(),
                     base: None,
                     source: None,
+                    values: Default::default(),
+                    uses: Vec::new(),
                 },
                 errors: Vec::new(),
                 blocked: Vec::new(),
