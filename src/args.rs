@@ -329,6 +329,10 @@ pub struct PlanArgs {
     /// No progress bars; only the result.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Every candidate and probe with its measures and warnings (by default a summary: what
+    /// was tried, what was planned and why; the plan file holds the detail either way).
+    #[arg(long, short)]
+    pub verbose: bool,
     #[command(flatten)]
     pub cache: CacheOptions,
 }

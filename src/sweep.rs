@@ -270,18 +270,20 @@ pub fn write_all(
             .unwrap_or(0);
         // One series per combination of the non-numeric varied values (e.g. each solver), so
         // methods can be told apart on the cost–error plane.
-        let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+        let mut groups: Groups = BTreeMap::new();
         for r in rows {
             let (Some(t), Some(y)) = (r.node_seconds[ni], r.measures[mi]) else {
                 continue;
             };
-            let name: Vec<String> = varies
-                .iter()
-                .zip(&r.values)
-                .filter(|(_, x)| !x.is_number())
-                .map(|(v, x)| format!("{}={}", v.name(), cell(x)))
+            let others: Vec<usize> = (0..varies.len())
+                .filter(|&j| !r.values[j].is_number())
                 .collect();
-            groups.entry(name.join(" ")).or_default().push((t, y));
+            let (key, name) = legend_key(varies, &r.values, &others);
+            groups
+                .entry(key)
+                .or_insert_with(|| (name, Vec::new()))
+                .1
+                .push((t, y));
         }
         let c = Chart {
             title: format!("{}.{} against the time of `{}`", m.node, m.port, m.node),
@@ -419,19 +421,15 @@ fn chart_against<'a>(
             varies[vi].values.iter().position(|x| x == v).unwrap_or(0) as f64
         }
     };
-    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let mut groups: Groups = BTreeMap::new();
     for r in rows {
         let Some(y) = r.measures[mi] else { continue };
-        let others: Vec<String> = varies
-            .iter()
-            .zip(&r.values)
-            .enumerate()
-            .filter(|(j, _)| *j != vi)
-            .map(|(_, (v, x))| format!("{}={}", v.name(), cell(x)))
-            .collect();
+        let others: Vec<usize> = (0..varies.len()).filter(|j| *j != vi).collect();
+        let (key, name) = legend_key(varies, &r.values, &others);
         groups
-            .entry(others.join(" "))
-            .or_default()
+            .entry(key)
+            .or_insert_with(|| (name, Vec::new()))
+            .1
             .push((position(&r.values[vi]), y));
     }
     Chart {
@@ -453,18 +451,18 @@ fn chart_versus<'a>(
     (xi, x): (usize, &'a PortRef),
     (mi, m): (usize, &'a PortRef),
 ) -> Chart<'a> {
-    let mut groups: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
+    let mut groups: Groups = BTreeMap::new();
     for r in rows {
         let (Some(a), Some(b)) = (r.measures[xi], r.measures[mi]) else {
             continue;
         };
-        let name: Vec<String> = varies
-            .iter()
-            .zip(&r.values)
-            .skip(1)
-            .map(|(v, val)| format!("{}={}", v.name(), cell(val)))
-            .collect();
-        groups.entry(name.join(" ")).or_default().push((a, b));
+        let others: Vec<usize> = (1..varies.len()).collect();
+        let (key, name) = legend_key(varies, &r.values, &others);
+        groups
+            .entry(key)
+            .or_insert_with(|| (name, Vec::new()))
+            .1
+            .push((a, b));
     }
     Chart {
         title: format!(
@@ -479,11 +477,37 @@ fn chart_versus<'a>(
     }
 }
 
+/// A chart's series, keyed by the other varied values' ranks (so the legend reads in value
+/// order: rank 1, 2, 4, 16, not 1, 16, 2, 4), each with its name and points.
+type Groups = BTreeMap<Vec<usize>, (String, Vec<(f64, f64)>)>;
+
+/// The legend's order and name of a run among the varied parameters `others`: each value's rank
+/// among its parameter's values (numbers by value, anything else as listed).
+fn legend_key(varies: &[Vary], values: &[Value], others: &[usize]) -> (Vec<usize>, String) {
+    let rank = |j: usize| {
+        let all = &varies[j].values;
+        let v = &values[j];
+        if all.iter().all(Value::is_number) {
+            let x = v.as_f64().unwrap_or(f64::NAN);
+            all.iter()
+                .filter(|w| w.as_f64().is_some_and(|w| w < x))
+                .count()
+        } else {
+            all.iter().position(|w| w == v).unwrap_or(0)
+        }
+    };
+    let name: Vec<String> = others
+        .iter()
+        .map(|&j| format!("{}={}", varies[j].name(), cell(&values[j])))
+        .collect();
+    (others.iter().map(|&j| rank(j)).collect(), name.join(" "))
+}
+
 /// A chart's series from its groups of points: sorted along x with `along_x`, else joined in
 /// the order the runs gave them.
-fn series_of(groups: BTreeMap<String, Vec<(f64, f64)>>, along_x: bool) -> Vec<Series> {
+fn series_of(groups: Groups, along_x: bool) -> Vec<Series> {
     groups
-        .into_iter()
+        .into_values()
         .map(|(name, mut points)| {
             if along_x {
                 points.sort_by(|p, q| p.0.total_cmp(&q.0));
@@ -618,5 +642,38 @@ pub fn row_of(
             .collect(),
         run_seconds: report.seconds,
         ok: report.ok,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    #[test]
+    fn legends_read_in_value_order() {
+        let varies = vec![
+            Vary {
+                node: "pca".into(),
+                param: "rank".into(),
+                values: vec![json!(16), json!(1), json!(4), json!(2)],
+            },
+            Vary {
+                node: "lod".into(),
+                param: "level".into(),
+                values: vec![json!(0), json!(2)],
+            },
+        ];
+        let mut keys: Vec<(Vec<usize>, String)> = cartesian(&varies)
+            .iter()
+            .map(|values| legend_key(&varies, values, &[0]))
+            .collect();
+        keys.sort();
+        keys.dedup();
+        let names: Vec<&str> = keys.iter().map(|k| k.1.as_str()).collect();
+        assert_eq!(
+            names,
+            ["pca.rank=1", "pca.rank=2", "pca.rank=4", "pca.rank=16"]
+        );
     }
 }

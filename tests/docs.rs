@@ -362,7 +362,7 @@ const GUIDE_COMMANDS: &[(&str, How)] = &[
         How::AsWritten,
     ),
     (
-        "plan graphs/mdf_render.json --render torus_mdf --budget flip=0.05",
+        "plan graphs/mdf_render.json --render torus_mdf --budget flip=0.2",
         How::AsWritten,
     ),
     (

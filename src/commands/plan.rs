@@ -200,16 +200,23 @@ fn own_model(args: &PlanArgs, fallback: Option<String>) -> anyhow::Result<i32> {
             println!("predicted FLIP {t:.4} (budget {budget})");
         }
         if let Some(p) = &planned.proof {
-            for (i, r) in p.rungs.iter().enumerate() {
-                println!(
-                    "probe {i}: {}: FLIP {} frame {} s{}",
-                    r.candidate,
-                    r.flip.map_or("absent".into(), |f| format!("{f:.4}")),
-                    r.frame_s.map_or("absent".into(), |t| format!("{t:.4}")),
-                    if p.chosen == Some(i) { " (kept)" } else { "" }
-                );
+            if args.verbose {
+                for (i, r) in p.rungs.iter().enumerate() {
+                    println!(
+                        "probe {i}: {}: FLIP {} frame {} s{}",
+                        r.candidate,
+                        r.flip.map_or("absent".into(), |f| format!("{f:.4}")),
+                        r.frame_s.map_or("absent".into(), |t| format!("{t:.4}")),
+                        if p.chosen == Some(i) { " (kept)" } else { "" }
+                    );
+                }
             }
-            println!("{} ({:.1} s planning)", p.why, p.plan_s);
+            println!(
+                "tried {}: {} ({:.1} s planning)",
+                count(p.rungs.len(), "simplification", "simplifications"),
+                p.why,
+                p.plan_s
+            );
         }
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }
@@ -363,6 +370,11 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
             println!("    {n}");
         }
         for (i, c) in a.candidates.iter().enumerate() {
+            // By default the planned candidate alone, with its warnings; every one with
+            // --verbose.
+            if !args.verbose && a.chosen != Some(i) {
+                continue;
+            }
             if let (None, Some(n)) = (c.probe_s, &c.note) {
                 println!("    {}: {n}", c.name);
                 continue;
@@ -388,14 +400,27 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
             .filter(|(_, t)| *t >= 0.05)
             .map(|(k, t)| format!("{k} {t:.1}"))
             .collect();
+        let within = a.candidates.iter().filter(|c| c.fits).count();
+        let tried = format!(
+            "tried {} ({within} within budget)",
+            count(a.candidates.len(), "candidate", "candidates")
+        );
         match a.plan_time().map(|(_, r)| r) {
             Some(r) => println!(
-                "{} ({:.1} s planning: {}; {r:.1}× the longer full render of the graph as given and of brute force)",
+                "{tried}: {} ({:.1} s planning: {}; {r:.1}× the longer full render of the graph as given and of brute force)",
                 a.why,
                 a.plan_s,
                 phases.join(", ")
             ),
-            None => println!("{} ({:.1} s planning: {})", a.why, a.plan_s, phases.join(", ")),
+            None => println!(
+                "{tried}: {} ({:.1} s planning: {})",
+                a.why,
+                a.plan_s,
+                phases.join(", ")
+            ),
+        }
+        if !args.verbose {
+            println!("(every candidate: --verbose, or the plan file)");
         }
         println!("wrote {} and {}", out_path.display(), plan_path.display());
     }
@@ -405,4 +430,9 @@ fn against_truth(args: &PlanArgs) -> anyhow::Result<i32> {
 fn write(path: &std::path::Path, text: &str) -> anyhow::Result<()> {
     mesoflow_runtime::write_atomic(path, text)
         .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))
+}
+
+/// "1 candidate", "4 candidates".
+fn count(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
 }

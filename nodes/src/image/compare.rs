@@ -48,9 +48,17 @@ impl Node for Compare {
         }
     }
 
-    fn run(&self, _ctx: &NodeContext, _p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
-        let r = inputs.get::<Image>("reference")?;
-        let a = inputs.get::<Image>("image")?;
+    fn run(&self, ctx: &NodeContext, _p: &Params, inputs: &Inputs) -> Result<Outputs, NodeError> {
+        let (r, a) = (
+            inputs.get::<Image>("reference")?,
+            inputs.get::<Image>("image")?,
+        );
+        // RGBA against RGB (a Mitsuba render of an exported scene is RGBA): compared on RGB.
+        let (r, a) = (
+            rgb_beside(ctx, "reference", r, a),
+            rgb_beside(ctx, "image", a, r),
+        );
+        let (r, a) = (r.as_ref(), a.as_ref());
         same_size(r, a)?;
         let masks = [
             ("reference_mask", inputs.opt::<Image>("reference_mask")?),
@@ -98,6 +106,35 @@ pub struct AgainstTruth {
     pub relative_rmse: Option<f64>,
     pub bias: Option<f64>,
     pub iou: Option<f64>,
+}
+
+/// `img` without its alpha channel where it is RGBA and `other` RGB of the same size, saying
+/// so; else `img` itself.
+fn rgb_beside<'a>(
+    ctx: &NodeContext,
+    port: &str,
+    img: &'a Image,
+    other: &Image,
+) -> std::borrow::Cow<'a, Image> {
+    let rgba_beside_rgb = img.channels == 4
+        && other.channels == 3
+        && (img.width, img.height) == (other.width, other.height);
+    if !rgba_beside_rgb {
+        return std::borrow::Cow::Borrowed(img);
+    }
+    ctx.warn(format!(
+        "`{port}` is RGBA and the other image RGB: compared on RGB, its alpha left out"
+    ));
+    std::borrow::Cow::Owned(Image {
+        width: img.width,
+        height: img.height,
+        channels: 3,
+        data: img
+            .data
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect(),
+    })
 }
 
 /// The `image` port's error when it is not the reference's size (width, height and channels).
@@ -254,5 +291,34 @@ mod tests {
         assert!(against_truth(&black, &a, None, None)
             .relative_rmse
             .is_none());
+    }
+
+    #[test]
+    fn an_rgba_render_is_compared_on_rgb_and_says_so() {
+        use mesoflow_testkit::node::OutputsExt;
+        let rgb = Image {
+            width: 2,
+            height: 1,
+            channels: 3,
+            data: vec![1.0, 0.5, 0.5, 0.2, 0.2, 0.2],
+        };
+        let rgba = Image {
+            width: 2,
+            height: 1,
+            channels: 4,
+            data: vec![1.0, 0.5, 0.5, 1.0, 0.2, 0.2, 0.2, 0.0],
+        };
+        let inputs = Inputs::new()
+            .with("reference", std::sync::Arc::new(rgb))
+            .with("image", std::sync::Arc::new(rgba));
+        let ctx = NodeContext::detached(None);
+        let out =
+            mesoflow_testkit::node::run_in(&ctx, &Compare, &Params::default(), &inputs).unwrap();
+        assert_eq!(out.value::<Scalar>("rmse").0, 0.0);
+        assert!(
+            ctx.warnings().iter().any(|w| w.contains("alpha left out")),
+            "{:?}",
+            ctx.warnings()
+        );
     }
 }
