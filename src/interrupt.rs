@@ -75,6 +75,7 @@ fn write_abandoned_report() {
         files: Vec::new(),
         cancelled: true,
         read: Vec::new(),
+        earlier: Vec::new(),
     };
     if let Ok(text) = serde_json::to_string_pretty(&report) {
         let _ = mesoflow_runtime::write_atomic(&run.out_dir.join("report.json"), text + "\n");

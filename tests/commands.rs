@@ -125,6 +125,57 @@ fn watch_reruns_only_what_a_change_touches() {
 }
 
 #[test]
+fn a_run_of_some_outputs_keeps_the_folder_s_report_whole() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let s = Scratch::new();
+    let g = root.join("graphs/quickstart.json");
+    let out = s.path("o");
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "run",
+            g.to_str().unwrap(),
+            "--quiet",
+            "--set",
+            "surface.size=16",
+            "--out-dir",
+            out.to_str().unwrap(),
+            "--cache-dir",
+        ];
+        let cache = s.path("cache");
+        let cache = cache.to_str().unwrap().to_string();
+        args.push(&cache);
+        args.extend_from_slice(extra);
+        let r = mesoflow(&args, root);
+        assert_eq!(r.code, 0, "{}", r.stderr);
+        report(&out)
+    };
+    let full = run(&[]);
+    let ids = |v: &serde_json::Value, key: &str| -> Vec<String> {
+        v[key]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .map(|n| n["id"].as_str().unwrap().to_string())
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let all = ids(&full, "nodes");
+    assert!(all.len() >= 3, "{full}");
+    let part = run(&["--output", "normals.rms_slope"]);
+    let (now, earlier) = (ids(&part, "nodes"), ids(&part, "earlier"));
+    assert!(now.contains(&"normals".to_string()), "{part}");
+    // Every node of the full run is still reported, this run's or an earlier one's.
+    for id in &all {
+        assert!(
+            now.contains(id) || earlier.contains(id),
+            "{id} lost: {part}"
+        );
+    }
+    assert!(!earlier.is_empty(), "{part}");
+}
+
+#[test]
 fn output_prints_the_values_asked_for_and_suggests_near_names() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let s = Scratch::new();

@@ -77,11 +77,38 @@ pub struct RunReport {
     /// Absolute paths of the files that nodes declared they read (what `watch` watches).
     #[serde(default)]
     pub read: Vec<String>,
+    /// After a run that asked for some outputs only (`--output`): the nodes of earlier runs
+    /// into the same folder that this one did not need, as those runs reported them, so the
+    /// folder's report stays whole ([`RunReport::keeping_earlier`]).
+    #[serde(skip_serializing_if = "Vec::is_empty", default)]
+    pub earlier: Vec<NodeReport>,
 }
 
 impl RunReport {
     pub fn node(&self, id: &str) -> Option<&NodeReport> {
         self.nodes.iter().find(|n| n.id == id)
+    }
+
+    /// This report with the nodes of `previous` (the folder's report before this run, of the
+    /// same graph) that it does not hold kept in [`earlier`](Self::earlier): what a run of
+    /// some outputs only writes, so it does not cut the folder's report down to them.
+    pub fn keeping_earlier(mut self, previous: &RunReport) -> RunReport {
+        if previous.graph != self.graph {
+            return self;
+        }
+        let kept: Vec<NodeReport> = previous
+            .nodes
+            .iter()
+            .chain(&previous.earlier)
+            .filter(|n| self.node(&n.id).is_none())
+            .cloned()
+            .collect();
+        let mut seen = std::collections::BTreeSet::new();
+        self.earlier = kept
+            .into_iter()
+            .filter(|n| seen.insert(n.id.clone()))
+            .collect();
+        self
     }
 
     /// Writes `<out_dir>/report.json` whole or not at all (through [`crate::write_atomic`]),

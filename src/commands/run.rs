@@ -83,7 +83,23 @@ impl Runner {
                 }
             }
         }
-        write_report(&report, out_dir)?;
+        if opts.outputs.is_empty() {
+            write_report(&report, out_dir)?;
+        } else {
+            // Some outputs only: the folder's report keeps the nodes this run did not need.
+            // Only a regular file of a report's size is read (never a link, FIFO or device).
+            let path = out_dir.join("report.json");
+            let previous = std::fs::symlink_metadata(&path)
+                .ok()
+                .filter(|m| m.is_file() && m.len() < 64 << 20)
+                .and_then(|_| std::fs::read_to_string(&path).ok())
+                .and_then(|t| serde_json::from_str::<mesoflow_runtime::RunReport>(&t).ok());
+            let whole = match &previous {
+                Some(p) => report.clone().keeping_earlier(p),
+                None => report.clone(),
+            };
+            write_report(&whole, out_dir)?;
+        }
         if !report.ok {
             // A failed run rewrites only some of the folder's files: say which ones are older,
             // so they are not taken for this run's.

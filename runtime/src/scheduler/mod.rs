@@ -250,6 +250,7 @@ pub(crate) fn execute(
         files: executed.files,
         cancelled,
         read: read_files.into_iter().collect(),
+        earlier: Vec::new(),
     };
     RunOutcome { report, values }
 }
