@@ -9,7 +9,11 @@
 //! PLY and its BVH) and frame (`benches/mesh_peer.py`, `llvm_ad_rgb`'s `direct`, the median of
 //! `--repeats` after the JIT's first frame); the ratio of the two frames. At equal samples the
 //! two are at equal error: with one directional light, one shadow ray a hit and no bounce,
-//! both estimators' only noise is the pixel's sub-pixel positions.
+//! both estimators' only noise is the pixel's sub-pixel positions. The last row path-traces
+//! the 1.1 M surface with 4 bounces after the direct one (Mitsuba's `path` at `max_depth` 6, no
+//! Russian roulette, as ours): both sample the light at every vertex and the next direction
+//! from the surface (ours by the cosine, Mitsuba's by the BSDF: the same for a Lambert
+//! surface), so equal samples are again near equal error.
 //!
 //! `cargo bench --bench brute_force -- [--spp 16] [--repeats 3] [--largest false]
 //! [--out target/brute_force]`: `--largest true` adds 16 M triangles (minutes, 3 GiB). Needs
@@ -28,7 +32,7 @@ const ALBEDO: [f64; 3] = [0.7, 0.6, 0.5];
 
 /// The graph: the bumps tile displaced `tiling` times over the torus at `density` vertices a
 /// texel, written as PLY, and rendered by `render.reference`.
-fn graph(tiling: [u32; 2], density: f64, spp: u32, seed: u64) -> Value {
+fn graph(tiling: [u32; 2], density: f64, bounces: u32, spp: u32, seed: u64) -> Value {
     let camera: Value = serde_json::from_str(CAMERA).expect("the camera literal");
     json!({
         "mesoflow": 1,
@@ -40,7 +44,7 @@ fn graph(tiling: [u32; 2], density: f64, spp: u32, seed: u64) -> Value {
             "ply": { "kind": "mesh.write", "inputs": { "mesh": "true_surface.mesh" }, "params": { "path": "truth.ply" } },
             "truth": { "kind": "render.reference", "inputs": { "mesh": "true_surface.mesh" },
                        "params": { "camera": camera, "light": { "direction": LIGHT, "intensity": 3.0 },
-                                   "brdf": "lambert", "albedo": ALBEDO, "samples": spp, "seed": seed } }
+                                   "brdf": "lambert", "albedo": ALBEDO, "samples": spp, "seed": seed, "bounces": bounces } }
         }
     })
 }
@@ -69,7 +73,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// Mitsuba's load and frame on the PLY, or why not.
-fn mitsuba(dir: &Path, ply: &Path, spp: u32, repeats: u32) -> Result<Value, String> {
+fn mitsuba(dir: &Path, ply: &Path, bounces: u32, spp: u32, repeats: u32) -> Result<Value, String> {
     let python = cli::repo().join("target/peer-venv/bin/python");
     if !python.exists() {
         return Err("no peer venv (target/peer-venv; .ci/run makes it)".into());
@@ -77,11 +81,14 @@ fn mitsuba(dir: &Path, ply: &Path, spp: u32, repeats: u32) -> Result<Value, Stri
     let camera: Value = serde_json::from_str(CAMERA).expect("the camera literal");
     let mut camera = camera;
     camera["up"] = json!([0.0, 1.0, 0.0]);
-    let scene = json!({
+    let mut scene = json!({
         "mesh": ply.display().to_string(), "camera": camera,
         "light": { "direction": LIGHT, "intensity": 3.0 }, "albedo": ALBEDO,
         "samples": spp, "repeats": repeats, "variant": "llvm_ad_rgb",
     });
+    if bounces > 0 {
+        scene["max_depth"] = json!(bounces + 2);
+    }
     let path = dir.join("mitsuba.json");
     std::fs::write(&path, scene.to_string()).map_err(|e| e.to_string())?;
     let out = Command::new(&python)
@@ -102,22 +109,23 @@ fn main() {
     let repeats: u32 = arg("--repeats", 3).max(1);
     let largest: bool = arg("--largest", false);
     let out: std::path::PathBuf = arg("--out", cli::repo().join("target/brute_force"));
-    let mut sizes = vec![([4, 2], 1.0), ([12, 5], 1.0), ([12, 5], 2.0)];
+    let mut sizes = vec![([4, 2], 1.0, 0), ([12, 5], 1.0, 0), ([12, 5], 2.0, 0)];
     if largest {
-        sizes.push(([24, 10], 2.0));
+        sizes.push(([24, 10], 2.0, 0));
     }
+    sizes.push(([12, 5], 1.0, 4));
     let mut rows = Vec::new();
-    println!("| triangles | ours' BVH build, s | Mitsuba's load, s | ours' frame, s | Mitsuba's frame, s | ours / Mitsuba | ours' rays a second |");
-    println!("|---:|---:|---:|---:|---:|---:|---:|");
-    for (tiling, density) in sizes {
-        let dir = out.join(format!("{}x{}_{density}", tiling[0], tiling[1]));
+    println!("| triangles | bounces | ours' BVH build, s | Mitsuba's load, s | ours' frame, s | Mitsuba's frame, s | ours / Mitsuba | ours' rays a second |");
+    println!("|---:|---:|---:|---:|---:|---:|---:|---:|");
+    for (tiling, density, bounces) in sizes {
+        let dir = out.join(format!("{}x{}_{density}_{bounces}", tiling[0], tiling[1]));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).expect("the bench's folder");
         let cache = dir.join("cache");
         let mut build = None;
         let (mut traces, mut rates, mut triangles) = (Vec::new(), Vec::new(), 0.0);
         for seed in 0..=repeats as u64 {
-            let r = run(&dir, &graph(tiling, density, spp, seed + 1), &cache);
+            let r = run(&dir, &graph(tiling, density, bounces, spp, seed + 1), &cache);
             let t = &cli::node(&r, "truth")["timings"];
             if seed == 0 {
                 build = t["bvh_seconds"].as_f64();
@@ -133,7 +141,7 @@ fn main() {
         let tris = ply_faces(&ply).unwrap_or(triangles as u64);
         let trace = median(traces);
         let rate = median(rates);
-        let peer = mitsuba(&dir, &ply, spp, repeats);
+        let peer = mitsuba(&dir, &ply, bounces, spp, repeats);
         let (load, frame) = match &peer {
             Ok(m) => (m["load_s"].as_f64(), m["frame_s"].as_f64()),
             Err(e) => {
@@ -143,7 +151,7 @@ fn main() {
         };
         let f = |v: Option<f64>| v.map_or("—".to_string(), |v| format!("{v:.3}"));
         println!(
-            "| {tris} | {} | {} | {trace:.3} | {} | {} | {:.2} M |",
+            "| {tris} | {bounces} | {} | {} | {trace:.3} | {} | {} | {:.2} M |",
             f(build),
             f(load),
             f(frame),
@@ -151,7 +159,7 @@ fn main() {
             rate / 1e6
         );
         rows.push(json!({
-            "triangles": tris, "tiling": tiling, "density": density, "spp": spp,
+            "triangles": tris, "tiling": tiling, "density": density, "bounces": bounces, "spp": spp,
             "bvh_build_s": build, "trace_s": trace, "rays_per_second": rate,
             "mitsuba_load_s": load, "mitsuba_frame_s": frame,
             "mitsuba": peer.as_ref().ok(), "mitsuba_error": peer.as_ref().err(),
