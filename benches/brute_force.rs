@@ -125,7 +125,11 @@ fn main() {
         let mut build = None;
         let (mut traces, mut rates, mut triangles) = (Vec::new(), Vec::new(), 0.0);
         for seed in 0..=repeats as u64 {
-            let r = run(&dir, &graph(tiling, density, bounces, spp, seed + 1), &cache);
+            let r = run(
+                &dir,
+                &graph(tiling, density, bounces, spp, seed + 1),
+                &cache,
+            );
             let t = &cli::node(&r, "truth")["timings"];
             if seed == 0 {
                 build = t["bvh_seconds"].as_f64();

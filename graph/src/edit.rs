@@ -90,7 +90,7 @@ impl GraphFile {
             path = format!("{path}.{key}");
         }
         *slot = o.value.clone();
-        crate::values::propagate(&self.values, &name, &self.uses, &mut self.nodes)
+        propagate(&self.values, &name, &self.uses, &mut self.nodes)
             .map_err(|e| format!("--set values.{}: {e}", o.param))
     }
 
@@ -162,6 +162,45 @@ impl GraphFile {
             }
         }
     }
+}
+
+/// Writes value `name` (with each use's own fields) again at every use in `nodes`, after the
+/// value changed.
+fn propagate(
+    values: &serde_json::Map<String, Value>,
+    name: &str,
+    uses: &[crate::values::Use],
+    nodes: &mut [(String, crate::file::NodeDecl)],
+) -> Result<(), String> {
+    for u in uses.iter().filter(|u| u.name == name) {
+        let v = crate::values::value_with(values, name, &u.fields)?;
+        let Some((_, decl)) = nodes.iter_mut().find(|(id, _)| *id == u.node) else {
+            continue;
+        };
+        let Some((crate::values::Step::Key(first), rest)) = u.path.split_first() else {
+            continue;
+        };
+        let Some(mut slot) = decl.params.get_mut(first) else {
+            continue;
+        };
+        for step in rest {
+            let next = match (step, slot) {
+                (crate::values::Step::Key(k), Value::Object(m)) => m.get_mut(k),
+                (crate::values::Step::Index(i), Value::Array(a)) => a.get_mut(*i),
+                _ => None,
+            };
+            let Some(next) = next else {
+                return Err(format!(
+                    "node `{}` no longer has `{}` where value `{name}` was used",
+                    u.node,
+                    crate::values::shown(&u.path)
+                ));
+            };
+            slot = next;
+        }
+        *slot = v;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

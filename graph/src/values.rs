@@ -47,7 +47,7 @@ fn error(node: Option<&str>, field: &str, message: String) -> GraphError {
 }
 
 /// The path as written in messages: `light.direction[1]`.
-fn shown(path: &[Step]) -> String {
+pub(crate) fn shown(path: &[Step]) -> String {
     let mut out = String::new();
     for s in path {
         match s {
@@ -171,7 +171,7 @@ fn walk(
 }
 
 /// Value `name` with `fields` replacing its own (an object's).
-fn value_with(
+pub(crate) fn value_with(
     values: &Map<String, Value>,
     name: &str,
     fields: &Map<String, Value>,
@@ -202,45 +202,6 @@ fn value_with(
             fields.keys().cloned().collect::<Vec<_>>().join(", ")
         )),
     }
-}
-
-/// Writes value `name` (with each use's own fields) again at every use in `nodes`, after the
-/// value changed.
-pub fn propagate(
-    values: &Map<String, Value>,
-    name: &str,
-    uses: &[Use],
-    nodes: &mut [(String, crate::file::NodeDecl)],
-) -> Result<(), String> {
-    for u in uses.iter().filter(|u| u.name == name) {
-        let v = value_with(values, name, &u.fields)?;
-        let Some((_, decl)) = nodes.iter_mut().find(|(id, _)| *id == u.node) else {
-            continue;
-        };
-        let Some((Step::Key(first), rest)) = u.path.split_first() else {
-            continue;
-        };
-        let Some(mut slot) = decl.params.get_mut(first) else {
-            continue;
-        };
-        for step in rest {
-            let next = match (step, slot) {
-                (Step::Key(k), Value::Object(m)) => m.get_mut(k),
-                (Step::Index(i), Value::Array(a)) => a.get_mut(*i),
-                _ => None,
-            };
-            let Some(next) = next else {
-                return Err(format!(
-                    "node `{}` no longer has `{}` where value `{name}` was used",
-                    u.node,
-                    shown(&u.path)
-                ));
-            };
-            slot = next;
-        }
-        *slot = v;
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -28,7 +28,7 @@
 //! macro shadowing is in the lighting, the tile's own in the transfer.
 
 use super::material::{lookup, texel_taps, Material};
-use super::shade::{tangent_frame, Surface};
+use super::surface::{tangent_frame, Surface};
 use crate::support::geometry::{dot, mul, V3};
 use crate::support::raytrace::environment::Environment;
 use crate::support::raytrace::tracer::Tracer;

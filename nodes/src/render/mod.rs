@@ -10,4 +10,5 @@ pub mod relief_scene;
 pub mod render_mesh;
 pub mod rings;
 pub mod shade;
+pub mod surface;
 pub mod volume;

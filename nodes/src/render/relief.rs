@@ -17,7 +17,7 @@
 
 use super::relief_gpu;
 pub use super::relief_scene::Relief;
-use super::shade::{surface_at, Surface};
+use super::surface::{surface_at, Surface};
 use crate::reflectance::models::{self as brdf, Model};
 use crate::support::geometry::{dot, mul, normalize, V3};
 use crate::support::progress::Counter;
