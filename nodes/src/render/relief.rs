@@ -569,6 +569,26 @@ mod tests {
         }
     }
 
+    /// `btf.capture` of the tile seen from above (view (0°, 0°)) under `lights` (θ, φ in
+    /// degrees), with the maps' Ward lobes.
+    fn captured_from_above(hf: &HeightField, m: &BrdfMap, lights: Vec<[f64; 2]>) -> Btf {
+        let cp = capture::Params {
+            views: DirectionSet::List(vec![[0.0, 0.0]]),
+            lights: DirectionSet::List(lights),
+            brdf: Model::Ward,
+            ..capture::Params::default()
+        };
+        let out = mesoflow_testkit::node::run(
+            &Capture,
+            &cp,
+            &Inputs::new()
+                .with("height", Arc::new(hf.clone()))
+                .with("maps", Arc::new(m.clone())),
+        )
+        .unwrap();
+        out.value::<Btf>("btf").clone()
+    }
+
     #[test]
     fn seen_from_above_it_is_the_capture_of_the_same_tile() {
         // An n×n orthographic view of a plane mapped once with the n×n tile puts pixel (x, y)
@@ -586,21 +606,7 @@ mod tests {
         for light in [[0.0, 0.0], [45.0, 30.0], [70.0, 200.0]] {
             let l = crate::types::Direction::degrees(light[0], light[1]).vector();
             let img = render(&hf, &m, &params(n as u32, 0.0, l, shell), None).unwrap();
-            let cp = capture::Params {
-                views: DirectionSet::List(vec![[0.0, 0.0]]),
-                lights: DirectionSet::List(vec![light]),
-                brdf: Model::Ward,
-                ..capture::Params::default()
-            };
-            let out = mesoflow_testkit::node::run(
-                &Capture,
-                &cp,
-                &Inputs::new()
-                    .with("height", Arc::new(hf.clone()))
-                    .with("maps", Arc::new(m.clone())),
-            )
-            .unwrap();
-            let b = out.value::<Btf>("btf");
+            let b = captured_from_above(&hf, &m, vec![light]);
             let (mut off, mut worst) = (0, 0f32);
             for y in 0..n {
                 for x in 0..n {
@@ -651,21 +657,7 @@ mod tests {
             .iter()
             .map(|(d, _, _)| [d[2].acos().to_degrees(), d[1].atan2(d[0]).to_degrees()])
             .collect();
-        let cp = capture::Params {
-            views: DirectionSet::List(vec![[0.0, 0.0]]),
-            lights: DirectionSet::List(lights),
-            brdf: Model::Ward,
-            ..capture::Params::default()
-        };
-        let out = mesoflow_testkit::node::run(
-            &Capture,
-            &cp,
-            &Inputs::new()
-                .with("height", Arc::new(hf.clone()))
-                .with("maps", Arc::new(m.clone())),
-        )
-        .unwrap();
-        let b = out.value::<Btf>("btf");
+        let b = captured_from_above(&hf, &m, lights);
         let texels = n * n;
         let (mut ours, mut truth, mut sq) = (0.0, 0.0, 0.0);
         for y in 0..n {

@@ -34,12 +34,14 @@ pub fn beyond(t: f64, previous: f64) -> bool {
 }
 
 /// Möller–Trumbore; (t, b1, b2, front-facing) for t > 0.
+#[inline]
 pub fn intersect(o: V3, d: V3, p0: V3, p1: V3, p2: V3) -> Option<(f64, f64, f64, bool)> {
     let (e1, e2) = (sub(p1, p0), sub(p2, p0));
     let pv = cross(d, e2);
     let det = dot(e1, pv);
-    let scale = dot(e1, e1).sqrt() * dot(e2, e2).sqrt();
-    if det.abs() <= 1e-12 * scale || scale == 0.0 {
+    // |det| ≤ 10⁻¹² |e1| |e2|, squared: no square roots on the tracer's hot path.
+    let scale2 = dot(e1, e1) * dot(e2, e2);
+    if det * det <= 1e-24 * scale2 || scale2 == 0.0 {
         return None; // parallel to the ray or degenerate
     }
     let inv = 1.0 / det;

@@ -11,7 +11,7 @@
 //! process (`bvh_store`).
 
 use super::bvh_store;
-use crate::support::geometry::{add, cross, dot, mul, normalize, sub, V3};
+use crate::support::geometry::{add, cross, mul, normalize, sub, V3};
 use crate::types::Mesh;
 use mesoflow_runtime::NodeContext;
 use obvhs::cwbvh::CwBvh;
@@ -192,34 +192,13 @@ impl<'a> Tracer<'a> {
         )
     }
 
-    /// Möller–Trumbore in f64 (the CPU ray caster's, `layers::intersect`, with its
-    /// degeneracy test squared rather than two square roots) against BVH slot `id`'s triangle:
-    /// distance and barycentrics (of corners 1 and 2).
+    /// Möller–Trumbore in f64 (the CPU ray caster's, `layers::intersect`) against BVH slot
+    /// `id`'s triangle: distance and barycentrics (of corners 1 and 2).
     #[inline(always)]
     fn intersect(&self, id: usize, o: V3, d: V3) -> Option<(f64, f64, f64)> {
         let v = self.slots.0[id].map(|x| x as f64);
-        let p0 = [v[0], v[1], v[2]];
-        let e1 = [v[3] - v[0], v[4] - v[1], v[5] - v[2]];
-        let e2 = [v[6] - v[0], v[7] - v[1], v[8] - v[2]];
-        let pv = cross(d, e2);
-        let det = dot(e1, pv);
-        let scale2 = dot(e1, e1) * dot(e2, e2);
-        if det * det <= 1e-24 * scale2 || scale2 == 0.0 {
-            return None; // parallel to the ray or degenerate
-        }
-        let inv = 1.0 / det;
-        let s = sub(o, p0);
-        let b1 = dot(s, pv) * inv;
-        if !(0.0..=1.0).contains(&b1) {
-            return None;
-        }
-        let q = cross(s, e1);
-        let b2 = dot(d, q) * inv;
-        if b2 < 0.0 || b1 + b2 > 1.0 {
-            return None;
-        }
-        let t = dot(e2, q) * inv;
-        (t > 0.0).then_some((t, b1, b2))
+        let (p0, p1, p2) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]], [v[6], v[7], v[8]]);
+        super::layers::intersect(o, d, p0, p1, p2).map(|(t, b1, b2, _)| (t, b1, b2))
     }
 
     /// The BVH's ray: started [`BACK_OFF`] behind `o`, so that the traversal's t is the
