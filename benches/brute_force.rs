@@ -24,7 +24,6 @@ use mesoflow_testkit::args::arg;
 use mesoflow_testkit::cli;
 use serde_json::{json, Value};
 use std::path::Path;
-use std::process::Command;
 
 const CAMERA: &str = r#"{ "eye": [0.0, 1.5, 2.7], "target": [0.0, -0.1, 0.0], "fov": 42, "resolution": [320, 240] }"#;
 const LIGHT: [f64; 3] = [0.5, 0.6, 0.6];
@@ -74,10 +73,6 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Mitsuba's load and frame on the PLY, or why not.
 fn mitsuba(dir: &Path, ply: &Path, bounces: u32, spp: u32, repeats: u32) -> Result<Value, String> {
-    let python = cli::repo().join("target/peer-venv/bin/python");
-    if !python.exists() {
-        return Err("no peer venv (target/peer-venv; .ci/run makes it)".into());
-    }
     let camera: Value = serde_json::from_str(CAMERA).expect("the camera literal");
     let mut camera = camera;
     camera["up"] = json!([0.0, 1.0, 0.0]);
@@ -89,19 +84,7 @@ fn mitsuba(dir: &Path, ply: &Path, bounces: u32, spp: u32, repeats: u32) -> Resu
     if bounces > 0 {
         scene["max_depth"] = json!(bounces + 2);
     }
-    let path = dir.join("mitsuba.json");
-    std::fs::write(&path, scene.to_string()).map_err(|e| e.to_string())?;
-    let out = Command::new(&python)
-        .arg(cli::repo().join("benches/mesh_peer.py"))
-        .arg(&path)
-        .output()
-        .map_err(|e| e.to_string())?;
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        return Err(err.lines().last().unwrap_or("failed").to_string());
-    }
-    let text = String::from_utf8_lossy(&out.stdout);
-    serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| e.to_string())
+    cli::mesh_peer(dir, &scene)
 }
 
 fn main() {

@@ -113,10 +113,6 @@ fn peer(
     truth_spp: u32,
     ours_s: f64,
 ) -> Result<Value, String> {
-    let python = cli::repo().join("target/peer-venv/bin/python");
-    if !python.exists() {
-        return Err("no peer venv (target/peer-venv; .ci/run makes it)".into());
-    }
     let out = dir.join("out");
     let light = match p.light.as_str() {
         "sun" => json!({ "direction": SUN, "intensity": 3.0 }),
@@ -131,19 +127,7 @@ fn peer(
         "truth_samples": truth_spp,
         "compare": { "ours": { "image": out.join("ours.npy"), "mask": out.join("ours_mask.npy"), "seconds": ours_s } },
     });
-    let path = dir.join("mitsuba.json");
-    std::fs::write(&path, scene.to_string()).map_err(|e| e.to_string())?;
-    let output = Command::new(&python)
-        .arg(cli::repo().join("benches/mesh_peer.py"))
-        .arg(&path)
-        .output()
-        .map_err(|e| e.to_string())?;
-    if !output.status.success() {
-        let err = String::from_utf8_lossy(&output.stderr);
-        return Err(err.lines().last().unwrap_or("failed").to_string());
-    }
-    let text = String::from_utf8_lossy(&output.stdout);
-    serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| e.to_string())
+    cli::mesh_peer(dir, &scene)
 }
 
 struct Point {

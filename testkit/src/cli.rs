@@ -46,3 +46,25 @@ pub fn node<'a>(report: &'a Value, id: &str) -> &'a Value {
         .and_then(|a| a.iter().find(|n| n["id"] == id))
         .unwrap_or(&Value::Null)
 }
+
+/// Runs `benches/mesh_peer.py` (Mitsuba 3 in the peer venv) on `scene`, written as
+/// `dir/mitsuba.json`: its JSON line, or why not (no venv, the peer's last error line).
+pub fn mesh_peer(dir: &Path, scene: &Value) -> Result<Value, String> {
+    let python = repo().join("target/peer-venv/bin/python");
+    if !python.exists() {
+        return Err("no peer venv (target/peer-venv; .ci/run makes it)".into());
+    }
+    let path = dir.join("mitsuba.json");
+    std::fs::write(&path, scene.to_string()).map_err(|e| e.to_string())?;
+    let out = Command::new(&python)
+        .arg(repo().join("benches/mesh_peer.py"))
+        .arg(&path)
+        .output()
+        .map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(err.lines().last().unwrap_or("failed").to_string());
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| e.to_string())
+}
