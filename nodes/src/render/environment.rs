@@ -54,6 +54,19 @@ pub struct EnvShading {
     lighting: Vec<[f32; 3]>,
 }
 
+/// Bytes the GPU path uploads under an environment: the transfer at the material's own texels
+/// and the lighting of `vertices` vertices, at `order` bands (clamped as [`EnvShading::new`]
+/// clamps it).
+pub fn gpu_bytes(texels: usize, views: usize, vertices: usize, order: usize) -> u64 {
+    let n = sh::count(order.clamp(1, sh::MAX_ORDER)) as u64;
+    let product = crate::support::memory::product;
+    product(&[texels as u64, views as u64, n, 12]).saturating_add(product(&[
+        vertices as u64,
+        n,
+        12,
+    ]))
+}
+
 /// Bytes the transfer of a BTF of `texels` texels and `views` views takes at `order`.
 pub fn transfer_bytes(texels: usize, views: usize, order: usize) -> u64 {
     crate::support::memory::product(&[texels as u64, views as u64, sh::count(order) as u64, 12])
@@ -135,6 +148,21 @@ impl EnvShading {
             transfer: levels,
             lighting,
         })
+    }
+
+    /// How many spherical-harmonic functions each colour carries.
+    pub fn functions(&self) -> usize {
+        self.n
+    }
+
+    /// The mesh's lighting, [vertex][function] RGB.
+    pub fn lighting(&self) -> &[[f32; 3]] {
+        &self.lighting
+    }
+
+    /// The transfer at the material's own texels, [view][texel][function] RGB.
+    pub fn transfer(&self) -> &[[f32; 3]] {
+        &self.transfer[0]
     }
 
     /// Radiance towards local view `wo` at a hit on `s` (entry texel `s.uv`, the hit `depth`

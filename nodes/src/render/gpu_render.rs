@@ -154,6 +154,11 @@ pub struct GpuRenderer<'a> {
     material: wgpu::Buffer,
     dirs: wgpu::Buffer,
     mdf: wgpu::Buffer,
+    /// Under an environment light: the mesh's lighting, then the BTF's transfer (one float
+    /// each, `environment.rs`'s layouts); one float otherwise.
+    env: wgpu::Buffer,
+    /// The functions per colour (0: no environment) and where the transfer starts in `env`.
+    env_info: [u32; 2],
     peel_front: wgpu::RenderPipeline,
     peel_back: wgpu::RenderPipeline,
     resolve: wgpu::ComputePipeline,
@@ -223,8 +228,21 @@ impl<'a> GpuRenderer<'a> {
             table(mat.light_table.as_ref()),
             table(scene.mdf.as_ref().and_then(|l| l.rings.as_ref())),
         ];
+        let (env_data, env_info) = match &scene.env {
+            Some(e) => {
+                let mut data: Vec<f32> = e.lighting().iter().flatten().copied().collect();
+                let at = data.len() as u32;
+                data.extend(e.transfer().iter().flatten());
+                (data, [e.functions() as u32, at])
+            }
+            None => (vec![0f32], [0, 0]),
+        };
         let limit = device.limits().max_storage_buffer_binding_size;
         for (what, bytes) in [
+            (
+                "the environment's transfer and lighting",
+                env_data.len() * 4,
+            ),
             ("the material", material.len() * 4),
             ("the MDF", mdf_data.len() * 4),
             ("the mesh", mesh_f.len() * 4),
@@ -292,6 +310,8 @@ impl<'a> GpuRenderer<'a> {
             material: storage("material", bytemuck::cast_slice(&material)),
             dirs: storage("dirs", bytemuck::cast_slice(&dirs)),
             mdf: storage("mdf", bytemuck::cast_slice(&mdf_data)),
+            env: storage("environment", bytemuck::cast_slice(&env_data)),
+            env_info,
             peel_front,
             peel_back,
             resolve,
@@ -547,7 +567,7 @@ impl<'a> GpuRenderer<'a> {
             Source::Basis { basis, .. } => (1, (basis.color == ColorSpace::YCbCr) as u32),
         };
         let [owners_off, blocks_off, pair_of_off, lights_off, mdf_dirs_off] = self.offsets;
-        let ints: [u32; 24] = [
+        let ints: [u32; 28] = [
             kind,
             mat.width as u32,
             mat.height as u32,
@@ -570,6 +590,10 @@ impl<'a> GpuRenderer<'a> {
             0,
             self.sides_at[0],
             self.sides_at[1],
+            0,
+            0,
+            self.env_info[0],
+            self.env_info[1],
             0,
             0,
         ];
@@ -607,6 +631,7 @@ impl<'a> GpuRenderer<'a> {
             shadow.map_or(&none, |x| x.0).as_entire_binding(),
             out.as_entire_binding(),
             wgpu::BindingResource::TextureView(&layers_view),
+            self.env.as_entire_binding(),
         ];
         let entries: Vec<wgpu::BindGroupEntry> = entries
             .into_iter()

@@ -24,6 +24,7 @@ struct Params {
     offs2: vec4<u32>,      // blocks offset in `tables`, light dirs offset, mdf dirs offset, pair_of offset
     rings_at: vec4<u32>,   // ring tables in `dirs` of the views, lights, MDF views (NONE: not rings)
     sides: vec4<u32>,      // the shell's side walls in `mesh`: offset, count (four corners each)
+    env: vec4<u32>,        // environment functions per colour (0: none), transfer offset in `envd`
 };
 
 @group(0) @binding(0) var<uniform> P: Params;
@@ -35,6 +36,7 @@ struct Params {
 @group(0) @binding(6) var<storage, read> shadow: array<f32>;
 @group(0) @binding(7) var<storage, read_write> out: array<vec4<f32>>;
 @group(0) @binding(8) var layers: texture_2d_array<f32>;
+@group(0) @binding(9) var<storage, read> envd: array<f32>;      // lighting | transfer
 
 const NONE: u32 = 0xffffffffu;
 // A side wall in `mesh`: four corners, its triangle, the corner slots of its edge.
@@ -75,6 +77,8 @@ struct Surface {
     // The texel aspect (k_u, k_v) (shade.rs's texel_aspect).
     k: vec2<f32>,
     tri: u32,
+    // The barycentric weights of the triangle's corners.
+    bary: vec3<f32>,
 };
 
 fn v3(base: u32, i: u32) -> vec3<f32> {
@@ -115,6 +119,7 @@ fn surface(f: vec4<f32>) -> Surface {
     s.t = tt;
     s.b = cross(nn, tt) * hand;
     s.tri = tri;
+    s.bary = w;
     let kb = 12u * n;
     s.k = vec2<f32>(mesh[kb + 2u * i0], mesh[kb + 2u * i0 + 1u]) * w.x
         + vec2<f32>(mesh[kb + 2u * i1], mesh[kb + 2u * i1 + 1u]) * w.y
@@ -819,6 +824,62 @@ fn past_horizon(s: Surface, wo: vec3<f32>, depth: vec2<f32>, to_light: vec3<f32>
     return max(along * sin_e + across * cos_e, zero) * lit;
 }
 
+// Radiance under an environment light (environment.rs's EnvShading::shade): the lighting of
+// the hit's triangle corners, barycentric, dotted per function with the BTF's transfer read
+// at the texels and views btf_eval_sampled reads.
+fn env_shade(h: Hit) -> vec3<f32> {
+    let n = P.env.x;
+    let bv = lookup(0u, P.dirs.x, P.rings_at.x, h.wo);
+    var total = 0.0;
+    for (var a = 0u; a < bv.count; a = a + 1u) {
+        total = total + bv.w[a];
+    }
+    if (total <= 0.0) {
+        return vec3<f32>(0.0);
+    }
+    // Where each (view, tap) pair's functions start in `envd`, and its weight.
+    var at_f = array<u32, 16>();
+    var at_w = array<f32, 16>();
+    var m = 0u;
+    for (var a = 0u; a < bv.count; a = a + 1u) {
+        let vi = bv.idx[a];
+        var at = h.s.uv;
+        if (h.depth.x > 0.0 || h.depth.y > 0.0) {
+            let vk = vec3<f32>(dirs[3u * vi], dirs[3u * vi + 1u], dirs[3u * vi + 2u]);
+            let k = h.wo.z / max(vk.z, 1e-3);
+            at = h.s.uv + h.depth * (vk.xy * k - h.wo.xy);
+        }
+        let tp = taps(at, P.mat.y, P.mat.z);
+        for (var k = 0u; k < 4u; k = k + 1u) {
+            let tw = tap_weight(tp, k);
+            if (tw == 0.0) {
+                continue;
+            }
+            let tx = (vi * P.mat.z + tp.y[k >> 1u]) * P.mat.y + tp.x[k & 1u];
+            at_f[m] = P.env.y + 3u * n * tx;
+            at_w[m] = bv.w[a] * tw / total;
+            m = m + 1u;
+        }
+    }
+    let tri = h.s.tri;
+    let c0 = 3u * n * tables[3u * tri];
+    let c1 = 3u * n * tables[3u * tri + 1u];
+    let c2 = 3u * n * tables[3u * tri + 2u];
+    var out = vec3<f32>(0.0);
+    for (var f = 0u; f < n; f = f + 1u) {
+        let l = vec3<f32>(envd[c0 + 3u * f], envd[c0 + 3u * f + 1u], envd[c0 + 3u * f + 2u]) * h.s.bary.x
+            + vec3<f32>(envd[c1 + 3u * f], envd[c1 + 3u * f + 1u], envd[c1 + 3u * f + 2u]) * h.s.bary.y
+            + vec3<f32>(envd[c2 + 3u * f], envd[c2 + 3u * f + 1u], envd[c2 + 3u * f + 2u]) * h.s.bary.z;
+        var t = vec3<f32>(0.0);
+        for (var i = 0u; i < m; i = i + 1u) {
+            let b = at_f[i] + 3u * f;
+            t = t + vec3<f32>(envd[b], envd[b + 1u], envd[b + 2u]) * at_w[i];
+        }
+        out = out + t * l;
+    }
+    return max(out, vec3<f32>(0.0));
+}
+
 fn lit(p: vec3<f32>, cos_light: f32) -> bool {
     let c = P.scam;
     let rel = p - c.eye.xyz;
@@ -860,6 +921,10 @@ fn main(@builtin(global_invocation_id) g: vec3<u32>) {
     }
     if (!hit.found) {
         out[px] = vec4<f32>(P.background.xyz, 0.0);
+        return;
+    }
+    if (P.env.x > 0u) {
+        out[px] = vec4<f32>(env_shade(hit), 1.0);
         return;
     }
     // Shadows and point lights are evaluated at the receiver's reference surface (see shade.rs).

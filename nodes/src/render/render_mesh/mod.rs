@@ -5,7 +5,8 @@
 //! in a compute pass. `frame_ms` is wall time per frame (submit to completion, render targets
 //! included) averaged over `frames` after an untimed first frame that also provides the image;
 //! `gpu_ms` is the time between timestamps at the start of the first pass and the end of the
-//! last, where the adapter supports timestamp queries.
+//! last, where the adapter supports timestamp queries. Under an environment light both paths
+//! shade with `environment.rs`'s transfer and per-vertex lighting.
 
 pub mod validity;
 
@@ -90,8 +91,8 @@ impl Node for RenderMesh {
             // the MDF's shadows, shell sides rays enter by. 5: light past the macro horizon.
             // 6: the validity warnings (images unchanged; a cache hit repeats the warnings its
             // entry stored, so older entries rerun once to have them). 7: environment lights, and
-            // the BTF read at the pixel's footprint.
-            version: 7,
+            // the BTF read at the pixel's footprint. 8: environment lights shaded on the GPU too.
+            version: 8,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
@@ -192,9 +193,9 @@ impl Node for RenderMesh {
             return Err(NodeError::input("btf", "expected a Btf or a BtfBasis"));
         };
         let mut material = Material::new(source);
-        // The GPU path reads the texels themselves: the levels are for the CPU's (which an
-        // environment light always takes).
-        let on_cpu = ctx.gpu().is_none() || p.light.is_environment();
+        let gpu = gpu_for(ctx, &material, mesh, p);
+        // The GPU path reads the texels themselves: the levels are for the CPU's.
+        let on_cpu = gpu.is_none();
         if p.footprint && on_cpu {
             crate::support::memory::check_param(
                 match &material.source {
@@ -260,11 +261,7 @@ impl Node for RenderMesh {
                 p.environment_order as usize,
             )?);
             ctx.timing("environment_ms", start.elapsed().as_secs_f64() * 1e3);
-            if ctx.gpu().is_some() {
-                ctx.warn("an environment light is shaded on the CPU: the GPU path shades a directional or point light only");
-            }
         }
-        let gpu = ctx.gpu().filter(|_| scene.env.is_none());
         let (data, mask, ms, gpu_ms) = match gpu {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
             None => {
@@ -475,6 +472,39 @@ pub fn render_cpu_stages(
     Ok((data, mask, stages))
 }
 
+/// The GPU the node renders on, if any: under an environment light only where the adapter can
+/// hold the transfer and the lighting in one storage buffer (otherwise the CPU, with a warning
+/// naming the sizes).
+fn gpu_for<'c>(
+    ctx: &'c NodeContext,
+    material: &Material,
+    mesh: &Mesh,
+    p: &Params,
+) -> Option<&'c mesoflow_runtime::Gpu> {
+    let gpu = ctx.gpu()?;
+    if !p.light.is_environment() {
+        return Some(gpu);
+    }
+    let bytes = super::environment::gpu_bytes(
+        material.width * material.height,
+        material.views.len(),
+        mesh.positions.len(),
+        p.environment_order as usize,
+    );
+    let limit = gpu.device.limits().max_storage_buffer_binding_size;
+    if bytes > limit {
+        let mib = |b: u64| b as f64 / (1u64 << 20) as f64;
+        ctx.warn(format!(
+            "the environment's transfer and lighting take {:.0} MiB, over {}'s storage buffer limit of {:.0} MiB: rendered on the CPU (a lower environment_order or a smaller BTF fits)",
+            mib(bytes),
+            gpu.describe(),
+            mib(limit)
+        ));
+        return None;
+    }
+    Some(gpu)
+}
+
 /// A rendered frame on the GPU: RGB data, mask, wall ms per frame, GPU ms per frame from
 /// timestamp queries where the device has them.
 type GpuFrame = (Vec<f32>, Vec<f32>, f64, Option<f64>);
@@ -489,7 +519,8 @@ pub fn render_gpu(
 ) -> Result<GpuFrame, NodeError> {
     use super::gpu_render::GpuRenderer;
     GpuRenderer::check_size(gpu, "camera", camera.width, camera.height)?;
-    let shadow = if p.shadows {
+    // Under an environment the mesh's shadows are in its lighting.
+    let shadow = if p.shadows && scene.env.is_none() {
         GpuRenderer::check_size(
             gpu,
             "shadow_resolution",
@@ -529,7 +560,7 @@ pub fn render_gpu(
     if !stages.is_empty() {
         ctx.timing("layers_ms", mean(&|s| s.layers_ms));
         ctx.timing("shade_ms", mean(&|s| s.shade_ms));
-        if p.shadows {
+        if shadow.is_some() {
             ctx.timing("shadow_ms", mean(&|s| s.shadow_ms.unwrap_or(0.0)));
         }
     }

@@ -525,7 +525,7 @@ fn scene_of<'a>(
         material,
         mdf.map(MdfLookup::new),
         p,
-        Light::new(&p.light).unwrap(),
+        Light::open(&p.light, &NodeContext::detached(None)).unwrap(),
     )
     .unwrap()
 }
@@ -536,7 +536,13 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
     let (torus, mut p) = shadowed_torus();
     let scene_in = |gpu: Option<&mesoflow_runtime::Gpu>, with_mdf: bool, p: &Params| {
         let material = Material::new(Source::Raw(&btf));
-        let scene = scene_of(&torus, &material, with_mdf.then_some(&mdf), p);
+        let mut scene = scene_of(&torus, &material, with_mdf.then_some(&mdf), p);
+        if let Some(env) = scene.light.env() {
+            let tracer = crate::support::raytrace::tracer::Tracer::new(&torus);
+            let order = p.environment_order as usize;
+            let shading = EnvShading::new(&material, &torus, &tracer, env, order).unwrap();
+            scene.env = Some(shading);
+        }
         let cam = Camera::new(&p.camera).unwrap();
         let ctx = NodeContext::detached(None);
         match gpu {
@@ -549,7 +555,9 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
                         .filter_map(|k| st.get(*k))
                         .sum::<f64>();
                     assert!(st.contains_key("layers_ms") && st.contains_key("shade_ms"));
-                    assert_eq!(st.contains_key("shadow_ms"), p.shadows);
+                    // Under an environment the shadows are in the lighting: no map.
+                    let mapped = p.shadows && !p.light.is_environment();
+                    assert_eq!(st.contains_key("shadow_ms"), mapped);
                     // Sums of the same per-frame differences: equal up to rounding.
                     assert!(
                         (parts - total).abs() <= 1e-9 * total.max(1.0),
@@ -595,14 +603,26 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
         let Ok(gpu) = mesoflow_runtime::Gpu::with_backends(backends) else {
             continue;
         };
-        for (with_mdf, shadows, parallax) in [
-            (false, false, false),
-            (true, false, false),
-            (true, true, false),
-            (true, false, true),
+        // The last two under the procedural sky: the environment's transfer and lighting,
+        // with the MDF's depth read per view (the shadows are then in the lighting).
+        let sun = p.light.clone();
+        let sky: LightParams =
+            serde_json::from_value(serde_json::json!({"sky": {}, "intensity": 2.0})).unwrap();
+        for (with_mdf, shadows, parallax, environment) in [
+            (false, false, false, false),
+            (true, false, false, false),
+            (true, true, false, false),
+            (true, false, true, false),
+            (false, false, false, true),
+            (true, true, false, true),
         ] {
             p.shadows = shadows;
             p.parallax = parallax;
+            p.light = if environment {
+                sky.clone()
+            } else {
+                sun.clone()
+            };
             let (cpu, cpu_cov, _) = scene_in(None, with_mdf, &p).unwrap();
             let (gpu_img, gpu_cov, gpu_ms) = match scene_in(Some(&gpu), with_mdf, &p) {
                 Ok(r) => r,
@@ -626,7 +646,7 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
             let mean = sum / pixels as f64 / peak as f64;
             let frac = differing as f64 / pixels as f64;
             eprintln!(
-                "{} mdf {with_mdf} shadows {shadows} parallax {parallax}: coverage CPU {cpu_cov:.4} GPU {gpu_cov:.4}, mean |diff| {mean:.2e} of peak, {frac:.4} of pixels differ by > 1%, GPU time {gpu_ms:?} ms",
+                "{} mdf {with_mdf} shadows {shadows} parallax {parallax} sky {environment}: coverage CPU {cpu_cov:.4} GPU {gpu_cov:.4}, mean |diff| {mean:.2e} of peak, {frac:.4} of pixels differ by > 1%, GPU time {gpu_ms:?} ms",
                 gpu.describe()
             );
             // Where they may differ: the rasteriser's edge rules vs the f64 ray–triangle test
@@ -644,6 +664,10 @@ fn gpu_and_cpu_renders_agree_on_every_backend() {
                 .features()
                 .contains(wgpu::Features::TIMESTAMP_QUERY);
             assert_eq!(gpu_ms.is_some(), stamps);
+            if environment {
+                // Not the background: the sky lights the torus.
+                assert!(peak > 0.05, "{peak}");
+            }
             assert!(
                 gpu_ms.is_none_or(|t| t > 0.0 && t.is_finite()),
                 "{gpu_ms:?}"
