@@ -163,12 +163,6 @@ impl Node for Reference {
                     "is for a surface: with a `medium` every path already follows each scattering event to its end",
                 ));
             }
-            Some(_) if p.light.is_environment() => {
-                return Err(NodeError::param(
-                    "light",
-                    "a translucent medium is rendered under a directional or point light: an environment is for a surface",
-                ));
-            }
             Some(m) => {
                 if inputs.opt::<Image>("albedo")?.is_some()
                     || inputs.opt::<NormalMap>("normals")?.is_some()
