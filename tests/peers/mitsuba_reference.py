@@ -88,8 +88,6 @@ def scene_of(mi, cfg, pixel_format="rgba"):
         # roulette, so each path runs to its depth as mesoflow's do.
         scene_dict["integrator"] = {"type": "path", "max_depth": cfg["max_depth"],
                                     "rr_depth": 1 << 30}
-    if "envmap" in cfg["light"]:
-        scene_dict["integrator"]["hide_emitters"] = True
     if cam_ortho := cfg["camera"].get("orthographic"):
         # Mitsuba's orthographic view spans [-1, 1] on both axes of a square image before its
         # to_world: scaled to mesoflow's half-height.
@@ -124,6 +122,9 @@ def scene_of(mi, cfg, pixel_format="rgba"):
             "albedo": {"type": "rgb", "value": medium["albedo"]},
             "phase": {"type": "hg", "g": medium["g"]},
         }
+    if "envmap" in cfg["light"]:
+        # As mesoflow's reference: the environment lights the scene and is not seen.
+        scene_dict["integrator"]["hide_emitters"] = True
     return scene_dict
 
 

@@ -146,6 +146,9 @@ pub fn write(s: &Scene, env_file: Option<&str>) -> String {
                 x,
                 r#"        <integer name="rr_depth" value="1073741824"/>"#
             );
+            if env_file.is_some() {
+                let _ = writeln!(x, r#"        <boolean name="hide_emitters" value="true"/>"#);
+            }
         }
     }
     let _ = writeln!(x, "    </integrator>");

@@ -204,12 +204,6 @@ pub fn build(
     let mesh = inputs.get::<Mesh>("mesh")?;
     mesh.check().map_err(|e| NodeError::input("mesh", e))?;
     let light = Light::open(&r.light, ctx)?;
-    if light.environment.is_some() && inputs.opt::<ScatteringMaterial>("medium")?.is_some() {
-        return Err(NodeError::param(
-            "light",
-            "a translucent medium is rendered under a directional or point light: an environment is for a surface",
-        ));
-    }
     let (mesh_path, mesh_file) = beside(path, ".ply");
     let mut files = Vec::new();
     let albedo = inputs.opt::<Image>("albedo")?;
