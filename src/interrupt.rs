@@ -66,6 +66,7 @@ fn write_abandoned_report() {
         seconds: run.started.elapsed().as_secs_f64(),
         nodes: run.finished.clone(),
         warnings: vec![Warning {
+            expected: false,
             node: String::new(),
             message: "interrupted twice: nodes still running were abandoned, and are missing \
                       from this report"

@@ -93,10 +93,12 @@ pub fn status_text(s: NodeStatus) -> &'static str {
 }
 
 /// The run's warnings, one line per distinct message: a message several nodes gave (the software
-/// adapter's notice, say) names them all once. The report keeps each node's own.
+/// adapter's notice, say) names them all once. The report keeps each node's own. Those the graph
+/// expects (`expected_warnings`) are counted in one line.
 fn warning_lines(report: &RunReport) -> String {
     let mut distinct: Vec<(&str, Vec<&str>)> = Vec::new();
-    for w in &report.warnings {
+    let expected = report.warnings.iter().filter(|w| w.expected).count();
+    for w in report.warnings.iter().filter(|w| !w.expected) {
         match distinct.iter_mut().find(|(m, _)| *m == w.message) {
             Some((_, nodes)) => nodes.push(&w.node),
             None => distinct.push((&w.message, vec![&w.node])),
@@ -109,6 +111,10 @@ fn warning_lines(report: &RunReport) -> String {
             let which = if names.len() == 1 { "node" } else { "nodes" };
             format!("warning: {which} {}: {message}\n", names.join(", "))
         })
+        .chain((expected > 0).then(|| {
+            let (s, verb) = if expected == 1 { ("", "is") } else { ("s", "are") };
+            format!("{expected} warning{s} the graph expects (its `expected_warnings`) {verb} in report.json\n")
+        }))
         .collect()
 }
 
@@ -289,6 +295,7 @@ mod tests {
         let warn = |node: &str, message: &str| Warning {
             node: node.into(),
             message: message.into(),
+            expected: false,
         };
         let report = RunReport {
             warnings: vec![

@@ -87,8 +87,10 @@ fn speaks_of_its_making(line: &str) -> Option<&'static str> {
         let before = if k > 0 { words[k - 1] } else { "" };
         match *w {
             "issue" | "issue's" | "issues" => return Some("an issue"),
-            // A Python session is the user's; any other is ours.
-            "session" | "session's" | "sessions" if before != "python" => return Some("a session"),
+            // A Python session is the user's, `session.rs` a module; any other is ours.
+            "session" | "session's" | "sessions" if before != "python" && next != "rs" => {
+                return Some("a session")
+            }
             "landing" | "landings" => return Some("a landing"),
             "seed"
                 if next.len() == 3
@@ -106,7 +108,7 @@ fn speaks_of_its_making(line: &str) -> Option<&'static str> {
 
 #[test]
 fn user_text_speaks_of_mesoflow_not_of_how_it_was_made() {
-    let mut texts: Vec<(String, String)> = ["README.md", "BENCHMARKS.md"]
+    let mut texts: Vec<(String, String)> = ["README.md", "BENCHMARKS.md", "docs/architecture.md"]
         .iter()
         .map(|f| {
             (
@@ -148,6 +150,10 @@ fn user_text_speaks_of_mesoflow_not_of_how_it_was_made() {
     );
     assert_eq!(
         speaks_of_its_making("for the Python session that made it"),
+        None
+    );
+    assert_eq!(
+        speaks_of_its_making("`session.rs` (the graph being edited)"),
         None
     );
     assert_eq!(speaks_of_its_making("seed 0's torus"), None);

@@ -433,3 +433,56 @@ fn a_tile_too_small_for_its_pattern_is_flat_and_says_so() {
     );
     assert!(!warnings.iter().any(|(n, _)| n == "fine"), "{warnings:?}");
 }
+
+/// A warning the graph names in `expected_warnings` stays in the report, marked, and the run
+/// prints one line that counts it instead of the warning; one it does not name still prints.
+#[test]
+fn a_warning_the_graph_expects_is_kept_in_the_report_and_not_printed() {
+    let s = Scratch::new();
+    let g = s.write(
+        "g.json",
+        r#"{"mesoflow": 1, "expected_warnings": {"small": ["flat"]}, "nodes": {
+            "small": {"kind": "heightfield.procedural", "params": {"pattern": "weave", "size": 16}},
+            "other": {"kind": "heightfield.procedural", "params": {"pattern": "weave", "size": 16}}}}"#,
+    );
+    // Not quiet: the summary is what is printed.
+    let out = s.path("o");
+    let args = [
+        "run",
+        g.to_str().unwrap(),
+        "--no-cache",
+        "--out-dir",
+        out.to_str().unwrap(),
+    ];
+    let r = mesoflow(&args, s.dir.path());
+    assert_eq!(r.code, 0, "{}", r.stderr);
+    let rep = report(&out);
+    let printed = format!("{}{}", r.stdout, r.stderr);
+    let small: Vec<&serde_json::Value> = rep["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|w| w["node"] == "small")
+        .collect();
+    assert!(!small.is_empty(), "{rep}");
+    assert!(small.iter().all(|w| w["expected"] == true), "{small:?}");
+    assert!(!printed.contains("warning: node `small`"), "{printed}");
+    assert!(printed.contains("warning: node `other`"), "{printed}");
+    assert!(
+        printed.contains("the graph expects (its `expected_warnings`)"),
+        "{printed}"
+    );
+    // A node the graph does not name is refused with a did-you-mean.
+    let bad = s.write(
+        "bad.json",
+        r#"{"mesoflow": 1, "expected_warnings": {"smal": ["flat"]}, "nodes": {
+            "small": {"kind": "heightfield.procedural", "params": {"pattern": "weave", "size": 16}}}}"#,
+    );
+    let r = mesoflow(&["run", bad.to_str().unwrap(), "--no-cache"], s.dir.path());
+    assert_ne!(r.code, 0);
+    assert!(
+        r.stderr.contains("names no node `smal`") && r.stderr.contains("`small`"),
+        "{}",
+        r.stderr
+    );
+}

@@ -40,6 +40,9 @@ pub struct GraphFile {
     pub values: Map<String, Value>,
     /// Where each shared value was used, so that an override of it reaches every use.
     pub uses: Vec<crate::values::Use>,
+    /// Per node, warnings the graph expects of it (parts of their messages): what the graph is
+    /// about, which a run keeps in its report without printing (`expected_warnings`).
+    pub expected_warnings: BTreeMap<String, Vec<String>>,
 }
 
 /// A JSON object that keeps duplicate keys, so that a duplicated node id can be reported instead
@@ -202,10 +205,24 @@ impl GraphFile {
                 Map::new()
             }),
         };
+        let expected_warnings = match rest.remove("expected_warnings") {
+            None => BTreeMap::new(),
+            Some(v) => parse_expected(v).unwrap_or_else(|e| {
+                errors.push(e);
+                BTreeMap::new()
+            }),
+        };
         for key in rest.keys() {
             let hint = crate::nearest(
                 key,
-                ["mesoflow", "description", "interface", "values", "nodes"],
+                [
+                    "mesoflow",
+                    "description",
+                    "interface",
+                    "values",
+                    "expected_warnings",
+                    "nodes",
+                ],
             )
             .map(|s| format!(" (did you mean `{s}`?)"))
             .unwrap_or_default();
@@ -247,6 +264,18 @@ impl GraphFile {
                 Err(mut es) => errors.append(&mut es),
             }
         }
+        for id in expected_warnings.keys() {
+            if !nodes.iter().any(|(n, _)| n == id) {
+                let hint = crate::nearest(id, nodes.iter().map(|(n, _)| n.as_str()))
+                    .map(|s| format!(" (did you mean `{s}`?)"))
+                    .unwrap_or_default();
+                errors.push(structure(
+                    Some(id),
+                    Some("expected_warnings"),
+                    format!("`expected_warnings` names no node `{id}`{hint}"),
+                ));
+            }
+        }
         if errors.is_empty() {
             Ok(GraphFile {
                 description,
@@ -256,6 +285,7 @@ impl GraphFile {
                 source: None,
                 values,
                 uses,
+                expected_warnings,
             })
         } else {
             Err(errors)
@@ -298,9 +328,53 @@ impl GraphFile {
         if let Some(i) = &self.interface {
             top.insert("interface".into(), i.to_value());
         }
+        if !self.expected_warnings.is_empty() {
+            let expected = self
+                .expected_warnings
+                .iter()
+                .map(|(id, parts)| (id.clone(), Value::from(parts.clone())));
+            top.insert(
+                "expected_warnings".into(),
+                Value::Object(expected.collect()),
+            );
+        }
         top.insert("nodes".into(), Value::Object(nodes));
         serde_json::to_string_pretty(&Value::Object(top)).unwrap_or_default()
     }
+}
+
+/// `expected_warnings`: an object of node id → array of strings.
+fn parse_expected(v: Value) -> Result<BTreeMap<String, Vec<String>>, GraphError> {
+    let bad = |what: String| structure(None, Some("expected_warnings"), what);
+    let Value::Object(m) = v else {
+        return Err(bad(format!(
+            "`expected_warnings` must be an object of node id → [parts of messages], got {}",
+            describe(&v)
+        )));
+    };
+    let mut out = BTreeMap::new();
+    for (id, parts) in m {
+        let list = match parts {
+            Value::Array(a) => a
+                .into_iter()
+                .map(|p| match p {
+                    Value::String(s) if !s.trim().is_empty() => Ok(s),
+                    other => Err(bad(format!(
+                        "`expected_warnings.{id}`: each entry must be a non-empty string, got {}",
+                        describe(&other)
+                    ))),
+                })
+                .collect::<Result<Vec<String>, GraphError>>()?,
+            other => {
+                return Err(bad(format!(
+                    "`expected_warnings.{id}` must be an array of strings, got {}",
+                    describe(&other)
+                )))
+            }
+        };
+        out.insert(id, list);
+    }
+    Ok(out)
 }
 
 fn strip_position(message: &str) -> String {

@@ -88,6 +88,7 @@ pub fn graph_schema(catalog: &dyn Catalog) -> Value {
             "mesoflow": { "const": 1, "description": "format version" },
             "description": { "type": "string" },
             "values": { "type": "object", "description": "shared values, written once and referred to from any node's parameters as {\"$value\": \"name\"} (with fields beside it replacing an object value's own)" },
+            "expected_warnings": { "type": "object", "description": "per node id, parts of the warnings the graph expects of it (what the graph is about): a run keeps them in its report and does not print them", "additionalProperties": { "type": "array", "items": { "type": "string", "minLength": 1 } } },
             "nodes": {
                 "type": "object",
                 "propertyNames": { "pattern": "^[a-z][a-z0-9_]*$" },

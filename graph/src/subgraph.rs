@@ -60,6 +60,7 @@ pub fn expand(file: &GraphFile) -> Result<GraphFile, Vec<GraphError>> {
         source: file.source.clone(),
         values: file.values.clone(),
         uses: file.uses.clone(),
+        expected_warnings: file.expected_warnings.clone(),
     })
 }
 

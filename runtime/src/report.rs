@@ -47,6 +47,9 @@ pub struct NodeReport {
 pub struct Warning {
     pub node: String,
     pub message: String,
+    /// The graph expects it of the node (its `expected_warnings`): kept here, not printed.
+    #[serde(skip_serializing_if = "std::ops::Not::not", default)]
+    pub expected: bool,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -87,6 +90,15 @@ pub struct RunReport {
 impl RunReport {
     pub fn node(&self, id: &str) -> Option<&NodeReport> {
         self.nodes.iter().find(|n| n.id == id)
+    }
+
+    /// Marks the warnings a graph expects (per node id, parts of their messages) as expected.
+    pub fn mark_expected(&mut self, expected: &std::collections::BTreeMap<String, Vec<String>>) {
+        for w in &mut self.warnings {
+            if let Some(parts) = expected.get(&w.node) {
+                w.expected = parts.iter().any(|p| w.message.contains(p.as_str()));
+            }
+        }
     }
 
     /// This report with the nodes of `previous` (the folder's report before this run, of the

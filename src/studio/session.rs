@@ -152,6 +152,7 @@ impl Studio {
                     source: None,
                     values: Default::default(),
                     uses: Vec::new(),
+                    expected_warnings: Default::default(),
                 },
                 errors: Vec::new(),
                 blocked: Vec::new(),

@@ -43,6 +43,7 @@ impl Sink {
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .push(Warning {
+                expected: false,
                 node: node.into(),
                 message,
             });
