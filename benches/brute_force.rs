@@ -16,7 +16,8 @@
 //! surface), so equal samples are again near equal error.
 //!
 //! `cargo bench --bench brute_force -- [--spp 16] [--repeats 3] [--largest false]
-//! [--out target/brute_force]`: `--largest true` adds 16 M triangles (minutes, 3 GiB). Needs
+//! [--out target/brute_force]`: `--largest true` adds 16 M triangles (minutes, 3 GiB),
+//! `--only-largest true` measures those alone. Needs
 //! the peer venv (`target/peer-venv`, as `.ci/run` makes it) and Debian's `libllvm19`; without
 //! them the Mitsuba columns are absent and the bench says why. Writes `OUT/brute_force.json`.
 
@@ -92,11 +93,15 @@ fn main() {
     let repeats: u32 = arg("--repeats", 3).max(1);
     let largest: bool = arg("--largest", false);
     let out: std::path::PathBuf = arg("--out", cli::repo().join("target/brute_force"));
+    let only_largest: bool = arg("--only-largest", false);
     let mut sizes = vec![([4, 2], 1.0, 0), ([12, 5], 1.0, 0), ([12, 5], 2.0, 0)];
-    if largest {
+    if largest || only_largest {
         sizes.push(([24, 10], 2.0, 0));
     }
     sizes.push(([12, 5], 1.0, 4));
+    if only_largest {
+        sizes.retain(|s| s.0 == [24, 10]);
+    }
     let mut rows = Vec::new();
     println!("| triangles | bounces | ours' BVH build, s | Mitsuba's load, s | ours' frame, s | Mitsuba's frame, s | ours / Mitsuba | ours' rays a second |");
     println!("|---:|---:|---:|---:|---:|---:|---:|---:|");

@@ -196,6 +196,7 @@ impl Sweep {
 }
 
 /// One varied parameter and its values, in sweep order.
+#[derive(Clone, Debug)]
 pub struct Vary {
     pub node: String,
     pub param: String,
@@ -255,10 +256,13 @@ pub fn write_all(
     for (mi, m) in measures.iter().enumerate() {
         let measure_name = m.to_string();
         let is_time = m.port == "seconds";
-        for (vi, v) in varies.iter().enumerate() {
+        // One chart per measure: against the varied parameter that reads best along an axis,
+        // a series per value of the others (the same points against another parameter would
+        // only regroup them).
+        if let Some(vi) = x_axis(varies) {
             let c = chart_against(varies, vi, rows, mi, &measure_name);
             if let Err(e) = chart::write(
-                &out_dir.join(format!("{}.{}_vs_{}", m.node, m.port, v.name())),
+                &out_dir.join(format!("{}.{}_vs_{}", m.node, m.port, varies[vi].name())),
                 &c,
             ) {
                 chart_errors.push(e);
@@ -403,6 +407,17 @@ fn write_csv(
     }
     mesoflow_runtime::write_atomic(path, out)?;
     Ok(())
+}
+
+/// The varied parameter a measure is charted against: the numeric one with the most values,
+/// else the one with the most values (the first of equals); none when nothing varies.
+fn x_axis(varies: &[Vary]) -> Option<usize> {
+    let numeric = |v: &Vary| v.values.iter().all(Value::is_number);
+    (0..varies.len()).max_by_key(|&i| {
+        let v = &varies[i];
+        // max_by_key keeps the last of equals: rank earlier parameters higher on ties.
+        (numeric(v), v.values.len(), std::cmp::Reverse(i))
+    })
 }
 
 /// Measure `mi` against varied parameter `vi`; one series per combination of the other parameters.
@@ -675,5 +690,26 @@ mod tests {
             names,
             ["pca.rank=1", "pca.rank=2", "pca.rank=4", "pca.rank=16"]
         );
+    }
+
+    #[test]
+    fn a_measure_is_charted_against_the_numeric_parameter_with_most_values() {
+        let vary = |param: &str, values: Vec<serde_json::Value>| Vary {
+            node: "n".into(),
+            param: param.into(),
+            values,
+        };
+        let solver = vary("solver", vec![json!("a"), json!("b"), json!("c")]);
+        let level = vary("level", vec![json!(0), json!(2)]);
+        let rank = vary(
+            "rank",
+            vec![json!(1), json!(2), json!(4), json!(8), json!(16)],
+        );
+        assert_eq!(x_axis(&[]), None);
+        assert_eq!(x_axis(&[solver.clone()]), Some(0));
+        assert_eq!(x_axis(&[solver.clone(), level.clone()]), Some(1));
+        assert_eq!(x_axis(&[level.clone(), rank.clone()]), Some(1));
+        // Equals: the first.
+        assert_eq!(x_axis(&[level.clone(), level]), Some(0));
     }
 }

@@ -3,7 +3,8 @@
 //! with the shell test (`shade`); it is the reference for tests and the fallback without a GPU.
 //! The GPU path (`gpu_render`) rasterises the same layers with depth peeling and resolves them
 //! in a compute pass. `frame_ms` is wall time per frame (submit to completion, render targets
-//! included) averaged over `frames` after an untimed first frame that also provides the image;
+//! included), the median of `frames` (after an untimed first frame on the GPU that also provides
+//! the image): one slow frame of several, a scheduler's hiccup, does not move it;
 //! `gpu_ms` is the time between timestamps at the start of the first pass and the end of the
 //! last, where the adapter supports timestamp queries. Under an environment light both paths
 //! shade with `environment.rs`'s transfer and per-vertex lighting.
@@ -165,7 +166,7 @@ impl Node for RenderMesh {
 
     fn timings(&self) -> &'static [(&'static str, &'static str)] {
         &[
-            ("frame_ms", "mean wall time per frame, ms"),
+            ("frame_ms", "wall time per frame, the median of `frames`, ms"),
             ("gpu_ms", "mean GPU time per frame from timestamp queries, ms; absent where the adapter has none, and on the CPU"),
             ("fps", "frames per second (from frame_ms)"),
             ("layers_ms", "the view's visibility layers, ms a frame: on the CPU ray-cast depth peeling (wall time), on the GPU the peel passes (GPU time, where the adapter has timestamp queries)"),
@@ -265,18 +266,20 @@ impl Node for RenderMesh {
         let (data, mask, ms, gpu_ms) = match gpu {
             Some(gpu) => render_gpu(ctx, gpu, &scene, &camera, p)?,
             None => {
-                let start = Instant::now();
                 let mut frame = (Vec::new(), Vec::new());
                 let mut stages = Stages::default();
                 // One counter for all frames: each frame's screen tiles add to its total.
                 let watch = Counter::new(ctx, 0);
+                let mut times = Vec::new();
                 for _ in 0..p.frames {
                     ctx.check_cancel()?;
+                    let started = Instant::now();
                     let (data, mask, s) = render_cpu_stages(&scene, &camera, p, &watch)?;
+                    times.push(started.elapsed().as_secs_f64() * 1e3);
                     frame = (data, mask);
                     stages.add(&s);
                 }
-                let ms = start.elapsed().as_secs_f64() * 1e3 / p.frames as f64;
+                let ms = median_ms(times);
                 stages.record(ctx, p.frames, p.shadows);
                 (frame.0, frame.1, ms, None)
             }
@@ -472,6 +475,16 @@ pub fn render_cpu_stages(
     Ok((data, mask, stages))
 }
 
+/// The median of frame times, ms (the mean of the middle two of an even count).
+fn median_ms(mut times: Vec<f64>) -> f64 {
+    times.sort_by(f64::total_cmp);
+    match times.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => times[n / 2],
+        n => 0.5 * (times[n / 2 - 1] + times[n / 2]),
+    }
+}
+
 /// The GPU the node renders on, if any: under an environment light only where the adapter can
 /// hold the transfer and the lighting in one storage buffer (otherwise the CPU, with a warning
 /// naming the sizes).
@@ -544,15 +557,17 @@ pub fn render_gpu(
     let (rgba, _) = r.frame(camera, sc, count, true)?;
     let timed = p.frames.max(1);
     let mut stages: Vec<super::gpu_render::GpuStages> = Vec::new();
-    let start = Instant::now();
+    let mut times = Vec::new();
     for k in 0..timed {
         ctx.check_cancel()?;
+        let started = Instant::now();
         if let (_, Some(g)) = r.frame(camera, sc, count, false)? {
             stages.push(g);
         }
+        times.push(started.elapsed().as_secs_f64() * 1e3);
         ctx.progress(k as u64 + 1, timed as u64);
     }
-    let ms = start.elapsed().as_secs_f64() * 1e3 / timed as f64;
+    let ms = median_ms(times);
     // The same stage breakdown as the CPU path's, in GPU time (means over the timed frames).
     let mean = |f: &dyn Fn(&super::gpu_render::GpuStages) -> f64| {
         stages.iter().map(f).sum::<f64>() / stages.len().max(1) as f64
