@@ -362,11 +362,17 @@ impl<'a> Material<'a> {
     }
 
     /// The taps that read a footprint of 2^`level` texels a side centred on (u, v): its box as
-    /// four boxes of half its side, each read trilinearly at its own level (one trilinear read
-    /// of the whole box blurs it with a kernel of three times its variance: relative RMSE 0.083
-    /// against the exact box at 3.3 texels a pixel, four half-boxes 0.043; `render_mesh`'s
-    /// test); under two texels a side, one trilinear read at the level whose blur matches the
-    /// box's. Weights sum to 1; zero-weight taps are left out.
+    /// four boxes of half its side, each read at its own level (one trilinear read of the whole
+    /// box blurs it with a kernel of three times its variance: relative RMSE 0.083 against the
+    /// exact box at 3.3 texels a pixel, four half-boxes 0.054; `render_mesh`'s test); under two
+    /// texels a side, one trilinear read at the level whose blur matches the box's. Weights sum
+    /// to 1; zero-weight taps are left out.
+    ///
+    /// The half-boxes blend two levels only across the middle half of each step and read one
+    /// level elsewhere (as GPUs' "brilinear" filtering does): half the texel reads for half the
+    /// footprints, no seam where the level changes. On the tiles axis's 960-tile torus the frame
+    /// fell from 945 to 779 ms (medians of three) at the same error (0.618); fully trilinear,
+    /// the half-boxes measured 0.043 on the test above.
     pub fn footprint_taps(&self, u: f64, v: f64, level: f64) -> LevelTaps {
         let mut out = LevelTaps::default();
         if level < 1.0 {
@@ -384,6 +390,8 @@ impl<'a> Material<'a> {
         }
         let quarter = 0.25 * level.exp2();
         let sub = level - 1.0;
+        let lo = sub.floor();
+        let sub = lo + ((sub - lo - 0.25) / 0.5).clamp(0.0, 1.0);
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (-1.0, 1.0), (1.0, 1.0)] {
             let uq = u + sx * quarter / self.width as f64;
             let vq = v + sy * quarter / self.height as f64;

@@ -93,7 +93,8 @@ impl Node for RenderMesh {
             // 6: the validity warnings (images unchanged; a cache hit repeats the warnings its
             // entry stored, so older entries rerun once to have them). 7: environment lights, and
             // the BTF read at the pixel's footprint. 8: environment lights shaded on the GPU too.
-            version: 8,
+            // 9: the footprint's half-size boxes read brilinearly.
+            version: 9,
             doc: "BTF-mapped mesh with MDF silhouettes (shell test, depth peeling) and shadow maps; linear HDR image and the mask of the pixels that show mesostructure.",
             device: DevicePreference::Gpu,
             inputs: vec![
