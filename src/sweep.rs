@@ -706,7 +706,7 @@ mod tests {
             vec![json!(1), json!(2), json!(4), json!(8), json!(16)],
         );
         assert_eq!(x_axis(&[]), None);
-        assert_eq!(x_axis(&[solver.clone()]), Some(0));
+        assert_eq!(x_axis(std::slice::from_ref(&solver)), Some(0));
         assert_eq!(x_axis(&[solver.clone(), level.clone()]), Some(1));
         assert_eq!(x_axis(&[level.clone(), rank.clone()]), Some(1));
         // Equals: the first.
