@@ -32,6 +32,8 @@ pub struct CheckedGraph {
     pub description: Option<String>,
     /// Topological order (every node after the nodes it reads); ties keep file order.
     pub nodes: Vec<CheckedNode>,
+    /// The file's `expected_warnings`: a run marks those warnings expected in its report.
+    pub expected_warnings: BTreeMap<String, Vec<String>>,
 }
 
 impl CheckedGraph {
@@ -200,6 +202,7 @@ pub fn check(
     Ok(CheckedGraph {
         description: file.description.clone(),
         nodes,
+        expected_warnings: file.expected_warnings.clone(),
     })
 }
 

@@ -47,7 +47,8 @@ pub struct NodeReport {
 pub struct Warning {
     pub node: String,
     pub message: String,
-    /// The graph expects it of the node (its `expected_warnings`): kept here, not printed.
+    /// The graph expects it of the node (its file's `expected_warnings`, marked by the run):
+    /// kept here, not printed.
     #[serde(skip_serializing_if = "std::ops::Not::not", default)]
     pub expected: bool,
 }

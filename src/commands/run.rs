@@ -23,8 +23,6 @@ pub struct Runner {
     /// After a cluster run, the errors of nodes that failed in their jobs: the final pass finds
     /// them missing from the cache, and its report says why, as the job saw it.
     pub cluster_errors: std::collections::BTreeMap<String, String>,
-    /// The graph's `expected_warnings`: marked in the report, not printed.
-    pub expected_warnings: std::collections::BTreeMap<String, Vec<String>>,
 }
 
 impl Runner {
@@ -51,10 +49,6 @@ impl Runner {
             quiet: args.quiet,
             explain: args.explain,
             cluster_errors: Default::default(),
-            // A file that cannot be read is reported by the load that follows.
-            expected_warnings: load::read(&args.graph.path)
-                .map(|f| f.expected_warnings)
-                .unwrap_or_default(),
         })
     }
 
@@ -79,7 +73,6 @@ impl Runner {
             .engine
             .run(graph, &opts, observer)
             .map_err(|e| invalid(e.to_string()))?;
-        report.mark_expected(&self.expected_warnings);
         for n in &mut report.nodes {
             if let Some(e) = self.cluster_errors.get(&n.id) {
                 if n.error

@@ -238,7 +238,7 @@ pub(crate) fn execute(
             Some((graph.nodes[i].id.clone(), out))
         })
         .collect();
-    let report = RunReport {
+    let mut report = RunReport {
         mesoflow: 1,
         version: env!("CARGO_PKG_VERSION").into(),
         graph: opts.graph_name.clone(),
@@ -253,6 +253,7 @@ pub(crate) fn execute(
         read: read_files.into_iter().collect(),
         earlier: Vec::new(),
     };
+    report.mark_expected(&graph.expected_warnings);
     RunOutcome { report, values }
 }
 
