@@ -10,7 +10,7 @@ function renderReport() {
   box.replaceChildren(el("h2", {}, `Last run: ${r.ok ? "ok" : "failed"}${r.cancelled ? " (cancelled)" : ""}, ${secs(r.seconds)}`),
     r.adapter ? el("div", { class: "doc" }, "GPU: " + r.adapter) : null,
     el("table", { class: "data", id: "report-table" }, head, rows),
-    r.warnings.length ? el("div", {}, el("h3", {}, "Warnings"), r.warnings.map(w => el("div", { class: "doc" }, `${w.node}: ${w.message}`))) : null,
+    r.warnings.length ? el("div", {}, el("h3", {}, "Warnings"), r.warnings.map(w => el("div", { class: "doc" }, `${w.node}: ${w.message}${w.expected ? " (the graph expects it)" : ""}`))) : null,
     r.skipped.length ? el("div", { class: "doc" }, "not needed (their dependants were cached): " + r.skipped.join(", ")) : null,
     r.files.length ? el("div", {}, el("h3", {}, "Files"), r.files.map(f => el("div", {}, el("a", { href: url(`/api/file?path=${encodeURIComponent(f)}`), target: "_blank" }, f)))) : null);
 }
