@@ -81,25 +81,21 @@ fn graph(light_name: &str, bounces: u32, albedo: f64, res: [u32; 2], frames: u32
 /// `mesoflow run GRAPH --output save_ours,save_ours_mask,export` on the CPU: the report or why not.
 fn run(dir: &Path) -> Result<Value, String> {
     let out = dir.join("out");
-    let output = Command::new(cli::bin())
-        .args(["run"])
-        .arg(dir.join("graph.json"))
-        .args([
-            "--output",
-            "save_ours.files",
-            "--output",
-            "save_ours_mask.files",
-            "--output",
-            "export.files",
-        ])
-        .args(["--quiet", "--no-cache", "--device", "cpu", "--out-dir"])
-        .arg(&out)
-        .output()
-        .map_err(|e| e.to_string())?;
-    if !output.status.success() {
-        let err = String::from_utf8_lossy(&output.stderr);
-        return Err(err.lines().last().unwrap_or("failed").to_string());
-    }
+    cli::output_or_last_error(
+        Command::new(cli::bin())
+            .args(["run"])
+            .arg(dir.join("graph.json"))
+            .args([
+                "--output",
+                "save_ours.files",
+                "--output",
+                "save_ours_mask.files",
+                "--output",
+                "export.files",
+            ])
+            .args(["--quiet", "--no-cache", "--device", "cpu", "--out-dir"])
+            .arg(&out),
+    )?;
     serde_json::from_slice(&std::fs::read(out.join("report.json")).map_err(|e| e.to_string())?)
         .map_err(|e| e.to_string())
 }

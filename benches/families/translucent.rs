@@ -268,15 +268,11 @@ fn mitsuba(scene: &Scene, resolution: [u32; 2], dir: &Path) -> Result<(f64, f64)
     });
     let path = dir.join(format!("scene-{}.json", resolution[0]));
     std::fs::write(&path, cfg.to_string()).map_err(|e| e.to_string())?;
-    let run = Command::new(&python)
-        .arg(mesoflow_testkit::cli::repo().join("benches/sss_peer.py"))
-        .arg(&path)
-        .output()
-        .map_err(|e| e.to_string())?;
-    if !run.status.success() {
-        let err = String::from_utf8_lossy(&run.stderr);
-        return Err(err.lines().last().unwrap_or("failed").to_string());
-    }
+    let run = mesoflow_testkit::cli::output_or_last_error(
+        Command::new(&python)
+            .arg(mesoflow_testkit::cli::repo().join("benches/sss_peer.py"))
+            .arg(&path),
+    )?;
     let v: Value = serde_json::from_slice(
         String::from_utf8_lossy(&run.stdout)
             .lines()

@@ -47,6 +47,17 @@ pub fn node<'a>(report: &'a Value, id: &str) -> &'a Value {
         .unwrap_or(&Value::Null)
 }
 
+/// Runs `cmd` to its end: its output, or the last line of its stderr where it failed (what the
+/// benches report of a peer or a run that did not finish).
+pub fn output_or_last_error(cmd: &mut Command) -> Result<std::process::Output, String> {
+    let out = cmd.output().map_err(|e| e.to_string())?;
+    if !out.status.success() {
+        let err = String::from_utf8_lossy(&out.stderr);
+        return Err(err.lines().last().unwrap_or("failed").to_string());
+    }
+    Ok(out)
+}
+
 /// Runs `benches/mesh_peer.py` (Mitsuba 3 in the peer venv) on `scene`, written as
 /// `dir/mitsuba.json`: its JSON line, or why not (no venv, the peer's last error line).
 pub fn mesh_peer(dir: &Path, scene: &Value) -> Result<Value, String> {
@@ -56,15 +67,11 @@ pub fn mesh_peer(dir: &Path, scene: &Value) -> Result<Value, String> {
     }
     let path = dir.join("mitsuba.json");
     std::fs::write(&path, scene.to_string()).map_err(|e| e.to_string())?;
-    let out = Command::new(&python)
-        .arg(repo().join("benches/mesh_peer.py"))
-        .arg(&path)
-        .output()
-        .map_err(|e| e.to_string())?;
-    if !out.status.success() {
-        let err = String::from_utf8_lossy(&out.stderr);
-        return Err(err.lines().last().unwrap_or("failed").to_string());
-    }
+    let out = output_or_last_error(
+        Command::new(&python)
+            .arg(repo().join("benches/mesh_peer.py"))
+            .arg(&path),
+    )?;
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.lines().last().unwrap_or("")).map_err(|e| e.to_string())
 }
